@@ -1,0 +1,55 @@
+"""Exceptions shared by every layer of pyfold.
+
+Fortran kernels return an integer status and a message; :func:`checked` turns a
+non-zero status into the matching typed exception, carrying the Fortran text.
+The status codes mirror ``fortran/core/fold_status.f90``.
+"""
+from __future__ import annotations
+
+FOLD_OK = 0
+FOLD_INPUT_ERROR = 1
+FOLD_NOT_CONVERGED = 2
+FOLD_IO_ERROR = 3
+FOLD_OVERLAP = 4
+FOLD_NUMERICAL = 5
+
+
+class PyfoldError(Exception):
+    """Base class of every error pyfold raises on purpose."""
+
+
+class InputError(PyfoldError, ValueError):
+    """Invalid user input: names the offending key and the allowed range."""
+
+
+class ConvergenceError(PyfoldError, RuntimeError):
+    """An iterative solver stopped before reaching its tolerance."""
+
+
+class NativeIOError(PyfoldError, OSError):
+    """A file could not be read or written by the native core."""
+
+
+class OverlapError(PyfoldError, RuntimeError):
+    """Particle overlap the collision strategy could not resolve."""
+
+
+class NumericalError(PyfoldError, ArithmeticError):
+    """NaN, infinity or another numerical blow-up."""
+
+
+_RAISES: dict[int, type[PyfoldError]] = {
+    FOLD_INPUT_ERROR: InputError,
+    FOLD_NOT_CONVERGED: ConvergenceError,
+    FOLD_IO_ERROR: NativeIOError,
+    FOLD_OVERLAP: OverlapError,
+    FOLD_NUMERICAL: NumericalError,
+}
+
+
+def checked(stat: int, errmsg: bytes | str) -> None:
+    """Raise the exception matching a Fortran status code, with its message."""
+    if int(stat) == FOLD_OK:
+        return
+    text = errmsg.decode(errors="replace") if isinstance(errmsg, bytes) else str(errmsg)
+    raise _RAISES.get(int(stat), PyfoldError)(text.strip() or f"native error, status {stat}")
