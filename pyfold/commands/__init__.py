@@ -1,0 +1,1 @@
+"""Sub-commands of the ``pyfold`` CLI (see :mod:`pyfold.cli`)."""
