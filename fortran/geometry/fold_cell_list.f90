@@ -1,0 +1,282 @@
+!> O(N) neighbour search under the sheared (Lees-Edwards) periodic images.
+!>
+!> The primary cell is cut into nb(1) x nb(2) x nb(3) bins of width >= rc (the
+!> interaction range). A pair closer than rc (minimum image) then sits in bins whose
+!> y (and z) rows differ by at most one. In x the search window is computed from the
+!> query position itself: [x - rc, x + rc] covers at most three bins. A neighbour row
+!> reached across the upper y-face is the image row displaced by +s (lattice vector
+!> a2 = (s, Ly, 0)), so its window is shifted to [x - s - rc, x - s + rc]; across the
+!> lower face to [x + s - rc, x + s + rc] (Allen & Tildesley 2017, Computer
+!> Simulation of Liquids, 2nd ed., section 5.3 and appendix on Lees-Edwards cells).
+!> Directions with fewer than three bins are scanned whole. The candidates are a
+!> superset of the neighbours; callers test the minimum-image distance, which is
+!> unique when every periodic edge exceeds 2 rc (checked in cell_list_setup).
+module fold_cell_list
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_cell, only: cell_t, cell_min_image
+   implicit none
+   private
+
+   !> Bins of a cell list; particles are chained through head/next.
+   type, public :: cell_list_t
+      !> Interaction range the bins were sized for [m]
+      real(dp) :: rc = 0.0_dp
+      !> Number of bins per direction
+      integer(ip) :: nb(3) = 1
+      !> Bin widths (>= rc) [m]
+      real(dp) :: w(3) = 1.0_dp
+      !> First particle of each bin (0 = empty), bins numbered 1..product(nb)
+      integer(ip), allocatable :: head(:)
+      !> Next particle in the same bin (0 = end)
+      integer(ip), allocatable :: next(:)
+   end type cell_list_t
+
+   public :: cell_list_setup, cell_list_insert, cell_list_build, cell_list_candidates
+   public :: neighbour_pairs
+
+contains
+
+   !> Size the bins for range rc and capacity nmax; checks that every periodic edge
+   !> is longer than 2 rc so that at most one image of a particle is within rc.
+   subroutine cell_list_setup(cl, cell, rc, nmax, stat, errmsg)
+      type(cell_list_t), intent(out) :: cl
+      type(cell_t), intent(in) :: cell
+      !> Interaction range (> 0) [m]
+      real(dp), intent(in) :: rc
+      !> Largest particle index that will be inserted
+      integer(ip), intent(in) :: nmax
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: d
+
+      stat = FOLD_INPUT_ERROR
+      errmsg = ""
+      if (.not. (rc > 0.0_dp)) then
+         write (errmsg, '(a,es10.3)') "cell_list: interaction range must be > 0, got ", rc
+         return
+      end if
+      do d = 1, cell%dim
+         if (d == 2 .and. cell%walls) cycle
+         if (.not. (cell%lengths(d) > 2.0_dp*rc)) then
+            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a)') "cell_list: cell edge ", d, " (", cell%lengths(d), &
+               ") must exceed twice the interaction range (2*", rc, "): enlarge the cell or shrink the particles"
+            return
+         end if
+      end do
+      cl%rc = rc
+      cl%nb = 1
+      cl%w = 1.0_dp
+      do d = 1, cell%dim
+         cl%nb(d) = max(1, int(cell%lengths(d)/rc))
+         cl%w(d) = cell%lengths(d)/cl%nb(d)
+      end do
+      allocate (cl%head(product(cl%nb)), cl%next(max(nmax, 0)))
+      cl%head = 0
+      cl%next = 0
+      stat = FOLD_OK
+   end subroutine cell_list_setup
+
+   !> Bin coordinates (0-based) of a position, after wrapping into the primary cell.
+   pure subroutine bin_of(cl, cell, x, ib, xw)
+      type(cell_list_t), intent(in) :: cl
+      type(cell_t), intent(in) :: cell
+      real(dp), intent(in) :: x(:)
+      integer, intent(out) :: ib(3)
+      !> Wrapped position (3 components, unused ones 0)
+      real(dp), intent(out) :: xw(3)
+      real(dp) :: ny
+      integer :: d
+
+      xw = 0.0_dp
+      xw(1:cell%dim) = x(1:cell%dim)
+      if (.not. cell%walls) then
+         ny = floor(xw(2)/cell%lengths(2))
+         xw(1) = xw(1) - ny*cell%shear_offset
+         xw(2) = xw(2) - ny*cell%lengths(2)
+      end if
+      xw(1) = modulo(xw(1), cell%lengths(1))
+      if (cell%dim == 3) xw(3) = modulo(xw(3), cell%lengths(3))
+      ib = 0
+      do d = 1, cell%dim
+         ib(d) = min(max(int(floor(xw(d)/cl%w(d))), 0), cl%nb(d) - 1)
+      end do
+   end subroutine bin_of
+
+   pure function bin_index(cl, ib) result(k)
+      type(cell_list_t), intent(in) :: cl
+      integer, intent(in) :: ib(3)
+      integer :: k
+      k = 1 + ib(1) + cl%nb(1)*(ib(2) + cl%nb(2)*ib(3))
+   end function bin_index
+
+   !> Insert particle k at position x (any image).
+   pure subroutine cell_list_insert(cl, cell, k, x)
+      type(cell_list_t), intent(inout) :: cl
+      type(cell_t), intent(in) :: cell
+      integer(ip), intent(in) :: k
+      real(dp), intent(in) :: x(:)
+      integer :: ib(3), b
+      real(dp) :: xw(3)
+      call bin_of(cl, cell, x, ib, xw)
+      b = bin_index(cl, ib)
+      cl%next(k) = cl%head(b)
+      cl%head(b) = k
+   end subroutine cell_list_insert
+
+   !> Build a cell list of all n particles x(dim, n) for range rc.
+   subroutine cell_list_build(cl, cell, x, rc, stat, errmsg)
+      type(cell_list_t), intent(out) :: cl
+      type(cell_t), intent(in) :: cell
+      real(dp), intent(in) :: x(:, :)
+      real(dp), intent(in) :: rc
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(ip) :: k
+      call cell_list_setup(cl, cell, rc, int(size(x, 2), ip), stat, errmsg)
+      if (stat /= FOLD_OK) return
+      do k = 1, int(size(x, 2), ip)
+         call cell_list_insert(cl, cell, k, x(:, k))
+      end do
+   end subroutine cell_list_build
+
+   !> All particles in the bins that can hold a neighbour (within rc) of position xq.
+   !> cand must have room for every inserted particle; nc returns the count.
+   pure subroutine cell_list_candidates(cl, cell, xq, cand, nc)
+      type(cell_list_t), intent(in) :: cl
+      type(cell_t), intent(in) :: cell
+      real(dp), intent(in) :: xq(:)
+      integer(ip), intent(inout) :: cand(:)
+      integer(ip), intent(out) :: nc
+      integer :: ib(3), jy, jz, jx, jxlo, jxhi, b, k, iy_lo, iy_hi, iz_lo, iz_hi, jyw, jzw, jxw
+      real(dp) :: xw(3), shift
+
+      nc = 0
+      call bin_of(cl, cell, xq, ib, xw)
+      if (cl%nb(2) >= 3 .or. cell%walls) then
+         iy_lo = ib(2) - 1
+         iy_hi = ib(2) + 1
+      else
+         iy_lo = 0
+         iy_hi = cl%nb(2) - 1
+      end if
+      if (cell%dim == 3 .and. cl%nb(3) >= 3) then
+         iz_lo = ib(3) - 1
+         iz_hi = ib(3) + 1
+      else
+         iz_lo = 0
+         iz_hi = cl%nb(3) - 1
+      end if
+      do jy = iy_lo, iy_hi
+         shift = 0.0_dp
+         jyw = jy
+         if (jy < 0) then
+            if (cell%walls) cycle
+            jyw = jy + cl%nb(2)
+            shift = cell%shear_offset    ! images of the top row sit at x - s
+         else if (jy >= cl%nb(2)) then
+            if (cell%walls) cycle
+            jyw = jy - cl%nb(2)
+            shift = -cell%shear_offset   ! images of the bottom row sit at x + s
+         end if
+         if (cl%nb(1) >= 3 .and. (cl%nb(2) >= 3 .or. cell%walls)) then
+            jxlo = int(floor((xw(1) + shift - cl%rc)/cl%w(1)))
+            jxhi = int(floor((xw(1) + shift + cl%rc)/cl%w(1)))
+         else
+            jxlo = 0
+            jxhi = cl%nb(1) - 1
+         end if
+         do jz = iz_lo, iz_hi
+            jzw = modulo(jz, cl%nb(3))
+            do jx = jxlo, jxhi
+               jxw = modulo(jx, cl%nb(1))
+               b = bin_index(cl, [jxw, jyw, jzw])
+               k = cl%head(b)
+               do while (k > 0)
+                  nc = nc + 1
+                  cand(nc) = k
+                  k = cl%next(k)
+               end do
+            end do
+         end do
+      end do
+   end subroutine cell_list_candidates
+
+   !> All pairs i < j whose minimum-image centre distance is < rc, either by the
+   !> O(N^2) double loop (use_cells = false, the reference) or with the cell list.
+   !> pairs(:, 1:npairs) is sorted by (i, j). If more than size(pairs, 2) pairs
+   !> exist, npairs returns the true count and stat = FOLD_INPUT_ERROR.
+   subroutine neighbour_pairs(cell, x, rc, use_cells, pairs, npairs, stat, errmsg)
+      type(cell_t), intent(in) :: cell
+      !> Centres x(dim, n) [m]
+      real(dp), intent(in) :: x(:, :)
+      !> Range [m]
+      real(dp), intent(in) :: rc
+      logical, intent(in) :: use_cells
+      integer(ip), intent(out) :: pairs(:, :)
+      integer(ip), intent(out) :: npairs
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+
+      type(cell_list_t) :: cl
+      integer(ip) :: i, j, n, nc, c
+      integer(ip), allocatable :: cand(:)
+      real(dp) :: dx(cell%dim)
+
+      n = int(size(x, 2), ip)
+      npairs = 0
+      pairs = 0
+      call cell_list_build(cl, cell, x, rc, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (use_cells) then
+         allocate (cand(n))
+         do i = 1, n
+            call cell_list_candidates(cl, cell, x(:, i), cand, nc)
+            call sort_int(cand(1:nc))
+            do c = 1, nc
+               j = cand(c)
+               if (j <= i) cycle
+               dx = x(:, i) - x(:, j)
+               call cell_min_image(cell, dx)
+               if (norm2(dx) < rc) call push(i, j)
+            end do
+         end do
+      else
+         do i = 1, n
+            do j = i + 1, n
+               dx = x(:, i) - x(:, j)
+               call cell_min_image(cell, dx)
+               if (norm2(dx) < rc) call push(i, j)
+            end do
+         end do
+      end if
+      if (npairs > size(pairs, 2)) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,i0,a,i0)') "neighbour_pairs: found ", npairs, " pairs, room for only ", size(pairs, 2)
+      end if
+   contains
+      subroutine push(a, b)
+         integer(ip), intent(in) :: a, b
+         npairs = npairs + 1
+         if (npairs <= size(pairs, 2)) pairs(:, npairs) = [a, b]
+      end subroutine push
+   end subroutine neighbour_pairs
+
+   !> Insertion sort (candidate lists are short).
+   pure subroutine sort_int(a)
+      integer(ip), intent(inout) :: a(:)
+      integer :: i, j
+      integer(ip) :: key
+      do i = 2, size(a)
+         key = a(i)
+         j = i - 1
+         do while (j >= 1)
+            if (a(j) <= key) exit
+            a(j + 1) = a(j)
+            j = j - 1
+         end do
+         a(j + 1) = key
+      end do
+   end subroutine sort_int
+
+end module fold_cell_list

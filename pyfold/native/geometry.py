@@ -1,0 +1,340 @@
+"""Geometry, particle and contact kernels of the direct simulation (``pyfold._fold_geometry``).
+
+Thin, shape-checking wrappers over the Fortran modules ``fold_cell`` (periodic
+Lees–Edwards or Couette cell), ``fold_segment`` (segment–segment closest points,
+capsule gaps), ``fold_cell_list`` (O(N) neighbour search under sheared images),
+``fold_placement`` (seeded random non-overlapping placement), ``fold_kinematics``
+(Jeffery 1922 kinematics, exact rigid rotation) and ``fold_contacts`` (the seed's
+collision strategy, Laure, Megally & Coupez). Arrays are ``(N, dim)`` here and
+``(dim, N)`` in Fortran; indices returned to Python are 0-based.
+
+Frame rule (``fold_cell``): the primary cell is ``[0, L)``, the imposed mean velocity
+is ``u = G·(x − L/2)`` (cell centre at rest, walls at ∓U), and only simple shear
+``G[0, 1] = γ̇`` is accepted. Every particle is treated, for overlap and contact, as a
+capsule (points within ``radius`` of an axis segment): exact for spheres, containing
+the cylinder for fibres, and a *bounding* capsule (half-segment ``L/2 − R``) for
+spheroids.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from pyfold.errors import InputError, checked
+from pyfold.native import load
+
+FIBRE, SPHERE, SPHEROID = 1, 2, 3
+"""Shape codes (``fold_particles``)."""
+ORIENT_GIVEN, ORIENT_ISOTROPIC, ORIENT_PLANAR = 0, 1, 2
+"""Orientation modes of :func:`place_particles` (``fold_placement``)."""
+CONTACT_MODES = {"none": 0, "naive": 1, "strategy": 2}
+ON_CAP = {"stop": 0, "continue": 1}
+
+
+@dataclass(frozen=True)
+class Cell:
+    """Simulation cell.
+
+    Parameters
+    ----------
+    lengths
+        Edge lengths ``(Lx, Ly)`` in 2-D or ``(Lx, Ly, Lz)`` in 3-D [m]; sets ``dim``.
+    walls
+        No-slip walls at ``y = 0`` (moving at −U) and ``y = Ly`` (+U), periodic elsewhere.
+    shear_rate
+        γ̇ = G[0, 1] = du_x/dy [1/s].
+    shear_offset
+        Lees–Edwards offset ``s`` of the lattice vector ``a2 = (s, Ly, 0)`` [m]
+        (``s = γ̇ t Ly`` wrapped to ``[−Lx/2, Lx/2)``; ignored with walls).
+    """
+
+    lengths: tuple[float, ...]
+    walls: bool = False
+    shear_rate: float = 0.0
+    shear_offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        lengths = tuple(float(v) for v in self.lengths)
+        if len(lengths) not in (2, 3) or not all(np.isfinite(lengths)) or min(lengths) <= 0:
+            raise InputError(f"cell lengths: expected 2 or 3 finite values > 0, got {self.lengths}")
+        object.__setattr__(self, "lengths", lengths)
+
+    @property
+    def dim(self) -> int:
+        return len(self.lengths)
+
+    def lengths3(self) -> np.ndarray:
+        out = np.ones(3)
+        out[: self.dim] = self.lengths
+        return out
+
+    def gradient(self) -> np.ndarray:
+        """Velocity gradient G (3, 3), G[i, j] = du_i/dx_j."""
+        g = np.zeros((3, 3))
+        g[0, 1] = self.shear_rate
+        return g
+
+    def at_time(self, t: float) -> "Cell":
+        """The same cell with the Lees–Edwards offset of time ``t`` (s = γ̇ t Ly, wrapped)."""
+        if self.walls:
+            return self
+        lx, ly = self.lengths[0], self.lengths[1]
+        s = (self.shear_rate * t * ly + 0.5 * lx) % lx - 0.5 * lx
+        return Cell(self.lengths, self.walls, self.shear_rate, s)
+
+
+@dataclass(frozen=True)
+class ContactStats:
+    """What one collision pass did (``contact_stats_t``)."""
+
+    n_corrections: int
+    iterations: int
+    min_gap: float
+    min_gap_over_alpha: float
+    pairs_left: int
+    worst_gap: float
+    capped: bool
+
+
+def _vectors(name: str, a, dim: int | None = None, n: int | None = None) -> np.ndarray:
+    """(N, dim) float array → Fortran-ordered (dim, N), with a named shape error."""
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] not in (2, 3) or (dim is not None and arr.shape[1] != dim) \
+            or (n is not None and arr.shape[0] != n):
+        want = f"({n if n is not None else 'N'}, {dim if dim is not None else '2 or 3'})"
+        raise InputError(f"{name}: expected shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name}: values must be finite")
+    return np.asfortranarray(arr.T)
+
+
+def _per_particle(name: str, a, n: int, dtype=np.float64) -> np.ndarray:
+    arr = np.asarray(a, dtype=dtype)
+    if arr.ndim == 0:
+        arr = np.full(n, arr, dtype=dtype)
+    if arr.shape != (n,):
+        raise InputError(f"{name}: expected a scalar or shape ({n},), got {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
+def _omega(name: str, a, n: int) -> np.ndarray:
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.shape != (n, 3):
+        raise InputError(f"{name}: expected shape ({n}, 3) (2-D: only the last column is used), got {arr.shape}")
+    return np.asfortranarray(arr.T)
+
+
+def _ext():
+    return load("_fold_geometry")
+
+
+def min_image(dx, cell: Cell) -> np.ndarray:
+    """Shortest image (N, dim) of displacements ``dx`` under the sheared periodic lattice."""
+    d = _vectors("dx", dx, cell.dim)
+    out, stat, msg = _ext().fold_geo_min_image(cell.lengths3(), int(cell.walls), cell.shear_offset, d)
+    checked(stat, msg)
+    return np.ascontiguousarray(out.T)
+
+
+def wrap(x, v, cell: Cell) -> tuple[np.ndarray, np.ndarray]:
+    """Positions wrapped into ``[0, L)`` and velocities with the Lees–Edwards jump ∓γ̇Ly."""
+    xf = _vectors("x", x, cell.dim)
+    vf = _vectors("v", v, cell.dim, xf.shape[1])
+    xo, vo, stat, msg = _ext().fold_geo_wrap(cell.lengths3(), int(cell.walls), cell.shear_offset,
+                                              cell.shear_rate, xf, vf)
+    checked(stat, msg)
+    return np.ascontiguousarray(xo.T), np.ascontiguousarray(vo.T)
+
+
+def capsule_contact(r, p1, h1, rad1, p2, h2, rad2) -> dict[str, np.ndarray]:
+    """Closest points of capsule pairs (batched over N).
+
+    Capsule k is the set of points within ``rad_k`` of the segment ``c_k + s p_k``,
+    ``|s| ≤ h_k``; ``r = c1 − c2`` (already a minimum image). Returns ``dist`` (surface
+    distance, negative on overlap; with zero radii the segment–segment distance),
+    ``normal`` (N, dim) unit vector from 2 to 1, and the arms ``s``, ``t`` of the
+    closest axis points (Ericson 2005, *Real-Time Collision Detection*, §5.1.9).
+    """
+    rf = _vectors("r", r)
+    dim, n = rf.shape
+    p1f = _vectors("p1", p1, dim, n)
+    p2f = _vectors("p2", p2, dim, n)
+    s, t, dist, normal = _ext().fold_geo_capsule_contact(
+        rf, p1f, _per_particle("h1", h1, n), _per_particle("rad1", rad1, n), p2f,
+        _per_particle("h2", h2, n), _per_particle("rad2", rad2, n))
+    return {"dist": dist, "normal": np.ascontiguousarray(normal.T), "s": s, "t": t}
+
+
+def neighbour_pairs(x, cell: Cell, rc: float, method: str = "cells") -> np.ndarray:
+    """All pairs (M, 2), 0-based, ``i < j``, sorted, whose minimum-image centre distance is < ``rc``.
+
+    ``method="cells"`` uses the O(N) cell list, ``"naive"`` the O(N²) double loop.
+    Every periodic edge must exceed ``2 rc`` (else :class:`InputError`).
+    """
+    if method not in ("cells", "naive"):
+        raise InputError(f"method: expected 'cells' or 'naive', got {method!r}")
+    xf = _vectors("x", x, cell.dim)
+    n = xf.shape[1]
+    room = max(16, 8 * n)
+    for _ in range(2):
+        pairs, npairs, stat, msg = _ext().fold_geo_pairs(room, cell.lengths3(), int(cell.walls),
+                                                         cell.shear_offset, xf, float(rc),
+                                                         int(method == "cells"))
+        if npairs <= room:
+            break
+        room = npairs
+    checked(stat, msg)
+    return np.ascontiguousarray(pairs[:, :npairs].T) - 1
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Result of :func:`place_particles`."""
+
+    x: np.ndarray
+    p: np.ndarray
+    n_rsa: int
+    relax_sweeps: int
+
+
+def place_particles(cell: Cell, shape, radius, length, *, alpha: float, seed: int,
+                    orientation="isotropic", axis=None, max_attempts: int = 1000,
+                    relax_sweeps: int = 5000) -> Placement:
+    """Seeded random non-overlapping placement (``fold_placement``).
+
+    Random sequential addition (largest particles first, gap ≥ ``alpha`` between
+    particles and ≥ ``alpha/2`` to walls, ``max_attempts`` tries each); what RSA cannot
+    place is then pushed apart by translation-only relaxation sweeps (at most
+    ``relax_sweeps``; 0 = pure RSA), which keeps the drawn orientations exactly.
+
+    Parameters
+    ----------
+    shape, radius, length
+        Per particle (N,): shape code (:data:`FIBRE`, :data:`SPHERE`, :data:`SPHEROID`),
+        radius [m], length [m] (fibre length, spheroid major axis, 2R for spheres).
+    orientation
+        ``"isotropic"``, ``"planar"`` (uniform in the plane normal to ``axis``; 2-D:
+        isotropic), ``"aligned"`` / ``"given"`` (along ``axis``), or an (N,) array of
+        :data:`ORIENT_GIVEN` / :data:`ORIENT_ISOTROPIC` / :data:`ORIENT_PLANAR` codes.
+    axis
+        (dim,) or (N, dim): the axis (aligned/given) or plane normal (planar).
+
+    Raises
+    ------
+    InputError
+        Invalid arguments, or the target volume fraction was not reached (the
+        message gives the fraction random sequential addition reached).
+    """
+    dim = cell.dim
+    shape_a = np.asarray(shape)
+    if shape_a.ndim != 1:
+        raise InputError(f"shape: expected shape (N,), got {shape_a.shape}")
+    n = shape_a.shape[0]
+    shape_a = _per_particle("shape", shape_a, n, np.int32)
+    if np.any((shape_a < FIBRE) | (shape_a > SPHEROID)):
+        raise InputError("shape: codes must be 1 (fibre), 2 (sphere) or 3 (spheroid)")
+    codes = {"given": ORIENT_GIVEN, "aligned": ORIENT_GIVEN, "isotropic": ORIENT_ISOTROPIC,
+             "planar": ORIENT_PLANAR}
+    if isinstance(orientation, str):
+        if orientation not in codes:
+            raise InputError(f"orientation: expected one of {sorted(codes)}, got {orientation!r}")
+        modes = np.full(n, codes[orientation], dtype=np.int32)
+    else:
+        modes = _per_particle("orientation", orientation, n, np.int32)
+    if axis is None:
+        if np.any(modes != ORIENT_ISOTROPIC):
+            if dim == 3 and np.all(modes != ORIENT_GIVEN):
+                axis = np.array([0.0, 0.0, 1.0])  # planar: the flow-gradient plane x-y
+            else:
+                raise InputError("axis: required for 'aligned'/'given' orientations")
+        else:
+            axis = np.eye(dim)[0]
+    axis_a = np.asarray(axis, dtype=np.float64)
+    if axis_a.shape == (dim,):
+        axis_a = np.tile(axis_a, (n, 1))
+    if max_attempts < 1 or relax_sweeps < 0:
+        raise InputError("max_attempts must be >= 1 and relax_sweeps >= 0")
+    x, p, n_rsa, sweeps, stat, msg = _ext().fold_geo_place(
+        cell.lengths3(), int(cell.walls), cell.shear_offset, shape_a,
+        _per_particle("radius", radius, n), _per_particle("length", length, n), modes,
+        _vectors("axis", axis_a, dim, n), float(alpha), int(seed), int(max_attempts), int(relax_sweeps))
+    checked(stat, msg)
+    return Placement(np.ascontiguousarray(x.T), np.ascontiguousarray(p.T), int(n_rsa), int(sweeps))
+
+
+def jeffery_velocities(cell: Cell, x, p, xi) -> tuple[np.ndarray, np.ndarray]:
+    """Dilute rigid velocities: ``v = G·(x − L/2)`` (N, dim) and the Jeffery angular
+    velocity ``ω`` (N, 3) whose rotation gives ``dp/dt = W·p + ξ(D·p − (p·D·p)p)``
+    (Jeffery 1922, Proc. R. Soc. A 102:161), plus the axial spin ω_f·p (3-D)."""
+    xf = _vectors("x", x, cell.dim)
+    n = xf.shape[1]
+    pf = _vectors("p", p, cell.dim, n)
+    v, omega, stat, msg = _ext().fold_geo_jeffery(cell.lengths3(), int(cell.walls), cell.gradient(), xf, pf,
+                                                  _per_particle("xi", xi, n))
+    checked(stat, msg)
+    return np.ascontiguousarray(v.T), np.ascontiguousarray(omega.T)
+
+
+def rigid_update(x, p, v, omega, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``x + v dt`` and ``p`` turned exactly by ``ω dt`` (Rodrigues; an angle in 2-D)."""
+    xf = _vectors("x", x)
+    dim, n = xf.shape
+    xo, po = _ext().fold_geo_rigid_update(xf, _vectors("p", p, dim, n), _vectors("v", v, dim, n),
+                                          _omega("omega", omega, n), float(dt))
+    return np.ascontiguousarray(xo.T), np.ascontiguousarray(po.T)
+
+
+def jeffery_advance(cell: Cell, x, p, xi, dt: float, nsteps: int, every: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Integrate dilute Jeffery kinematics (velocities frozen over each step, exact rotation,
+    Lees–Edwards wrapping). Returns ``x`` and ``p`` histories of shape
+    ``(nsteps // every + 1, N, dim)``, every ``every`` steps from the initial state."""
+    if nsteps < 0 or every < 1 or not dt > 0:
+        raise InputError(f"need nsteps >= 0, every >= 1 and dt > 0, got {nsteps}, {every}, {dt}")
+    xf = _vectors("x", x, cell.dim)
+    n = xf.shape[1]
+    nout = nsteps // every + 1
+    xh, ph, stat, msg = _ext().fold_geo_jeffery_advance(nout, cell.lengths3(), int(cell.walls), cell.gradient(),
+                                                        xf, _vectors("p", p, cell.dim, n),
+                                                        _per_particle("xi", xi, n), float(dt), int(every))
+    checked(stat, msg)
+    return np.transpose(xh, (2, 1, 0)).copy(), np.transpose(ph, (2, 1, 0)).copy()
+
+
+def resolve_contacts(cell: Cell, shape, radius, length, x, p, v, omega, dt: float, *, alpha: float,
+                     mode: str = "strategy", max_iter: int = 100, on_cap: str = "stop",
+                     owned: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray, ContactStats]:
+    """The seed's collision strategy on rigid velocities (``fold_contacts.resolve_contacts``).
+
+    Gaps are taken at the predicted positions at ``t + dt`` (cell offset advanced by
+    ``dt``); while a particle's worst gap is below ``alpha``, equal and opposite
+    impulses at the contact point make it close to first order (two spheres:
+    ``δ = |D|/(2Δt)``, the seed's rule). ``mode`` is ``"none"`` (statistics only),
+    ``"naive"`` (O(N²) search) or ``"strategy"`` (cell lists). ``owned = (first, last)``
+    (0-based, inclusive) restricts the particles whose corrections are computed (MPI
+    split); by default all. Returns the corrected ``v`` (N, dim), ``omega`` (N, 3) and
+    :class:`ContactStats`.
+
+    Raises
+    ------
+    OverlapError
+        The iteration cap was reached and ``on_cap="stop"``.
+    """
+    if mode not in CONTACT_MODES:
+        raise InputError(f"mode: expected one of {sorted(CONTACT_MODES)}, got {mode!r}")
+    if on_cap not in ON_CAP:
+        raise InputError(f"on_cap: expected one of {sorted(ON_CAP)}, got {on_cap!r}")
+    xf = _vectors("x", x, cell.dim)
+    n = xf.shape[1]
+    first, last = (0, n - 1) if owned is None else (int(owned[0]), int(owned[1]))
+    out = _ext().fold_geo_resolve_contacts(
+        cell.lengths3(), int(cell.walls), cell.shear_offset, cell.gradient(),
+        _per_particle("shape", shape, n, np.int32), _per_particle("radius", radius, n),
+        _per_particle("length", length, n), xf, _vectors("p", p, cell.dim, n), _vectors("v", v, cell.dim, n),
+        _omega("omega", omega, n), float(dt), CONTACT_MODES[mode], float(alpha), int(max_iter), ON_CAP[on_cap],
+        first + 1, last + 1)
+    vo, oo, ncorr, iters, min_gap, mgoa, left, worst, capped, stat, msg = out
+    checked(stat, msg)
+    stats = ContactStats(int(ncorr), int(iters), float(min_gap), float(mgoa), int(left), float(worst), bool(capped))
+    return np.ascontiguousarray(vo.T), np.ascontiguousarray(oo.T), stats
