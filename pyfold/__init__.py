@@ -18,3 +18,12 @@ from pyfold.errors import (  # noqa: E402
 )
 
 __all__ = ["__version__", "PyfoldError", "InputError", "ConvergenceError"]
+
+
+def __getattr__(name: str):
+    # Lazy: `pyfold.open_run` without importing xarray/h5py at `import pyfold`.
+    if name == "open_run":
+        from pyfold.runs import open_run
+
+        return open_run
+    raise AttributeError(f"module 'pyfold' has no attribute {name!r}")

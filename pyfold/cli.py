@@ -17,6 +17,8 @@ from pyfold.errors import InputError, PyfoldError
 #: command name -> (module under pyfold.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "main": ("main_job", "run the bundled default job: simulate, fit C_I, compare closures, write figures"),
+    "validate": ("validate", "check a scene file completely and print it normalised"),
+    "run": ("run", "run the direct simulation of a scene into an HDF5 run file"),
 }
 
 EXIT_OK, EXIT_FAILURE, EXIT_INPUT = 0, 1, 2

@@ -1,0 +1,183 @@
+"""The HDF5 run file: what ``pyfold run`` hands to ``fold_run`` (micro contract, issue 3).
+
+Python writes the root attributes, ``/setup`` (the scene verbatim, the
+normalised scene, and ``/setup/resolved``: every number Fortran needs, with
+``units``) and ``/initial`` (the full initial particle state); ``fold_run``
+appends the results at the root. Arrays are ``(n, dim)`` here, ``x(dim, n)`` in
+Fortran. Strings are fixed-length UTF-8 (null-padded), which Fortran HDF5 reads
+without variable-length machinery.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from pyfold import __version__
+from pyfold.errors import InputError
+from pyfold.scene import ResolvedScene
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "InitialState",
+    "RunSetup",
+    "creator",
+    "write_run_file",
+    "read_setup",
+    "check_format",
+    "fixed_string",
+]
+
+FORMAT = "pyfold.run"
+FORMAT_VERSION = "1.0"
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """The initial particle state, ``(n, dim)`` arrays in family order."""
+
+    x: np.ndarray
+    p: np.ndarray
+    shape: np.ndarray
+    family: np.ndarray
+    radius: np.ndarray
+    length: np.ndarray
+    xi: np.ndarray
+
+    def check(self, dim: int) -> None:
+        n = self.x.shape[0]
+        for name in ("x", "p"):
+            arr = getattr(self, name)
+            if arr.shape != (n, dim) or not np.all(np.isfinite(arr)):
+                raise InputError(f"initial.{name}: expected finite ({n}, {dim}) array, got shape {arr.shape}")
+        for name in ("shape", "family", "radius", "length", "xi"):
+            if getattr(self, name).shape != (n,):
+                raise InputError(f"initial.{name}: expected shape ({n},), got {getattr(self, name).shape}")
+        if not np.allclose(np.linalg.norm(self.p, axis=1), 1.0, rtol=0, atol=1e-12):
+            raise InputError("initial.p: axes must be unit vectors")
+
+
+@dataclass(frozen=True)
+class RunSetup:
+    """What ``/setup`` holds, read back."""
+
+    scene_toml: str
+    scene: dict
+    resolved: dict
+
+
+def _git_describe() -> str:
+    here = Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty", "--abbrev=12"],
+                             capture_output=True, text=True, timeout=5, check=True)
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def creator() -> str:
+    """``"pyfold <version> (<git describe>)"``."""
+    return f"pyfold {__version__} ({_git_describe()})"
+
+
+def fixed_string(text: str) -> np.ndarray:
+    """A scalar fixed-length UTF-8 string (length >= 1, as HDF5 requires)."""
+    data = text.encode("utf-8")
+    return np.array(data, dtype=h5py.string_dtype("utf-8", max(1, len(data))))
+
+
+def _fixed_strings(texts: list[str]) -> np.ndarray:
+    data = [t.encode("utf-8") for t in texts]
+    return np.array(data, dtype=h5py.string_dtype("utf-8", max([1, *map(len, data)])))
+
+
+def _dataset(group: h5py.Group, name: str, value, units: str, long_name: str) -> None:
+    if isinstance(value, str):
+        ds = group.create_dataset(name, data=fixed_string(value))
+    elif isinstance(value, list) and all(isinstance(v, str) for v in value):
+        ds = group.create_dataset(name, data=_fixed_strings(value))
+    else:
+        ds = group.create_dataset(name, data=value)
+    if units:
+        ds.attrs["units"] = fixed_string(units)
+    ds.attrs["long_name"] = fixed_string(long_name)
+
+
+def write_run_file(path: str | Path, resolved: ResolvedScene, initial: InitialState, command: str) -> None:
+    """Write a new run file with the root attributes, ``/setup`` and ``/initial``.
+
+    Parameters
+    ----------
+    path : path
+        File to create (truncated if it exists: the caller decides about overwriting).
+    resolved : ResolvedScene
+        The validated scene (``resolved.toml`` is stored verbatim).
+    initial : InitialState
+        The initial particle state, ``(n, dim)`` arrays.
+    command : str
+        The command line that made the file.
+    """
+    initial.check(resolved.dim)
+    if initial.x.shape[0] != resolved.n_particles:
+        raise InputError(f"initial: {initial.x.shape[0]} particles, the scene has {resolved.n_particles}")
+    with h5py.File(path, "w", libver="earliest") as f:
+        for key, value in (("format", FORMAT), ("format_version", FORMAT_VERSION), ("creator", creator()),
+                           ("created", datetime.now(timezone.utc).isoformat(timespec="seconds")),
+                           ("command", command)):
+            f.attrs[key] = fixed_string(value)
+        setup = f.create_group("setup")
+        setup.create_dataset("scene_toml", data=fixed_string(resolved.toml))
+        setup.create_dataset("scene_json", data=fixed_string(resolved.scene_json()))
+        res = setup.create_group("resolved")
+        for name, (value, units, long_name) in resolved.resolved_datasets().items():
+            _dataset(res, name, value, units, long_name)
+        init = f.create_group("initial")
+        for name, units, long_name, dtype in (
+            ("x", "m", "particle centres", np.float64), ("p", "1", "particle unit axes", np.float64),
+            ("shape", "1", "shape code: 1 fibre, 2 sphere, 3 spheroid", np.int32),
+            ("family", "1", "family index (0-based)", np.int32), ("radius", "m", "radius", np.float64),
+            ("length", "m", "fibre length, spheroid major axis, 2R for spheres", np.float64),
+            ("xi", "1", "Jeffery shape factor", np.float64),
+        ):
+            _dataset(init, name, np.ascontiguousarray(getattr(initial, name), dtype=dtype), units, long_name)
+
+
+def _text(value) -> str:
+    if isinstance(value, bytes | np.bytes_):
+        return value.decode("utf-8")
+    return str(value)
+
+
+def check_format(f: h5py.File, path: str | Path) -> str:
+    """Refuse a file that is not a pyfold run file or has an unknown major version."""
+    fmt = _text(f.attrs.get("format", b""))
+    version = _text(f.attrs.get("format_version", b""))
+    if fmt != FORMAT:
+        raise InputError(f"{path}: not a pyfold run file (format attribute {fmt!r}, expected {FORMAT!r})")
+    if version.split(".")[0] != FORMAT_VERSION.split(".")[0]:
+        raise InputError(f"{path}: run file format_version {version!r}; this pyfold reads "
+                         f"{FORMAT_VERSION.split('.')[0]}.x")
+    return version
+
+
+def read_setup(path: str | Path) -> RunSetup:
+    """Read ``/setup`` back: the scene verbatim, the normalised scene, the resolved values."""
+    with h5py.File(path, "r") as f:
+        check_format(f, path)
+        setup = f["setup"]
+        resolved = {}
+        for name, ds in setup["resolved"].items():
+            value = ds[()]
+            if h5py.check_string_dtype(ds.dtype) is not None:
+                value = ds.asstr()[()]
+                value = value.tolist() if isinstance(value, np.ndarray) else str(value)
+            resolved[name] = value
+        return RunSetup(scene_toml=setup["scene_toml"].asstr()[()], scene=json.loads(setup["scene_json"].asstr()[()]),
+                        resolved=resolved)

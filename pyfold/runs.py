@@ -1,0 +1,208 @@
+"""Reading run files: :func:`open_run` (labelled xarray view), :func:`write_xdmf` (ParaView)
+and :func:`run_summary`.
+
+The results ``fold_run`` appends at the root of a run file are netCDF-compatible
+(HDF5 dimension scales, micro contract): ``time``, tensor indices ``i, j, k, l``,
+vector components ``xyz``, ``family``, ``snapshot``, ``particle``. :func:`open_run`
+opens them with xarray, labels the index dimensions (``"x", "y"[, "z"]``, family
+names), adds the initial state from ``/initial`` and puts the scene and the
+resolved choices in ``attrs``.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import h5py
+import numpy as np
+import xarray as xr
+
+from pyfold.errors import InputError, PyfoldError
+from pyfold.run_file import check_format, read_setup
+
+__all__ = ["open_run", "write_xdmf", "run_summary", "AXIS_LABELS"]
+
+AXIS_LABELS = ("x", "y", "z")
+_INITIAL = {  # /initial dataset -> (variable name in the Dataset, dims after "particle")
+    "x": ("initial_x", ("xyz",)),
+    "p": ("initial_p", ("xyz",)),
+    "shape": ("particle_shape", ()),
+    "family": ("particle_family", ()),
+    "radius": ("particle_radius", ()),
+    "length": ("particle_length", ()),
+    "xi": ("particle_xi", ()),
+}
+
+
+def _text(value) -> str:
+    if isinstance(value, bytes | np.bytes_):
+        return bytes(value).decode("utf-8", errors="replace")
+    if isinstance(value, np.ndarray) and value.shape == ():
+        return _text(value[()])
+    return str(value)
+
+
+def open_run(path: str | Path) -> xr.Dataset:
+    """Open a run file as a labelled :class:`xarray.Dataset`.
+
+    Parameters
+    ----------
+    path : path
+        A run file written by ``pyfold run`` (complete, failed or still partial).
+
+    Returns
+    -------
+    xarray.Dataset
+        Results over ``time`` (``a2(time, i, j)``, ``a4(time, i, j, k, l)``,
+        ``a2_family(time, family, i, j)``, contact and drift records),
+        snapshots ``x, p (snapshot, particle, xyz)`` with ``snapshot_time``,
+        and the initial state ``initial_x, initial_p (particle, xyz)``,
+        ``particle_shape, particle_family, particle_radius, particle_length,
+        particle_xi (particle)``. Index dimensions are labelled ``"x", "y"[, "z"]``,
+        ``family`` by family name. Every variable keeps its ``units`` and
+        ``long_name``. ``attrs`` hold the root attributes (``status``,
+        ``steps_done``, ``creator``, ...), ``scene`` (normalised scene, a dict as
+        JSON text), ``scene_toml`` (verbatim) and the resolved scalars
+        (``dim``, ``dt``, ``alpha``, ``regime``, ``hydrodynamics_reason``, ...).
+
+    Raises
+    ------
+    InputError
+        Not a pyfold run file, or an unknown major ``format_version``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"open_run: no such file: {path}")
+    try:
+        with h5py.File(path, "r") as f:
+            check_format(f, path)
+            root_attrs = {k: (_text(v) if isinstance(v, bytes | np.bytes_ | str) else
+                              (v.item() if np.ndim(v) == 0 and hasattr(v, "item") else v)) for k, v in f.attrs.items()}
+            initial = {name: (f["initial"][name][()], dict(f["initial"][name].attrs)) for name in _INITIAL
+                       if "initial" in f and name in f["initial"]}
+    except OSError as exc:
+        raise InputError(f"open_run: {path} is not a readable HDF5 file: {exc}") from exc
+    setup = read_setup(path)
+    res = setup.resolved
+    dim = int(res["dim"])
+    names = list(res["family_names"]) if isinstance(res["family_names"], list) else [res["family_names"]]
+
+    ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False)
+    labels = list(AXIS_LABELS[:dim])
+    relabel = {d: labels for d in ("i", "j", "k", "l", "xyz") if d in ds.dims}
+    if "family" in ds.dims:
+        relabel["family"] = names
+    for dim_name, values in relabel.items():
+        attrs = dict(ds[dim_name].attrs) if dim_name in ds.coords else {}
+        ds = ds.assign_coords({dim_name: (dim_name, values, attrs)})
+    if "snapshot_time" in ds:
+        ds = ds.set_coords("snapshot_time")
+    for name, (data, attrs) in initial.items():
+        var, extra = _INITIAL[name]
+        attrs = {k: _text(v) for k, v in attrs.items()}
+        if extra:
+            ds[var] = (("particle", *extra), data, attrs)
+        else:
+            ds[var] = (("particle",), data, attrs)
+    if "xyz" not in ds.coords:
+        ds = ds.assign_coords(xyz=labels)
+    if "particle" not in ds.coords and "particle" in ds.dims:
+        ds = ds.assign_coords(particle=np.arange(ds.sizes["particle"]))
+    if "particle_family" in ds:
+        ds = ds.assign_coords(family_name=("particle", [names[int(k)] for k in ds["particle_family"].values]))
+
+    attrs = dict(root_attrs)
+    attrs["scene"] = json.dumps(setup.scene)
+    attrs["scene_toml"] = setup.scene_toml
+    for key, value in res.items():
+        if isinstance(value, str) or np.ndim(value) == 0:
+            attrs[key] = value.item() if hasattr(value, "item") else value
+    ds.attrs = attrs
+    return ds
+
+
+def _hdf_item(h5name: str, dataset: str, dims: tuple[int, ...], number: str, precision: int) -> str:
+    return (f'<DataItem Dimensions="{" ".join(map(str, dims))}" NumberType="{number}" Precision="{precision}" '
+            f'Format="HDF">{h5name}:{dataset}</DataItem>')
+
+
+def _slab(h5name: str, dataset: str, index: int, full: tuple[int, ...]) -> str:
+    """One frame ``dataset[index]`` of a ``(frames, n, dim)`` dataset as an XDMF hyperslab."""
+    _, n, d = full
+    return (f'<DataItem ItemType="HyperSlab" Dimensions="{n} {d}" Type="HyperSlab">'
+            f'<DataItem Dimensions="3 3" Format="XML">{index} 0 0 1 1 1 1 {n} {d}</DataItem>'
+            f'{_hdf_item(h5name, dataset, full, "Float", 8)}</DataItem>')
+
+
+def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
+    """Write an XDMF 3 file for ParaView beside a run file: one frame per snapshot.
+
+    Particles are points (their centres) carrying the axis ``p`` as a vector
+    attribute and ``length``, ``radius``, ``shape``, ``family`` as scalars (a
+    ParaView Glyph filter with a cylinder, scaled by ``length`` and oriented by
+    ``p``, draws the fibres). Without snapshots the one frame is ``/initial``.
+    The HDF5 file is referred to by its name, so keep both files together.
+
+    Returns
+    -------
+    pathlib.Path
+        The ``.xmf`` file written (default: the run file with suffix ``.xmf``).
+    """
+    path = Path(path)
+    xmf = Path(xmf) if xmf is not None else path.with_suffix(".xmf")
+    h5name = path.name
+    with h5py.File(path, "r") as f:
+        check_format(f, path)
+        if "initial" not in f or "x" not in f["initial"]:
+            raise PyfoldError(f"{path}: no /initial/x to show")
+        n, dim = f["initial"]["x"].shape
+        if "x" in f and "p" in f and f["x"].ndim == 3 and f["x"].shape[0] > 0:
+            full = tuple(int(s) for s in f["x"].shape)
+            times = f["snapshot_time"][()] if "snapshot_time" in f else np.arange(full[0], dtype=float)
+            frames = [(float(times[k]), _slab(h5name, "/x", k, full), _slab(h5name, "/p", k, full))
+                      for k in range(full[0])]
+        else:
+            frames = [(0.0, _hdf_item(h5name, "/initial/x", (n, dim), "Float", 8),
+                       _hdf_item(h5name, "/initial/p", (n, dim), "Float", 8))]
+    geometry = "XYZ" if dim == 3 else "XY"
+    scalars = "".join(
+        f'<Attribute Name="{name}" AttributeType="Scalar" Center="Node">'
+        f'{_hdf_item(h5name, "/initial/" + name, (n,), number, prec)}</Attribute>'
+        for name, number, prec in (("length", "Float", 8), ("radius", "Float", 8), ("shape", "Int", 4),
+                                   ("family", "Int", 4))
+    )
+    grids = []
+    for k, (t, geom, axes) in enumerate(frames):
+        grids.append(
+            f'<Grid Name={quoteattr(f"snapshot {k}")} GridType="Uniform"><Time Value="{t!r}"/>'
+            f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1"/>'
+            f'<Geometry GeometryType="{geometry}">{geom}</Geometry>'
+            f'<Attribute Name="p" AttributeType="Vector" Center="Node">{axes}</Attribute>{scalars}</Grid>')
+    text = ('<?xml version="1.0" ?>\n<Xdmf Version="3.0"><Domain>'
+            '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">'
+            + "\n".join(grids) + "</Grid></Domain></Xdmf>\n")
+    xmf.write_text(text, encoding="utf-8")
+    return xmf
+
+
+def run_summary(path: str | Path) -> str:
+    """A few lines: status, steps, regime and choices, smallest gap / alpha, final a2."""
+    ds = open_run(path)
+    try:
+        a = ds.attrs
+        lines = [f"status: {a.get('status', 'unknown')}, steps done: {a.get('steps_done', '?')} of {a.get('n_steps', '?')}",
+                 f"regime: {a.get('regime', '?')}; {a.get('hydrodynamics_reason', '')}"]
+        if "min_gap_over_alpha" in ds and ds.sizes.get("time", 0) > 0:
+            gap = ds["min_gap_over_alpha"].values
+            gap = gap[np.isfinite(gap) & (np.abs(gap) < 1e300)]
+            lines.append(f"smallest gap / alpha over the run: {gap.min():.4g}" if gap.size else
+                         "smallest gap / alpha: no particle pairs within range")
+        if "a2" in ds and ds.sizes.get("time", 0) > 0:
+            a2 = ds["a2"].isel(time=-1).values
+            t = float(ds["time"].values[-1])
+            rows = "; ".join(" ".join(f"{v:+.4f}" for v in row) for row in a2)
+            lines.append(f"a2 at t = {t:g}: [{rows}]")
+        return "\n".join(lines)
+    finally:
+        ds.close()

@@ -1,0 +1,510 @@
+"""Consistency checks and normalisation: a parsed :class:`Scene` -> :class:`ResolvedScene`.
+
+Everything Fortran needs is computed here once (counts from volume fractions,
+Jeffery shape factors, step counts, ``auto`` choices with their reason), so the
+run file's ``/setup/resolved`` group is a plain table of numbers with units.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pyfold.errors import InputError
+from pyfold.scene import shapes
+from pyfold.scene._problems import Problems
+from pyfold.scene.schema import EQUIVALENT_ASPECT_RATIO_DEFAULT, Scene
+
+__all__ = ["Family", "ResolvedScene", "normalise", "HYDRODYNAMICS_CODES", "COLLISION_CODES"]
+
+HYDRODYNAMICS_CODES = {"jeffery": 0, "stokes": 1}
+COLLISION_CODES = {"none": 0, "naive": 1, "strategy": 2}
+ON_CAP_CODES = {"stop": 0, "continue": 1}
+
+#: Relative tolerance for "is a multiple of dt" (times given in decimal notation).
+MULTIPLE_TOL = 1e-9
+#: Default security zone as a fraction of the smallest particle radius (the seed's
+#: Couette scene uses alpha = R / 15; a tenth keeps alpha below a grid cell at the
+#: default 4 cells per diameter).
+DEFAULT_ALPHA_OVER_RADIUS = 0.1
+#: Default number of statistics records and of snapshots over a run.
+DEFAULT_RECORDS, DEFAULT_SNAPSHOTS = 100, 10
+
+
+@dataclass(frozen=True)
+class Family:
+    """One particle family after normalisation."""
+
+    index: int
+    name: str
+    shape: str
+    radius: float
+    length: float  # cylinder length, spheroid major axis, 2R for spheres [m]
+    aspect_ratio: float  # length / (2 radius) [-]
+    equivalent_aspect_ratio: float  # beta_e of the Jeffery equation [-]
+    xi: float  # Jeffery shape factor [-]
+    count: int
+    volume_fraction: float  # actual fraction of the cell the count fills [-]
+    orientation: str
+    axes: np.ndarray | None = None  # given or aligned axes, normalised
+
+    @property
+    def shape_code(self) -> int:
+        return shapes.SHAPE_CODES[self.shape]
+
+
+@dataclass(frozen=True)
+class ResolvedScene:
+    """A validated scene with every default filled in and every choice made."""
+
+    scene: Scene  # the normalised scene (itself a valid scene)
+    dim: int
+    cell_lengths: np.ndarray  # (3,), Lz = 0 in 2-D [m]
+    walls: bool
+    wall_speed: float  # U: the walls at y = 0, Ly move at -U, +U [m/s]
+    velocity_gradient: np.ndarray  # (3, 3) G_ij = du_i/dx_j [1/s]
+    shear_rate: float  # sqrt(2 D:D) [1/s]
+    viscosity: float
+    dt: float
+    t_end: float
+    n_steps: int
+    seed: int
+    hydrodynamics: str
+    collisions: str
+    reason: str
+    alpha: float
+    contact_max_iter: int
+    on_contact_cap: str
+    lubrication: bool
+    output_every: int
+    snapshot_every: int
+    checkpoint_every: int
+    families: tuple[Family, ...]
+    regime: str
+    regime_measure: float  # n L^dim
+    regime_threshold: float  # L/d of the longest family
+    warnings: tuple[str, ...] = field(default=())
+    toml: str = ""  # the scene file verbatim, when read from TOML
+
+    @property
+    def n_particles(self) -> int:
+        return sum(f.count for f in self.families)
+
+    def scene_json(self) -> str:
+        """The normalised scene as JSON (what ``/setup/scene_json`` stores)."""
+        return json.dumps(self.scene.model_dump(mode="json", exclude_none=True), indent=1)
+
+    def resolved_datasets(self) -> dict[str, tuple[object, str, str]]:
+        """``name -> (value, units, long_name)`` of the run file's ``/setup/resolved`` group."""
+        fams = self.families
+        return {
+            "dim": (np.int32(self.dim), "1", "spatial dimension"),
+            "cell_lengths": (self.cell_lengths, "m", "cell side lengths (Lx, Ly, Lz); Lz = 0 in 2-D"),
+            "walls": (np.int32(self.walls), "1", "1: no-slip walls at y = 0 and y = Ly (Couette), 0: periodic"),
+            "wall_speed": (self.wall_speed, "m/s", "walls at y = 0 and y = Ly move at -U and +U along x"),
+            "velocity_gradient": (self.velocity_gradient, "1/s", "imposed velocity gradient G_ij = du_i/dx_j"),
+            "shear_rate": (self.shear_rate, "1/s", "scalar deformation rate sqrt(2 D:D)"),
+            "viscosity": (self.viscosity, "Pa s", "fluid viscosity"),
+            "dt": (self.dt, "s", "time step"),
+            "t_end": (self.t_end, "s", "end time"),
+            "n_steps": (np.int32(self.n_steps), "1", "number of time steps, t_end / dt"),
+            "seed": (np.int32(self.seed), "1", "random seed"),
+            "hydrodynamics": (np.int32(HYDRODYNAMICS_CODES[self.hydrodynamics]), "1", "0 jeffery, 1 stokes"),
+            "hydrodynamics_reason": (self.reason, "", "what was chosen for hydrodynamics and collisions, and why"),
+            "collisions": (np.int32(COLLISION_CODES[self.collisions]), "1", "0 none, 1 naive, 2 strategy"),
+            "alpha": (self.alpha, "m", "security zone alpha"),
+            "contact_max_iter": (np.int32(self.contact_max_iter), "1", "cap on contact iterations per step"),
+            "on_contact_cap": (np.int32(ON_CAP_CODES[self.on_contact_cap]), "1", "0 stop, 1 continue"),
+            "lubrication": (np.int32(self.lubrication), "1", "sphere-sphere lubrication on (1) or off (0)"),
+            "output_every": (np.int32(self.output_every), "1", "steps between statistics records"),
+            "snapshot_every": (np.int32(self.snapshot_every), "1", "steps between snapshots, 0 = none"),
+            "checkpoint_every": (np.int32(self.checkpoint_every), "1", "steps between checkpoints, 0 = none"),
+            "family_names": ([f.name for f in fams], "", "particle family names, in family index order"),
+            "family_shape": (np.array([f.shape_code for f in fams], np.int32), "1", "1 fibre, 2 sphere, 3 spheroid"),
+            "family_count": (np.array([f.count for f in fams], np.int32), "1", "particles per family"),
+            "family_radius": (np.array([f.radius for f in fams]), "m", "radius per family"),
+            "family_length": (np.array([f.length for f in fams]), "m", "length per family"),
+            "family_volume_fraction": (np.array([f.volume_fraction for f in fams]), "1",
+                                       "volume (2-D: area) fraction per family"),
+            "family_aspect_ratio": (np.array([f.aspect_ratio for f in fams]), "1", "length / diameter"),
+            "family_equivalent_aspect_ratio": (np.array([f.equivalent_aspect_ratio for f in fams]), "1",
+                                               "equivalent spheroid aspect ratio of the Jeffery equation"),
+            "family_xi": (np.array([f.xi for f in fams]), "1", "Jeffery shape factor"),
+            "regime": (self.regime, "", "dilute, semi-dilute, concentrated (n L^dim against 1 and L/d) or spheres"),
+            "regime_measure": (self.regime_measure, "1", "n L^dim: number density times longest length^dim"),
+        }
+
+    def summary(self) -> str:
+        """A few human-readable lines: regime, choices, particles, steps."""
+        lines = [
+            f"regime: {self.regime} (n L^{self.dim} = {self.regime_measure:.4g}; "
+            f"semi-dilute from 1, concentrated from L/d = {self.regime_threshold:.4g})"
+            if self.regime != "spheres" else
+            f"regime: spheres, total volume fraction {sum(f.volume_fraction for f in self.families):.4g}",
+            self.reason,
+            f"cell: {self.dim}-D {' x '.join(f'{v:g}' for v in self.cell_lengths[:self.dim])}, "
+            f"{'Couette walls' if self.walls else 'periodic'}; {self.n_steps} steps of {self.dt:g} to t = {self.t_end:g}",
+        ]
+        for f in self.families:
+            lines.append(
+                f"  {f.name}: {f.count} {f.shape}{'s' if f.count > 1 else ''}, R = {f.radius:g}, L = {f.length:g}, "
+                f"beta = {f.aspect_ratio:.4g}, beta_e = {f.equivalent_aspect_ratio:.4g}, xi = {f.xi:.6f}, "
+                f"phi = {f.volume_fraction:.4g}, {f.orientation}")
+        lines += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+def _multiple_of(value: float, dt: float) -> int | None:
+    k = round(value / dt)
+    return k if abs(k * dt - value) <= MULTIPLE_TOL * max(value, dt) else None
+
+
+def _is_simple_shear(G: np.ndarray) -> bool:
+    mask = np.ones_like(G, dtype=bool)
+    mask[0, 1] = False
+    return bool(np.all(G[mask] == 0.0))
+
+
+def _gradient(scene: Scene, problems: Problems) -> np.ndarray | None:
+    """The (dim, dim) velocity gradient, from the kinematics module's constructors."""
+    from pyfold import kinematics
+
+    flow, dim = scene.flow, scene.cell.dim
+    if flow.type == "general":
+        if flow.rate is not None:
+            problems.add("flow.rate", "not used with flow.type = 'general' (the gradient sets the rate); remove it")
+        if flow.gradient is None:
+            problems.add("flow.gradient", f"required with flow.type = 'general': a {dim} x {dim} traceless array")
+            return None
+        rows = flow.gradient
+        if len(rows) != dim or any(len(r) != dim for r in rows):
+            shape = f"{len(rows)} x {'/'.join(sorted({str(len(r)) for r in rows}))}"
+            problems.add("flow.gradient", f"a {dim}-D cell (cell.dim = {dim}) needs a {dim} x {dim} gradient, got {shape}")
+            return None
+        try:
+            return kinematics.traceless_gradient(rows, name="flow.gradient", dim=dim)
+        except InputError as exc:
+            problems.add("flow.gradient", str(exc).removeprefix("flow.gradient: "))
+            return None
+    if flow.gradient is not None:
+        problems.add("flow.gradient", f"only with flow.type = 'general' (got flow.type = {flow.type!r}); remove it")
+    if flow.rate is None:
+        problems.add("flow.rate", f"required with flow.type = {flow.type!r}: the rate [1/s]")
+        return None
+    if flow.type == "simple_shear":
+        return np.asarray(kinematics.simple_shear(flow.rate, dim=dim))
+    if flow.type == "planar_elongation":
+        return np.asarray(kinematics.planar_elongation(flow.rate, dim=dim))
+    if dim == 2:
+        problems.add("flow.type", "'uniaxial_elongation' needs a 3-D cell (cell.dim = 3); "
+                     "allowed in 2-D: simple_shear, planar_elongation, general")
+        return None
+    return np.asarray(kinematics.uniaxial_elongation(flow.rate))
+
+
+def _family(scene: Scene, index: int, problems: Problems, cell_volume: float) -> Family | None:
+    fam = scene.particles[index]
+    dim = scene.cell.dim
+    at = f"particles[{index}]"
+    ok = True
+    if fam.shape == "sphere":
+        for key in ("length", "aspect_ratio"):
+            if getattr(fam, key) is not None:
+                problems.add(f"{at}.{key}", "a sphere has no length or aspect ratio (give its radius only)")
+                ok = False
+        length, beta = 2.0 * fam.radius, 1.0
+    else:
+        given = [k for k in ("length", "aspect_ratio") if getattr(fam, k) is not None]
+        if len(given) != 1:
+            problems.add(f"{at}.length", f"give exactly one of length, aspect_ratio for a {fam.shape} "
+                         f"(got {', '.join(given) if given else 'neither'})")
+            return None
+        length = fam.length if fam.length is not None else 2.0 * fam.radius * fam.aspect_ratio
+        beta = length / (2.0 * fam.radius)
+        if not beta > 1.0:
+            problems.add(f"{at}.{given[0]}", f"a {fam.shape} needs length > 2 radius (aspect ratio > 1), got "
+                         f"aspect ratio {beta:.6g}; use shape = 'sphere' for round particles")
+            return None
+    if fam.equivalent_aspect_ratio is not None and fam.shape != "fibre":
+        problems.add(f"{at}.equivalent_aspect_ratio", f"only for fibres (finite cylinders), not a {fam.shape}")
+        ok = False
+    rule = fam.equivalent_aspect_ratio or EQUIVALENT_ASPECT_RATIO_DEFAULT
+    beta_e, xi = shapes.jeffery_xi(fam.shape, beta, rule)
+    if fam.shape == "fibre" and not (1.0 < beta_e < beta):
+        key = "length" if fam.length is not None else "aspect_ratio"
+        others = [r for r in ("cox", "zhang", "harris_pittman") if r != rule]
+        problems.add(f"{at}.{key}", f"the {rule!r} equivalent-aspect-ratio rule gives beta_e = {beta_e:.4g} for "
+                     f"aspect ratio {beta:.4g}, outside its range of validity (a finite cylinder has "
+                     f"1 < beta_e < beta); set {at}.equivalent_aspect_ratio to one of {others} or use longer fibres")
+        ok = False
+
+    vp = shapes.particle_volume(dim, fam.shape, fam.radius, length)
+    if (fam.count is None) == (fam.volume_fraction is None):
+        problems.add(f"{at}.count", "give exactly one of count, volume_fraction "
+                     f"(got {'both' if fam.count is not None else 'neither'})")
+        return None
+    if fam.count is not None:
+        count = fam.count
+    else:
+        count = int(round(fam.volume_fraction * cell_volume / vp))
+        if count < 1:
+            problems.add(f"{at}.volume_fraction", f"{fam.volume_fraction:g} of this cell holds no whole particle "
+                         f"(one particle fills {vp / cell_volume:.3g}); allowed: >= {0.5 * vp / cell_volume:.3g}")
+            return None
+    axes = None
+    if fam.orientation == "given":
+        if fam.orientations is None:
+            problems.add(f"{at}.orientations", "required with orientation = 'given': one axis per particle")
+            ok = False
+        elif fam.count is None:
+            problems.add(f"{at}.count", "orientation = 'given' needs count (not volume_fraction)")
+            ok = False
+        elif len(fam.orientations) != count:
+            problems.add(f"{at}.orientations", f"must hold count = {count} axes, got {len(fam.orientations)}")
+            ok = False
+        else:
+            axes = _axes(fam.orientations, f"{at}.orientations", dim, problems)
+            ok = ok and axes is not None
+    elif fam.orientations is not None:
+        problems.add(f"{at}.orientations", "only with orientation = 'given'")
+        ok = False
+    if fam.orientation == "aligned":
+        direction = fam.direction if fam.direction is not None else [1.0] + [0.0] * (dim - 1)
+        found = _axes([direction], f"{at}.direction", dim, problems)
+        ok = ok and found is not None
+        axes = found
+    elif fam.direction is not None:
+        problems.add(f"{at}.direction", "only with orientation = 'aligned'")
+        ok = False
+    if not ok:
+        return None
+    return Family(index=index, name=fam.name or f"family{index}", shape=fam.shape, radius=fam.radius,
+                  length=length, aspect_ratio=beta, equivalent_aspect_ratio=beta_e, xi=xi, count=count,
+                  volume_fraction=count * vp / cell_volume, orientation=fam.orientation, axes=axes)
+
+
+def _axes(vectors, path: str, dim: int, problems: Problems) -> np.ndarray | None:
+    bad = [i for i, v in enumerate(vectors) if len(v) != dim]
+    if bad:
+        problems.add(path, f"each axis must have {dim} components (cell.dim = {dim}); "
+                     f"entry {bad[0]} has {len(vectors[bad[0]])}")
+        return None
+    arr = np.asarray(vectors, dtype=np.float64)
+    norms = np.linalg.norm(arr, axis=1)
+    if np.any(norms == 0.0):
+        problems.add(path, f"axes must be non-zero vectors; entry {int(np.argmin(norms))} is zero")
+        return None
+    return arr / norms[:, None]
+
+
+def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
+    """Check every rule that ties keys together and resolve the scene.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene whose fields passed the schema (types, ranges, known keys).
+    source : str
+        Name used in the error message (the file name).
+
+    Returns
+    -------
+    ResolvedScene
+
+    Raises
+    ------
+    InputError
+        Listing every problem found, each under its key path with the allowed range.
+    """
+    problems = Problems()
+    cell, dim = scene.cell, scene.cell.dim
+    if len(cell.size) != dim:
+        problems.add("cell.size", f"a {dim}-D cell (cell.dim = {dim}) needs {dim} side lengths, got {len(cell.size)}")
+        problems.raise_if_any(source)
+    lengths = np.zeros(3)
+    lengths[:dim] = cell.size
+    cell_volume = float(np.prod(cell.size))
+    walls = cell.boundary == "couette"
+
+    G = _gradient(scene, problems)
+    if G is not None and not _is_simple_shear(G):
+        # fold_cell (fortran/geometry) keeps the cell shape: only the sliding images of
+        # simple shear (Lees-Edwards) or the moving walls of Couette flow are exact.
+        key = "flow.gradient" if scene.flow.type == "general" else "flow.type"
+        what = ("no-slip walls (cell.boundary = 'couette') drive a simple shear u = (rate y, 0, 0)" if walls else
+                "a periodic cell that does not deform is exact only for simple shear (sliding Lees-Edwards "
+                "images, physics.md section 3); elongational flows need a deforming (Kraynik-Reinelt) lattice, "
+                "which pyfold does not have yet")
+        problems.add(key, f"{what}: G_xy must be the only non-zero entry; got flow.type = {scene.flow.type!r}"
+                     f"{' with G = ' + str(G.tolist()) if scene.flow.type == 'general' else ''}")
+
+    families = [_family(scene, i, problems, cell_volume) for i in range(len(scene.particles))]
+    names = [f.name for f in families if f is not None]
+    for i, f in enumerate(families):
+        if f is not None and names.count(f.name) > 1:
+            problems.add(f"particles[{i}].name", f"family names must be unique, {f.name!r} is used twice")
+    good = [f for f in families if f is not None]
+
+    model = scene.model
+    radii = [f.radius for f in good] or [min(p.radius for p in scene.particles)]
+    alpha = model.alpha if model.alpha is not None else DEFAULT_ALPHA_OVER_RADIUS * min(radii)
+    if alpha > min(radii):
+        problems.add("model.alpha", f"must be between 0 and the smallest particle radius {min(radii):g} "
+                     f"(a security zone of the order of a grid cell), got {alpha:g}")
+    if model.hydrodynamics == "stokes":
+        problems.add("model.hydrodynamics", "'stokes' is not available yet: the Stokes solver has not landed in "
+                     "pyfold; use 'jeffery' (imposed-flow kinematics) or 'auto'")
+    if model.lubrication and not any(f.shape == "sphere" for f in good):
+        problems.add("model.lubrication", "the lubrication force (physics.md section 3) is defined between spheres; "
+                     "this scene has no sphere family")
+
+    # Each particle (grown by alpha) must not meet its own periodic image, and the
+    # minimum image of a pair must be unique: extent + alpha <= half the period.
+    for f in good:
+        extent = f.length + (2.0 * f.radius if f.shape == "fibre" else 0.0)
+        key = f"particles[{f.index}].{'radius' if f.shape == 'sphere' else 'length'}"
+        periodic = [(ax, lengths[ax]) for ax in range(dim) if not (walls and ax == 1)]
+        ax, period = min(periodic, key=lambda t: t[1])
+        if extent + alpha > 0.5 * period:
+            problems.add(key, f"particle extent {extent:g} + alpha {alpha:g} must be <= half the smallest periodic "
+                         f"side ({'xyz'[ax]}: {period:g} / 2 = {0.5 * period:g}); enlarge cell.size or use shorter particles")
+        if walls and extent + alpha >= lengths[1]:
+            problems.add(key, f"particle extent {extent:g} + alpha {alpha:g} must be < the wall gap Ly = {lengths[1]:g}")
+
+    # Random placement (honouring alpha) cannot exceed the random-packing limits.
+    total_inflated, limits = 0.0, []
+    for f in good:
+        grown_length = f.length + alpha if f.shape != "sphere" else 2.0 * f.radius + alpha
+        inflated = f.count * shapes.particle_volume(dim, f.shape, f.radius + 0.5 * alpha, grown_length) / cell_volume
+        total_inflated += inflated
+        found = shapes.random_packing_limit(f.shape, dim, f.aspect_ratio)
+        if found is None:
+            continue
+        limit, why = found
+        limits.append(limit)
+        if inflated > limit:
+            key = "count" if scene.particles[f.index].count is not None else "volume_fraction"
+            problems.add(f"particles[{f.index}].{key}", f"volume fraction {f.volume_fraction:.4g} "
+                         f"({inflated:.4g} with the security zone alpha) is beyond what random placement can reach: "
+                         f"{why}; allowed: <= {limit * f.volume_fraction / inflated:.4g}")
+    if len(good) > 1 and limits and total_inflated > max(limits):
+        problems.add("particles", f"total volume fraction {sum(f.volume_fraction for f in good):.4g} "
+                     f"({total_inflated:.4g} with alpha) exceeds the random-packing limit {max(limits):.4g} "
+                     f"of the most packable family")
+
+    num = scene.numerics
+    n_steps = None
+    if num.dt > num.t_end:
+        problems.add("numerics.dt", f"must be <= numerics.t_end = {num.t_end:g}, got {num.dt:g}")
+    else:
+        n_steps = _multiple_of(num.t_end, num.dt)
+        if n_steps is None:
+            problems.add("numerics.t_end", f"must be a multiple of numerics.dt = {num.dt:g}, got {num.t_end:g} "
+                         f"(= {num.t_end / num.dt:.6g} dt)")
+        elif n_steps > 2**31 - 1:
+            problems.add("numerics.t_end", f"t_end / dt = {n_steps} steps, allowed <= {2**31 - 1}")
+            n_steps = None
+
+    out = scene.output
+    every: dict[str, int] = {}
+    if n_steps is not None:
+        defaults = {"interval": max(1, n_steps // DEFAULT_RECORDS), "snapshot_interval": max(1, n_steps // DEFAULT_SNAPSHOTS),
+                    "checkpoint_interval": 0}
+        for key, default in defaults.items():
+            value = getattr(out, key)
+            if value is None:
+                every[key] = default
+                continue
+            if value == 0.0 and key != "interval":
+                every[key] = 0
+                continue
+            k = _multiple_of(value, num.dt)
+            if k is None or k < 1:
+                problems.add(f"output.{key}", f"must be a multiple of numerics.dt = {num.dt:g}"
+                             f"{' or 0 (none)' if key != 'interval' else ''}, got {value:g}")
+            elif k > n_steps:
+                problems.add(f"output.{key}", f"must be <= numerics.t_end = {num.t_end:g}, got {value:g}")
+            else:
+                every[key] = k
+
+    problems.raise_if_any(source)
+    assert G is not None and n_steps is not None
+
+    # Regime from the longest family (physics.md section 2).
+    longest = max(good, key=lambda f: f.length)
+    n_density = sum(f.count for f in good) / cell_volume
+    regime, measure = shapes.regime(n_density, longest.length, 2.0 * longest.radius, dim)
+    regime_text = f"{regime} (n L^{dim} = {measure:.3g}, L/d = {longest.aspect_ratio:.3g})"
+    has_spheres = any(f.shape == "sphere" for f in good)
+    if longest.shape == "sphere":
+        # The n L^d rule classifies rods; for spheres it would call a 50 % packing dilute.
+        regime = "spheres"
+        regime_text = (f"spheres (volume fraction {sum(f.volume_fraction for f in good):.3g}; "
+                       f"the n L^{dim} regimes are defined for elongated particles)")
+
+    reasons = []
+    collisions = model.collisions
+    if collisions == "auto":
+        if regime == "dilute" and not has_spheres:
+            collisions = "none"
+            reasons.append(f"collisions = none (auto): {regime_text}, particles rarely meet: no contact pass")
+        else:
+            collisions = "strategy"
+            why = (f"{regime_text}; spheres present, whose collisions the n L^{dim} rule does not bound: contacts kept"
+                   if regime == "dilute" else regime_text)
+            reasons.append(f"collisions = strategy (auto): {why}")
+    else:
+        reasons.append(f"collisions = {collisions} (requested)")
+    hydrodynamics = model.hydrodynamics
+    if hydrodynamics == "auto":
+        hydrodynamics = "jeffery"
+        caveat = ("" if regime == "dilute" else
+                  "; hydrodynamic interactions between particles are neglected, an approximation in this regime")
+        reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}; the Stokes solver is not available yet{caveat}")
+    else:
+        reasons.insert(0, f"hydrodynamics = {hydrodynamics} (requested)")
+    G3 = np.zeros((3, 3))
+    G3[:dim, :dim] = G
+    from pyfold.kinematics import shear_rate
+
+    rate = float(shear_rate(G3))
+    warnings = []
+    for f in good:
+        step = rate * 0.5 * f.length * num.dt  # tip displacement relative to the centre per step
+        if collisions != "none" and step > 0.5 * alpha:
+            warnings.append(f"{f.name}: a tip moves up to {step:.3g} per step, more than alpha/2 = {0.5 * alpha:.3g} "
+                            "(physics.md section 5); contacts may need many iterations, consider a smaller dt")
+        if step > f.radius:
+            warnings.append(f"{f.name}: a tip moves up to {step:.3g} per step, more than a radius {f.radius:.3g} "
+                            "(physics.md section 5: a fraction of a diameter per step)")
+
+    fam_tables = []
+    for f in good:
+        raw = scene.particles[f.index]
+        update: dict[str, object] = {"name": f.name}
+        if raw.shape == "fibre":
+            update["equivalent_aspect_ratio"] = raw.equivalent_aspect_ratio or EQUIVALENT_ASPECT_RATIO_DEFAULT
+        if raw.orientation == "aligned":
+            update["direction"] = [float(v) for v in f.axes[0]]
+        fam_tables.append(raw.model_copy(update=update))
+    normalised = scene.model_copy(update={
+        "particles": fam_tables,
+        "model": model.model_copy(update={"hydrodynamics": hydrodynamics, "collisions": collisions, "alpha": alpha}),
+        "output": out.model_copy(update={
+            "interval": every["interval"] * num.dt,
+            "snapshot_interval": every["snapshot_interval"] * num.dt,
+            "checkpoint_interval": every["checkpoint_interval"] * num.dt,
+        }),
+    })
+    return ResolvedScene(
+        scene=normalised, dim=dim, cell_lengths=lengths, walls=walls,
+        wall_speed=float(G[0, 1]) * 0.5 * lengths[1] if walls else 0.0,
+        velocity_gradient=G3, shear_rate=rate, viscosity=scene.fluid.viscosity, dt=num.dt, t_end=num.t_end,
+        n_steps=n_steps, seed=num.seed, hydrodynamics=hydrodynamics, collisions=collisions,
+        reason="; ".join(reasons), alpha=alpha, contact_max_iter=model.contact_max_iter,
+        on_contact_cap=model.on_contact_cap, lubrication=model.lubrication,
+        output_every=every["interval"], snapshot_every=every["snapshot_interval"],
+        checkpoint_every=every["checkpoint_interval"], families=tuple(good), regime=regime,
+        regime_measure=measure, regime_threshold=longest.aspect_ratio, warnings=tuple(warnings),
+    )

@@ -1,0 +1,177 @@
+"""The scene file's schema: one pydantic model per TOML table.
+
+Field-level rules (types, ranges, allowed words, unknown keys) live here; rules
+that tie several keys together (a 2-D cell with a 3-D gradient, walls with an
+elongational flow, a volume fraction beyond random packing, ...) live in
+:mod:`pyfold.scene.checks`, so that every error can name its own key path.
+
+Types are strict: ``"1.0"`` is not a number and ``1.5`` is not an integer; an
+integer is accepted where a real is expected. Units: SI or any consistent set
+(Stokes flow is linear), see ``docs/scenes.md``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+
+__all__ = [
+    "Cell",
+    "Flow",
+    "Fluid",
+    "ParticleFamily",
+    "Model",
+    "StokesSettings",
+    "Numerics",
+    "Output",
+    "Scene",
+    "EQUIVALENT_ASPECT_RATIO_DEFAULT",
+]
+
+#: Default rule for the equivalent aspect ratio of a finite cylinder: Cox (1971,
+#: J. Fluid Mech. 45:625) slender-body result ``beta_e = 1.24 beta / sqrt(ln beta)``,
+#: the classic choice for long fibres (physics.md section 2).
+EQUIVALENT_ASPECT_RATIO_DEFAULT = "cox"
+
+
+def _finite(value: float) -> float:
+    if not math.isfinite(value):
+        raise ValueError("must be a finite number (not nan or inf)")
+    return value
+
+
+Real = Annotated[float, AfterValidator(_finite)]
+PositiveReal = Annotated[float, Field(gt=0), AfterValidator(_finite)]
+NonNegativeReal = Annotated[float, Field(ge=0), AfterValidator(_finite)]
+Vector = Annotated[list[Real], Field(min_length=2, max_length=3)]
+
+
+class _Table(BaseModel):
+    """A TOML table: strict types, unknown keys rejected, values frozen once read."""
+
+    model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
+
+
+class Cell(_Table):
+    """The computational cell."""
+
+    dim: Literal[2, 3] = 3
+    #: Side lengths (Lx, Ly[, Lz]), one per dimension [m]
+    size: Annotated[list[PositiveReal], Field(min_length=2, max_length=3)]
+    #: "periodic" on every side, or "couette": no-slip walls at y = 0 and y = Ly
+    #: moving at -U and +U (U = rate * Ly / 2), periodic in x (and z)
+    boundary: Literal["periodic", "couette"] = "periodic"
+
+
+class Flow(_Table):
+    """The imposed mean flow ``u = G . x``."""
+
+    type: Literal["simple_shear", "planar_elongation", "uniaxial_elongation", "general"] = "simple_shear"
+    #: simple shear: G_xy = rate; planar elongation: G = diag(rate, -rate[, 0]);
+    #: uniaxial elongation: G = diag(rate, -rate/2, -rate/2) [1/s]
+    rate: Real | None = None
+    #: the full velocity gradient G_ij = du_i/dx_j (dim x dim, traceless), type = "general" only [1/s]
+    gradient: Annotated[list[Vector], Field(min_length=2, max_length=3)] | None = None
+
+
+class Fluid(_Table):
+    """The suspending Newtonian fluid."""
+
+    #: dynamic viscosity [Pa s]
+    viscosity: PositiveReal = 1.0
+
+
+class ParticleFamily(_Table):
+    """One family of identical particles."""
+
+    #: label used in outputs (default "family<index>")
+    name: Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.+-]+$")] | None = None
+    shape: Literal["fibre", "sphere", "spheroid"]
+    #: fibre cross-section radius, sphere radius, spheroid minor semi-axis [m]
+    radius: PositiveReal
+    #: fibre (cylinder) length or spheroid major axis; not for spheres [m]
+    length: PositiveReal | None = None
+    #: length / (2 radius), an alternative to `length`; not for spheres [-]
+    aspect_ratio: PositiveReal | None = None
+    #: number of particles (give exactly one of count, volume_fraction)
+    count: Annotated[int, Field(ge=1, le=10_000_000)] | None = None
+    #: fraction of the cell volume (area in 2-D) the family fills [-]
+    volume_fraction: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] | None = None
+    orientation: Literal["isotropic", "aligned", "planar_random", "given"] = "isotropic"
+    #: axis of every particle for orientation = "aligned" (normalised; default the flow direction x)
+    direction: Vector | None = None
+    #: one axis per particle (count x dim) for orientation = "given" (each normalised)
+    orientations: list[Vector] | None = None
+    #: finite cylinders only: rule giving the equivalent spheroid aspect ratio
+    #: (Cox 1971, Zhang et al. 2011, Harris & Pittman 1975)
+    equivalent_aspect_ratio: Literal["cox", "zhang", "harris_pittman"] | None = None
+
+
+class Model(_Table):
+    """Physical model of the direct simulation."""
+
+    #: "auto" (chosen from the regime), "jeffery" (imposed-flow kinematics) or "stokes"
+    hydrodynamics: Literal["auto", "jeffery", "stokes"] = "auto"
+    #: "auto" (chosen from the regime), "strategy" (seed loop with cell lists),
+    #: "naive" (same rule, O(N^2) reference) or "none"
+    collisions: Literal["auto", "strategy", "naive", "none"] = "auto"
+    #: security zone alpha [m] (default: a tenth of the smallest particle radius)
+    alpha: NonNegativeReal | None = None
+    #: cap on contact-correction iterations per step
+    contact_max_iter: Annotated[int, Field(ge=1, le=100_000)] = 100
+    #: what to do when the cap is hit: "stop" the run (status failed) or "continue" and count it
+    on_contact_cap: Literal["stop", "continue"] = "stop"
+    #: sphere-sphere lubrication force (physics.md section 3); spheres only
+    lubrication: bool = False
+
+
+class StokesSettings(_Table):
+    """Settings of the Stokes solver: validated now, used once the solver exists."""
+
+    #: relative residual tolerance of the iterative solver [-]
+    tolerance: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] = 1e-6
+    max_iterations: Annotated[int, Field(ge=1, le=1_000_000)] = 1000
+    #: viscosity contrast of the penalisation eta_solid / eta_fluid (seed: 1e3) [-]
+    kappa: Annotated[float, Field(gt=1), AfterValidator(_finite)] = 1e3
+    #: grid cells per particle diameter (physics.md section 5: 4-8) [-]
+    cells_per_diameter: Annotated[int, Field(ge=1, le=64)] = 4
+
+
+class Numerics(_Table):
+    """Time stepping and solver settings."""
+
+    #: time step [s]
+    dt: PositiveReal
+    #: end time; a multiple of dt [s]
+    t_end: PositiveReal
+    #: seed of every random draw (placement, orientations)
+    seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
+    stokes: StokesSettings = StokesSettings()
+
+
+class Output(_Table):
+    """What the run file records and how often (times are multiples of numerics.dt)."""
+
+    #: interval between records of the statistics (a2, a4, contact and drift counters) [s]
+    #: (default: t_end / 100 rounded down to a multiple of dt)
+    interval: PositiveReal | None = None
+    #: interval between particle snapshots (positions, axes); 0 = none
+    #: (default: t_end / 10 rounded down to a multiple of dt) [s]
+    snapshot_interval: NonNegativeReal | None = None
+    #: interval between restart checkpoints; 0 = none [s]
+    checkpoint_interval: NonNegativeReal = 0.0
+
+
+class Scene(_Table):
+    """A complete scene: what ``pyfold run`` simulates."""
+
+    title: Annotated[str, Field(max_length=200)] = ""
+    description: Annotated[str, Field(max_length=4000)] = ""
+    cell: Cell
+    flow: Flow
+    fluid: Fluid = Fluid()
+    particles: Annotated[list[ParticleFamily], Field(min_length=1, max_length=64)]
+    model: Model = Model()
+    numerics: Numerics
+    output: Output = Output()
