@@ -1,0 +1,489 @@
+!> The run driver: reads a run file, advances the particles, appends the results.
+!>
+!> One step from t to t + dt (dilute Jeffery hydrodynamics):
+!>   1. kinematics: v = u_mean(x), omega = the exact Jeffery step for constant G
+!>      (`fold_jeffery_step`), for this rank's block of particles, then gathered;
+!>   2. contacts: the seed's collision strategy on (v, omega) at the predicted
+!>      configuration (`fold_contacts::resolve_contacts`, corrections summed over ranks
+!>      after every sweep);
+!>   3. exact rigid update (`fold_kinematics::rigid_update`), positions wrapped into
+!>      the Lees-Edwards cell at t + dt;
+!>   4. blow-up checks (a particle moving more than half the cell in one step;
+!>      NaN/infinity anywhere in x, p, v, omega), drift measures;
+!>   5. statistics (`fold_orientation_stats`) and output every `output_every` steps,
+!>      snapshots and checkpoints at their own intervals.
+!>
+!> MPI: the particle state is replicated on every rank of MPI_COMM_WORLD; rank r owns
+!> the contiguous block first:last = r*n/np+1 : (r+1)*n/np for kinematics and contact
+!> corrections. Every rank then performs the same rigid update on the same data, so
+!> the state stays replicated; results differ from a serial run only by the order of
+!> the rank sum of contact corrections (round-off). Rank 0 alone writes the file and
+!> broadcasts the status of each write, so an I/O failure stops every rank.
+!>
+!> Failure (contact cap with on_cap = stop, NaN, I/O): the state at the start of the
+!> failing step (the last good state) is restored and written as the last record,
+!> a snapshot and /checkpoint; the root attribute `status` says "failed: step N,
+!> t = T: cause" and `steps_done` = N - 1. Nothing here stops the program: the
+!> outcome is returned to `fold_run`.
+module fold_driver
+   use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
+   use mpi_f08
+   use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR, FOLD_OVERLAP, FOLD_NUMERICAL
+   use fold_particles, only: particle_set_t
+   use fold_cell, only: cell_t, cell_init, cell_set_time, cell_wrap, cell_wall_speed
+   use fold_kinematics, only: rigid_update
+   use fold_contacts, only: contact_config_t, contact_stats_t, resolve_contacts, FOLD_CONTACT_NONE
+   use fold_orientation_stats, only: orientation_moments
+   use fold_jeffery_step, only: jeffery_stepper_t, jeffery_stepper_init, jeffery_step_velocities
+   use fold_h5, only: h5_start, h5_stop
+   use fold_run_file, only: run_setup_t, read_run_file
+   use fold_output, only: run_output_t, run_record_t, record_init, output_open, output_resume, output_record, &
+                          output_snapshot, output_checkpoint, output_status, output_close
+   implicit none
+   private
+
+   !> How a run ended.
+   type, public :: run_outcome_t
+      !> FOLD_OK or the failure status
+      integer :: stat = FOLD_OK
+      !> Cause of the failure ("" on success)
+      character(len=msg_len) :: errmsg = ""
+      !> The run file was rejected before any step (fold_run exits with 2)
+      logical :: bad_input = .false.
+      !> Steps completed (the state in the file is after this step)
+      integer(i8) :: steps_done = 0
+      !> Time of that state [s]
+      real(dp) :: time = 0.0_dp
+   end type run_outcome_t
+
+   public :: run_driver, measure_gaps
+
+contains
+
+   !> Run (or resume) the simulation described by a run file, on MPI_COMM_WORLD.
+   subroutine run_driver(path, resume, outcome)
+      !> Run file (/setup/resolved and /initial present; results are appended)
+      character(len=*), intent(in) :: path
+      !> Continue from /checkpoint instead of starting from /initial
+      logical, intent(in) :: resume
+      type(run_outcome_t), intent(out) :: outcome
+
+      type(run_setup_t) :: setup
+      type(particle_set_t) :: parts, good
+      type(cell_t) :: cell
+      type(contact_config_t) :: cfg
+      type(contact_stats_t) :: cstats
+      type(jeffery_stepper_t) :: stepper
+      type(run_output_t) :: out
+      type(run_record_t) :: rec
+      integer :: rank, nranks, stat, s2
+      character(len=msg_len) :: errmsg, m2
+      integer(i8) :: step, step0, last_record, last_snapshot, progress_every
+      integer(ip) :: first, last
+      integer, allocatable :: cnt_v(:), dsp_v(:), cnt_w(:), dsp_w(:)
+      real(dp) :: t
+
+      call MPI_Comm_rank(MPI_COMM_WORLD, rank)
+      call MPI_Comm_size(MPI_COMM_WORLD, nranks)
+      call h5_start(stat, errmsg)
+      if (stat /= FOLD_OK) then
+         call finish_early(.false.)
+         return
+      end if
+
+      ! ---------------------------------------------------------------- setup
+      call read_run_file(path, setup, parts, stat, errmsg)
+      if (stat == FOLD_OK) call make_cell(setup, cell, stat, errmsg)
+      if (stat == FOLD_OK) then
+         cfg = contact_config_t(mode=setup%collisions, alpha=setup%alpha, max_iter=setup%contact_max_iter, &
+                                on_cap=setup%on_contact_cap, lubrication=setup%lubrication)
+         call jeffery_stepper_init(stepper, parts, cell%G, setup%dt, stat, errmsg)
+      end if
+      ! A measuring pass now turns a cell too small for the contact search into a
+      ! run-file error instead of a failure at step 1.
+      if (stat == FOLD_OK) call measure_gaps(cell, parts, cfg, cstats, stat, errmsg)
+      if (stat /= FOLD_OK) then
+         call finish_early(.true.)
+         return
+      end if
+      if (setup%lubrication .and. rank == 0) write (output_unit, '(a)') &
+         "fold_run: note: lubrication = 1 has no effect with Jeffery hydrodynamics (no force balance)"
+
+      first = int(int(rank, i8)*parts%n/nranks + 1, ip)
+      last = int(int(rank + 1, i8)*parts%n/nranks, ip)
+      allocate (cnt_v(nranks), dsp_v(nranks), cnt_w(nranks), dsp_w(nranks))
+      block
+         integer :: r
+         do r = 0, nranks - 1
+            dsp_v(r + 1) = int(int(r, i8)*parts%n/nranks)
+            cnt_v(r + 1) = int(int(r + 1, i8)*parts%n/nranks) - dsp_v(r + 1)
+         end do
+      end block
+      dsp_w = 3*dsp_v
+      cnt_w = 3*cnt_v
+      dsp_v = parts%dim*dsp_v
+      cnt_v = parts%dim*cnt_v
+
+      ! ---------------------------------------------------------------- output
+      call record_init(rec, parts%dim, setup%n_families)
+      ! Every rank has closed the run file: rank 0 may now open it for writing
+      ! (HDF5 file locks refuse a writer while readers hold the file).
+      call MPI_Barrier(MPI_COMM_WORLD)
+      step0 = 0
+      t = 0.0_dp
+      if (rank == 0) then
+         if (resume) then
+            call output_resume(out, path, parts, setup%n_families, nranks, step0, t, stat, errmsg)
+         else
+            call output_open(out, path, parts, setup%n_families, nranks, stat, errmsg)
+         end if
+      end if
+      call share_status(stat, errmsg)
+      if (stat /= FOLD_OK) then
+         if (rank == 0) call output_close(out, s2, m2)
+         call finish_early(stat == FOLD_INPUT_ERROR)
+         return
+      end if
+      if (resume) then
+         call MPI_Bcast(step0, 1, MPI_INTEGER8, 0, MPI_COMM_WORLD)
+         call MPI_Bcast(t, 1, MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
+         call MPI_Bcast(parts%x, size(parts%x), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
+         call MPI_Bcast(parts%p, size(parts%p), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
+         call MPI_Bcast(parts%v, size(parts%v), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
+         call MPI_Bcast(parts%omega, size(parts%omega), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
+         ! positions at the checkpoint time (not the initial ones) decide the first gaps
+         call measure_gaps(cell, parts, cfg, cstats, stat, errmsg)
+      end if
+      call reset_record(rec)
+      call accumulate(rec, cstats, parts)
+      last_record = -1
+      last_snapshot = -1
+      if (.not. resume) then
+         call write_outputs(0_i8, 0.0_dp, .true.)
+         if (stat /= FOLD_OK) then
+            call fail(0_i8, "I/O: "//trim(errmsg), FOLD_IO_ERROR)
+            return
+         end if
+      end if
+      last_record = step0
+      last_snapshot = step0
+      call reset_record(rec)
+
+      ! ---------------------------------------------------------------- time loop
+      progress_every = max(1_i8, setup%nsteps/100)
+      good = parts
+      do step = step0 + 1, setup%nsteps
+         good%x = parts%x
+         good%p = parts%p
+         good%v = parts%v
+         good%omega = parts%omega
+         t = real(step - 1, dp)*setup%dt
+         call cell_set_time(cell, t)
+
+         call jeffery_step_velocities(stepper, cell, parts, first, last)
+         if (nranks > 1) then
+            call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_DATATYPE_NULL, parts%v, cnt_v, dsp_v, MPI_DOUBLE_PRECISION, &
+                                MPI_COMM_WORLD)
+            call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_DATATYPE_NULL, parts%omega, cnt_w, dsp_w, &
+                                MPI_DOUBLE_PRECISION, MPI_COMM_WORLD)
+            call resolve_contacts(cell, parts, setup%dt, cfg, cstats, stat, errmsg, first, last, reduce_world)
+         else
+            call resolve_contacts(cell, parts, setup%dt, cfg, cstats, stat, errmsg)
+         end if
+         if (stat /= FOLD_OK) then
+            call fail(step, trim(errmsg), stat)
+            return
+         end if
+
+         ! A particle crossing more than half the cell in one step makes the minimum
+         ! image (and so every gap) meaningless: a blow-up, not a result.
+         block
+            real(dp) :: jump
+            integer(ip) :: kmax
+            character(len=200) :: why
+            jump = 0.0_dp
+            kmax = 0
+            if (parts%n > 0) then
+               kmax = int(maxloc(norm2(parts%v, dim=1), dim=1), ip)
+               jump = norm2(parts%v(:, kmax))*setup%dt
+            end if
+            if (.not. (jump <= 0.5_dp*minval(setup%cell_lengths(1:parts%dim)))) then
+               write (why, '(a,i0,a,es10.3,a)') "particle ", kmax - 1, " would move ", jump, &
+                  " in one step, more than half the cell; dt too large"
+               call fail(step, trim(why), FOLD_NUMERICAL)
+               return
+            end if
+         end block
+         call rigid_update(parts, setup%dt)
+         t = real(step, dp)*setup%dt
+         call cell_set_time(cell, t)
+         block
+            integer(ip) :: k
+            do k = 1, parts%n
+               call cell_wrap(cell, parts%x(:, k), parts%v(:, k))
+            end do
+         end block
+         if (.not. finite_state(parts)) then
+            call fail(step, "NaN or infinity in the particle state (x, p, v or omega); dt too large?", &
+                      FOLD_NUMERICAL)
+            return
+         end if
+         call accumulate(rec, cstats, parts)
+
+         call write_outputs(step, t, step == setup%nsteps)
+         if (stat /= FOLD_OK) then
+            call fail(step + 1, "I/O: "//trim(errmsg), FOLD_IO_ERROR)
+            return
+         end if
+         if (rank == 0 .and. (mod(step, progress_every) == 0 .or. step == setup%nsteps)) then
+            write (output_unit, '(a,1x,i0,1x,i0,1x,es23.16)') "PROGRESS", step, setup%nsteps, t
+            flush (output_unit)
+         end if
+      end do
+
+      if (rank == 0) then
+         call output_status(out, "ok", setup%nsteps, stat, errmsg)
+         call output_close(out, s2, m2)
+         if (stat == FOLD_OK .and. s2 /= FOLD_OK) then
+            stat = s2
+            errmsg = m2
+         end if
+      end if
+      call share_status(stat, errmsg)
+      outcome%stat = stat
+      outcome%steps_done = setup%nsteps
+      outcome%time = t
+      if (stat /= FOLD_OK) outcome%errmsg = "I/O: "//trim(errmsg)
+      call h5_stop()
+
+   contains
+
+      !> Record / snapshot / checkpoint due at this step (rank 0 writes; all ranks
+      !> learn the status).
+      subroutine write_outputs(st, time, final)
+         integer(i8), intent(in) :: st
+         real(dp), intent(in) :: time
+         logical, intent(in) :: final
+         stat = FOLD_OK
+         errmsg = ""
+         if (rank == 0) then
+            if (mod(st, setup%output_every) == 0 .or. final) then
+               call fill_record(rec, st, time, parts, setup%n_families)
+               call output_record(out, rec, stat, errmsg)
+               if (stat == FOLD_OK) call reset_record(rec)
+            end if
+            if (stat == FOLD_OK .and. setup%snapshot_every > 0) then
+               if (mod(st, setup%snapshot_every) == 0 .or. final) &
+                  call output_snapshot(out, st, time, parts, stat, errmsg)
+            end if
+            if (stat == FOLD_OK .and. setup%checkpoint_every > 0) then
+               if (mod(st, setup%checkpoint_every) == 0 .or. final) &
+                  call output_checkpoint(out, st, time, parts, stat, errmsg)
+            end if
+         end if
+         if (mod(st, setup%output_every) == 0 .or. final) then
+            last_record = st
+            call reset_record(rec)
+         end if
+         if (setup%snapshot_every > 0) then
+            if (mod(st, setup%snapshot_every) == 0 .or. final) last_snapshot = st
+         end if
+         call share_status(stat, errmsg)
+      end subroutine write_outputs
+
+      !> Stop at `failed_step`: restore the last good state, write it, set status.
+      subroutine fail(failed_step, cause, code)
+         integer(i8), intent(in) :: failed_step
+         character(len=*), intent(in) :: cause
+         integer, intent(in) :: code
+         integer(i8) :: good_step
+         real(dp) :: good_t
+         character(len=msg_len) :: text
+         integer :: ws
+
+         good_step = failed_step - 1
+         good_t = real(good_step, dp)*setup%dt
+         if (good_step >= 0 .and. allocated(good%x)) then
+            parts%x = good%x
+            parts%p = good%p
+            parts%v = good%v
+            parts%omega = good%omega
+         end if
+         write (text, '(a,i0,a,es23.16,a,a)') "failed: step ", failed_step, ", t = ", &
+            real(failed_step, dp)*setup%dt, ": ", trim(cause)
+         ws = FOLD_OK
+         if (rank == 0 .and. out%file >= 0) then
+            ! After an I/O failure the file may refuse more writes; try anyway.
+            if (last_record /= good_step .and. good_step >= 0) then
+               call fill_record(rec, good_step, good_t, parts, setup%n_families)
+               call output_record(out, rec, ws, m2)
+            end if
+            if (last_snapshot /= good_step .and. good_step >= 0) call output_snapshot(out, good_step, good_t, parts, ws, m2)
+            if (good_step >= 0) call output_checkpoint(out, good_step, good_t, parts, ws, m2)
+            call output_status(out, trim(text), max(good_step, 0_i8), ws, m2)
+            call output_close(out, ws, m2)
+         end if
+         outcome%stat = code
+         outcome%errmsg = text
+         outcome%steps_done = max(good_step, 0_i8)
+         outcome%time = good_t
+         call h5_stop()
+      end subroutine fail
+
+      !> Return before any step: rejected run file or unusable output file.
+      subroutine finish_early(input_problem)
+         logical, intent(in) :: input_problem
+         outcome%stat = stat
+         outcome%errmsg = errmsg
+         outcome%bad_input = input_problem
+         call h5_stop()
+      end subroutine finish_early
+
+   end subroutine run_driver
+
+   !> Surface gaps of a configuration as it is (zero velocities over a vanishing
+   !> step), through the same contact pass as the run, without corrections.
+   subroutine measure_gaps(cell, parts, cfg, cstats, stat, errmsg)
+      type(cell_t), intent(in) :: cell
+      type(particle_set_t), intent(in) :: parts
+      type(contact_config_t), intent(in) :: cfg
+      type(contact_stats_t), intent(out) :: cstats
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      type(particle_set_t) :: still
+      type(contact_config_t) :: look
+
+      still = parts
+      still%v = 0.0_dp
+      still%omega = 0.0_dp
+      look = cfg
+      look%mode = FOLD_CONTACT_NONE
+      call resolve_contacts(cell, still, tiny(1.0_dp), look, cstats, stat, errmsg)
+   end subroutine measure_gaps
+
+   !> Sum over ranks of the contact corrections and counters, minimum of the gaps
+   !> (the reduction `fold_contacts` calls after each sweep).
+   subroutine reduce_world(dv, domega, counts, mins)
+      real(dp), intent(inout) :: dv(:, :), domega(:, :)
+      integer(i8), intent(inout) :: counts(:)
+      real(dp), intent(inout) :: mins(:)
+      call MPI_Allreduce(MPI_IN_PLACE, dv, size(dv), MPI_DOUBLE_PRECISION, MPI_SUM, MPI_COMM_WORLD)
+      call MPI_Allreduce(MPI_IN_PLACE, domega, size(domega), MPI_DOUBLE_PRECISION, MPI_SUM, MPI_COMM_WORLD)
+      call MPI_Allreduce(MPI_IN_PLACE, counts, size(counts), MPI_INTEGER8, MPI_SUM, MPI_COMM_WORLD)
+      call MPI_Allreduce(MPI_IN_PLACE, mins, size(mins), MPI_DOUBLE_PRECISION, MPI_MIN, MPI_COMM_WORLD)
+   end subroutine reduce_world
+
+   !> Rank 0's status and message to every rank.
+   subroutine share_status(stat, errmsg)
+      integer, intent(inout) :: stat
+      character(len=msg_len), intent(inout) :: errmsg
+      call MPI_Bcast(stat, 1, MPI_INTEGER, 0, MPI_COMM_WORLD)
+      call MPI_Bcast(errmsg, msg_len, MPI_CHARACTER, 0, MPI_COMM_WORLD)
+   end subroutine share_status
+
+   !> The cell of the run, checking the redundant entries of /setup/resolved against G.
+   subroutine make_cell(setup, cell, stat, errmsg)
+      type(run_setup_t), intent(in) :: setup
+      type(cell_t), intent(out) :: cell
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      real(dp) :: gd, u
+      real(dp), parameter :: rel = 1.0e-9_dp
+
+      call cell_init(cell, setup%dim, setup%cell_lengths, setup%walls, setup%velocity_gradient, stat, errmsg)
+      if (stat /= FOLD_OK) then
+         errmsg = "/setup/resolved/velocity_gradient or cell_lengths: "//trim(errmsg)
+         return
+      end if
+      gd = setup%velocity_gradient(1, 2)
+      if (abs(setup%shear_rate - gd) > rel*max(abs(gd), tiny(1.0_dp))) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,es12.5,a,es12.5,a)') "/setup/resolved/shear_rate = ", setup%shear_rate, &
+            " disagrees with velocity_gradient[0, 1] = ", gd, " (must be equal)"
+         return
+      end if
+      if (setup%walls) then
+         u = cell_wall_speed(cell)
+         if (abs(setup%wall_speed - u) > rel*max(abs(u), tiny(1.0_dp))) then
+            stat = FOLD_INPUT_ERROR
+            write (errmsg, '(a,es12.5,a,es12.5,a)') "/setup/resolved/wall_speed = ", setup%wall_speed, &
+               " disagrees with shear_rate*Ly/2 = ", u, " (walls move at -U and +U)"
+            return
+         end if
+      end if
+   end subroutine make_cell
+
+   !> All of x, p, v, omega finite.
+   logical function finite_state(parts)
+      type(particle_set_t), intent(in) :: parts
+      real(dp), parameter :: big = huge(1.0_dp)
+      finite_state = all(abs(parts%x) <= big) .and. all(abs(parts%p) <= big) .and. &
+                     all(abs(parts%v) <= big) .and. all(abs(parts%omega) <= big)
+   end function finite_state
+
+   !> Empty the interval aggregates of a record.
+   subroutine reset_record(rec)
+      type(run_record_t), intent(inout) :: rec
+      rec%n_corrections = 0
+      rec%contact_iterations = 0
+      rec%pairs_left = 0
+      rec%capped_steps = 0
+      rec%min_gap = huge(1.0_dp)
+      rec%min_gap_over_alpha = huge(1.0_dp)
+      rec%length_drift = 0.0_dp
+      rec%unit_norm_drift = 0.0_dp
+   end subroutine reset_record
+
+   !> Fold one step's contact statistics and drifts into the interval aggregates.
+   subroutine accumulate(rec, cstats, parts)
+      type(run_record_t), intent(inout) :: rec
+      type(contact_stats_t), intent(in) :: cstats
+      type(particle_set_t), intent(in) :: parts
+      integer(ip) :: k
+      real(dp) :: pn, ends
+
+      rec%n_corrections = rec%n_corrections + cstats%n_corrections
+      rec%contact_iterations = max(rec%contact_iterations, int(cstats%iterations, i8))
+      rec%pairs_left = max(rec%pairs_left, cstats%pairs_left)
+      if (cstats%capped) rec%capped_steps = rec%capped_steps + 1
+      rec%min_gap = min(rec%min_gap, cstats%min_gap)
+      rec%min_gap_over_alpha = min(rec%min_gap_over_alpha, cstats%min_gap_over_alpha)
+      do k = 1, parts%n
+         pn = norm2(parts%p(:, k))
+         rec%unit_norm_drift = max(rec%unit_norm_drift, abs(pn - 1.0_dp))
+         ! end points X1,2 = x -+ (L/2) p as the seed's end-point scheme would hold them
+         ends = norm2((parts%x(:, k) + 0.5_dp*parts%length(k)*parts%p(:, k)) - &
+                      (parts%x(:, k) - 0.5_dp*parts%length(k)*parts%p(:, k)))
+         rec%length_drift = max(rec%length_drift, abs(ends - parts%length(k))/parts%length(k))
+      end do
+   end subroutine accumulate
+
+   !> Orientation tensors of the whole set and of each family (number averages).
+   subroutine fill_record(rec, step, time, parts, nfam)
+      type(run_record_t), intent(inout) :: rec
+      integer(i8), intent(in) :: step
+      real(dp), intent(in) :: time
+      type(particle_set_t), intent(in) :: parts
+      integer(ip), intent(in) :: nfam
+      real(dp), allocatable :: pf(:, :)
+      integer(ip) :: f, m
+      integer :: stat
+      character(len=msg_len) :: errmsg
+
+      rec%step = step
+      rec%time = time
+      ! NaN cannot reach here (finite_state is checked first); stat only reports that.
+      call orientation_moments(parts%dim, parts%n, parts%p, spread(1.0_dp, 1, parts%n), rec%a2, rec%a4, stat, errmsg)
+      do f = 0, nfam - 1
+         m = count(parts%family == f)
+         rec%a2_family(:, :, f + 1) = 0.0_dp
+         rec%a4_family(:, :, :, :, f + 1) = 0.0_dp
+         if (m == 0) cycle
+         pf = reshape(pack(parts%p, spread(parts%family == f, 1, parts%dim)), [parts%dim, m])
+         call orientation_moments(parts%dim, m, pf, spread(1.0_dp, 1, m), rec%a2_family(:, :, f + 1), &
+                                  rec%a4_family(:, :, :, :, f + 1), stat, errmsg)
+      end do
+   end subroutine fill_record
+
+end module fold_driver

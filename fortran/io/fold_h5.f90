@@ -1,0 +1,793 @@
+!> Thin, checked helpers over the HDF5 Fortran API for pyfold run files.
+!>
+!> Every routine returns `stat` (FOLD_OK, FOLD_INPUT_ERROR for content that is
+!> missing or wrong, FOLD_IO_ERROR for a file or HDF5 call that fails)
+!> and an `errmsg` that names the object (full path, e.g. `/setup/resolved/dt`).
+!>
+!> Array order: HDF5's Fortran API reverses the C dimension order, so a Fortran
+!> array `a(d, n, nt)` is seen by h5py/xarray as `(nt, n, d)`. All shapes passed
+!> here are in Fortran order; the *last* Fortran dimension is the one that can
+!> grow (time, snapshot), which is the first one in Python.
+!>
+!> netCDF compatibility: coordinate datasets are HDF5 dimension scales
+!> (H5DS, HDF5 high-level library) and every result variable has a scale attached
+!> to each of its dimensions, which is what netCDF-4 and `h5netcdf` read as
+!> named dimensions (`xarray.open_dataset(path, engine="h5netcdf")`).
+module fold_h5
+   use, intrinsic :: iso_c_binding, only: c_ptr, c_loc, c_char, c_null_char, c_int64_t
+   use hdf5
+   use h5ds, only: h5dsset_scale_f, h5dsattach_scale_f
+   use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
+   implicit none
+   private
+
+   public :: hid_t, hsize_t
+   public :: h5_start, h5_stop, h5_open_file, h5_close_file, h5_flush
+   public :: h5_exists, h5_shape
+   public :: h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
+   public :: h5_attr_string, h5_attr_int, h5_attr_real
+   public :: h5_make_group, h5_delete
+   public :: h5_scale_int, h5_scale_real, h5_var_create, h5_var_append_real, h5_var_append_int
+   public :: h5_var_length, h5_var_truncate
+   public :: h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
+
+   !> Element types of h5_var_create
+   integer, parameter, public :: FOLD_H5_REAL = 1, FOLD_H5_INT = 2
+
+contains
+
+   ! ------------------------------------------------------------------ library
+
+   !> Open the HDF5 library and silence its own error stack printing (errors are
+   !> reported through stat/errmsg instead).
+   subroutine h5_start(stat, errmsg)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: err
+      call h5open_f(err)
+      if (.not. ok(err, "h5open_f: cannot initialise the HDF5 library", stat, errmsg)) return
+      call h5eset_auto_f(0, err)
+   end subroutine h5_start
+
+   !> Close the HDF5 library.
+   subroutine h5_stop()
+      integer :: err
+      call h5close_f(err)
+   end subroutine h5_stop
+
+   !> Open an existing file read-only (`writable = .false.`) or read-write.
+   subroutine h5_open_file(path, writable, file, stat, errmsg)
+      !> File path
+      character(len=*), intent(in) :: path
+      !> Open for writing as well
+      logical, intent(in) :: writable
+      !> File identifier
+      integer(hid_t), intent(out) :: file
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: err
+      logical :: there
+
+      file = -1
+      inquire (file=path, exist=there)
+      if (.not. there) then
+         stat = FOLD_IO_ERROR
+         errmsg = "run file not found: "//trim(path)
+         return
+      end if
+      if (writable) then
+         call h5fopen_f(path, H5F_ACC_RDWR_F, file, err)
+      else
+         call h5fopen_f(path, H5F_ACC_RDONLY_F, file, err)
+      end if
+      if (.not. ok(err, "cannot open "//trim(path)//" as an HDF5 file", stat, errmsg)) return
+   end subroutine h5_open_file
+
+   !> Close a file (flushes it).
+   subroutine h5_close_file(file, stat, errmsg)
+      integer(hid_t), intent(inout) :: file
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: err
+      stat = FOLD_OK
+      errmsg = ""
+      if (file < 0) return
+      call h5fclose_f(file, err)
+      file = -1
+      if (.not. ok(err, "h5fclose_f failed", stat, errmsg)) return
+   end subroutine h5_close_file
+
+   !> Push everything written so far to disk (a crash then keeps it).
+   subroutine h5_flush(file, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: err
+      call h5fflush_f(file, H5F_SCOPE_GLOBAL_F, err)
+      if (.not. ok(err, "h5fflush_f failed", stat, errmsg)) return
+   end subroutine h5_flush
+
+   ! ------------------------------------------------------------------ queries
+
+   !> True when every component of the path `name` (e.g. "/setup/resolved/dt") exists.
+   function h5_exists(loc, name) result(there)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      logical :: there
+      integer :: err, pos
+      ! h5lexists_f fails (rather than returning false) when a parent group is
+      ! missing, so each prefix is checked in turn.
+      there = .false.
+      do pos = 2, len(name)
+         if (name(pos:pos) /= "/") cycle
+         call h5lexists_f(loc, name(1:pos - 1), there, err)
+         if (err < 0 .or. .not. there) then
+            there = .false.
+            return
+         end if
+      end do
+      call h5lexists_f(loc, name, there, err)
+      if (err < 0) there = .false.
+   end function h5_exists
+
+   !> Rank and Fortran-order shape of a dataset (rank 0 for a scalar dataspace).
+   subroutine h5_shape(loc, name, rank, shape, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer, intent(out) :: rank
+      !> Fortran-order extents (first `rank` entries used)
+      integer(hsize_t), intent(out) :: shape(7)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset, space
+      integer(hsize_t) :: maxdims(7)
+      integer :: err
+
+      rank = 0
+      shape = 0
+      if (.not. open_dataset(loc, name, dset, stat, errmsg)) return
+      call h5dget_space_f(dset, space, err)
+      if (ok(err, name//": cannot read its dataspace", stat, errmsg)) then
+         call h5sget_simple_extent_ndims_f(space, rank, err)
+         if (rank > 7) then
+            stat = FOLD_INPUT_ERROR
+            write (errmsg, '(a,a,i0)') name, ": rank > 7 not supported, got ", rank
+         else if (rank > 0) then
+            call h5sget_simple_extent_dims_f(space, shape(1:rank), maxdims(1:rank), err)
+            if (err < 0) then
+               stat = FOLD_IO_ERROR
+               errmsg = name//": cannot read its extents"
+            end if
+         end if
+         call h5sclose_f(space, err)
+      end if
+      call h5dclose_f(dset, err)
+   end subroutine h5_shape
+
+   ! ------------------------------------------------------------------ reading
+
+   !> Read an integer scalar dataset (rank 0, or one element). Its stored type
+   !> must be an integer type.
+   subroutine h5_read_int(loc, name, val, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(i8), intent(out), target :: val
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(i8), allocatable :: buf(:)
+      val = 0
+      call h5_read_int_array(loc, name, [integer(hsize_t) ::], buf, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      val = buf(1)
+   end subroutine h5_read_int
+
+   !> Read a real scalar dataset (rank 0, or one element; integer storage is converted).
+   subroutine h5_read_real(loc, name, val, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      real(dp), intent(out) :: val
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      real(dp), allocatable :: buf(:)
+      val = 0.0_dp
+      call h5_read_real_array(loc, name, [integer(hsize_t) ::], buf, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      val = buf(1)
+   end subroutine h5_read_real
+
+   !> Read an integer dataset of the expected Fortran-order shape into a flat buffer.
+   !> An empty `expected` means "a scalar": rank 0 or a single element.
+   subroutine h5_read_int_array(loc, name, expected, buf, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: expected(:)
+      integer(i8), allocatable, intent(out), target :: buf(:)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: err, tclass
+      type(c_ptr) :: ptr
+
+      allocate (buf(max(1_hsize_t, product(expected))))
+      buf = 0
+      if (.not. checked_dataset(loc, name, expected, dset, tclass, stat, errmsg)) return
+      if (tclass /= H5T_INTEGER_F) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = name//": must be stored as an integer"
+      else
+         ptr = c_loc(buf)
+         call h5dread_f(dset, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), ptr, err)
+         call check_err(err, name//": read failed", stat, errmsg)
+      end if
+      call h5dclose_f(dset, err)
+   end subroutine h5_read_int_array
+
+   !> Read a real (or integer, converted) dataset of the expected Fortran-order shape.
+   subroutine h5_read_real_array(loc, name, expected, buf, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: expected(:)
+      real(dp), allocatable, intent(out), target :: buf(:)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: err, tclass
+      type(c_ptr) :: ptr
+
+      allocate (buf(max(1_hsize_t, product(expected))))
+      buf = 0.0_dp
+      if (.not. checked_dataset(loc, name, expected, dset, tclass, stat, errmsg)) return
+      if (tclass /= H5T_FLOAT_F .and. tclass /= H5T_INTEGER_F) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = name//": must be stored as a number"
+      else
+         ptr = c_loc(buf)
+         call h5dread_f(dset, H5T_NATIVE_DOUBLE, ptr, err)
+         call check_err(err, name//": read failed", stat, errmsg)
+      end if
+      call h5dclose_f(dset, err)
+   end subroutine h5_read_real_array
+
+   ! ------------------------------------------------------------------ attributes
+
+   !> Write (replace) a variable-length UTF-8 string attribute (h5py reads it as `str`).
+   subroutine h5_attr_string(loc, name, value, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name, value
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      character(kind=c_char, len=:), allocatable, target :: text
+      type(c_ptr), target :: ptr(1)
+      integer(hid_t) :: vtype, space, attr
+      integer :: err
+
+      text = value//c_null_char
+      ptr(1) = c_loc(text)
+      call h5tcopy_f(H5T_C_S1, vtype, err)
+      if (.not. ok(err, "attribute "//name//": h5tcopy_f failed", stat, errmsg)) return
+      ! H5T_VARIABLE is (size_t)-1 in C; the 1.10 Fortran API has no named constant.
+      call h5tset_size_f(vtype, -1_size_t, err)
+      call h5tset_cset_f(vtype, H5T_CSET_UTF8_F, err)
+      call h5screate_f(H5S_SCALAR_F, space, err)
+      call replace_attr(loc, name, vtype, space, attr, stat, errmsg)
+      if (stat == FOLD_OK) then
+         call h5awrite_f(attr, vtype, c_loc(ptr), err)
+         call check_err(err, "attribute "//name//": write failed", stat, errmsg)
+         call h5aclose_f(attr, err)
+      end if
+      call h5sclose_f(space, err)
+      call h5tclose_f(vtype, err)
+   end subroutine h5_attr_string
+
+   !> Write (replace) a 64-bit integer scalar attribute.
+   subroutine h5_attr_int(loc, name, value, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(i8), intent(in) :: value
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(i8), target :: v
+      integer(hid_t) :: space, attr, itype
+      integer :: err
+      v = value
+      itype = h5kind_to_type(c_int64_t, H5_INTEGER_KIND)
+      call h5screate_f(H5S_SCALAR_F, space, err)
+      call replace_attr(loc, name, itype, space, attr, stat, errmsg)
+      if (stat == FOLD_OK) then
+         call h5awrite_f(attr, itype, c_loc(v), err)
+         call check_err(err, "attribute "//name//": write failed", stat, errmsg)
+         call h5aclose_f(attr, err)
+      end if
+      call h5sclose_f(space, err)
+   end subroutine h5_attr_int
+
+   !> Write (replace) a real scalar attribute.
+   subroutine h5_attr_real(loc, name, value, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      real(dp), intent(in) :: value
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      real(dp), target :: v
+      integer(hid_t) :: space, attr
+      integer :: err
+      v = value
+      call h5screate_f(H5S_SCALAR_F, space, err)
+      call replace_attr(loc, name, H5T_NATIVE_DOUBLE, space, attr, stat, errmsg)
+      if (stat == FOLD_OK) then
+         call h5awrite_f(attr, H5T_NATIVE_DOUBLE, c_loc(v), err)
+         call check_err(err, "attribute "//name//": write failed", stat, errmsg)
+         call h5aclose_f(attr, err)
+      end if
+      call h5sclose_f(space, err)
+   end subroutine h5_attr_real
+
+   ! ------------------------------------------------------------------ groups, links
+
+   !> Create a group if it does not exist yet.
+   subroutine h5_make_group(loc, name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: grp
+      integer :: err
+      stat = FOLD_OK
+      errmsg = ""
+      if (h5_exists(loc, name)) return
+      call h5gcreate_f(loc, name, grp, err)
+      if (.not. ok(err, name//": cannot create group", stat, errmsg)) return
+      call h5gclose_f(grp, err)
+   end subroutine h5_make_group
+
+   !> Unlink an object if it exists (used to replace a checkpoint).
+   subroutine h5_delete(loc, name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: err
+      stat = FOLD_OK
+      errmsg = ""
+      if (.not. h5_exists(loc, name)) return
+      call h5ldelete_f(loc, name, err)
+      if (.not. ok(err, name//": cannot delete", stat, errmsg)) return
+   end subroutine h5_delete
+
+   ! ------------------------------------------------------------------ plain datasets
+
+   !> Write a fixed-shape real dataset (replacing any previous one) with units.
+   subroutine h5_write_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      real(dp), intent(in), target, contiguous :: buf(:)
+      !> Fortran-order shape; product(shape) == size(buf)
+      integer(hsize_t), intent(in) :: shape(:)
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: space, dset
+      integer :: err
+      call h5_delete(loc, name, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5screate_simple_f(size(shape), shape, space, err)
+      if (.not. ok(err, name//": dataspace", stat, errmsg)) return
+      call h5dcreate_f(loc, name, H5T_NATIVE_DOUBLE, space, dset, err)
+      call h5sclose_f(space, err)
+      if (.not. ok(err, name//": cannot create dataset", stat, errmsg)) return
+      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(buf), err)
+      if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, units, long_name, stat, errmsg)
+      call h5dclose_f(dset, err)
+   end subroutine h5_write_real_array
+
+   !> Write a scalar real dataset (replacing any previous one).
+   subroutine h5_write_real_scalar(loc, name, value, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      real(dp), intent(in) :: value
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      real(dp), target :: v(1)
+      integer(hid_t) :: space, dset
+      integer :: err
+      v(1) = value
+      call h5_delete(loc, name, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5screate_f(H5S_SCALAR_F, space, err)
+      call h5dcreate_f(loc, name, H5T_NATIVE_DOUBLE, space, dset, err)
+      call h5sclose_f(space, err)
+      if (.not. ok(err, name//": cannot create dataset", stat, errmsg)) return
+      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(v), err)
+      if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, units, long_name, stat, errmsg)
+      call h5dclose_f(dset, err)
+   end subroutine h5_write_real_scalar
+
+   !> Write a scalar 64-bit integer dataset (replacing any previous one).
+   subroutine h5_write_int_scalar(loc, name, value, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(i8), intent(in) :: value
+      character(len=*), intent(in) :: long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(i8), target :: v(1)
+      integer(hid_t) :: space, dset, itype
+      integer :: err
+      v(1) = value
+      itype = h5kind_to_type(c_int64_t, H5_INTEGER_KIND)
+      call h5_delete(loc, name, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5screate_f(H5S_SCALAR_F, space, err)
+      call h5dcreate_f(loc, name, itype, space, dset, err)
+      call h5sclose_f(space, err)
+      if (.not. ok(err, name//": cannot create dataset", stat, errmsg)) return
+      call h5dwrite_f(dset, itype, c_loc(v), err)
+      if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, "1", long_name, stat, errmsg)
+      call h5dclose_f(dset, err)
+   end subroutine h5_write_int_scalar
+
+   ! ------------------------------------------------------------------ netCDF-style variables
+
+   !> Create a 1-D integer coordinate that is also an HDF5 dimension scale named `name`.
+   !> With `unlimited`, it starts empty and grows by h5_var_append_int.
+   subroutine h5_scale_int(loc, name, values, unlimited, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(i8), intent(in), target, contiguous :: values(:)
+      logical, intent(in) :: unlimited
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: err
+      call create_extendible(loc, name, FOLD_H5_INT, [integer(hsize_t) :: size(values)], unlimited, dset, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (size(values) > 0) then
+         call h5dwrite_f(dset, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(values), err)
+         if (.not. ok(err, name//": write failed", stat, errmsg)) then
+            call h5dclose_f(dset, err)
+            return
+         end if
+      end if
+      call finish_scale(dset, name, units, long_name, stat, errmsg)
+   end subroutine h5_scale_int
+
+   !> Create a 1-D real coordinate that is also a dimension scale (see h5_scale_int).
+   subroutine h5_scale_real(loc, name, values, unlimited, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      real(dp), intent(in), target, contiguous :: values(:)
+      logical, intent(in) :: unlimited
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: err
+      call create_extendible(loc, name, FOLD_H5_REAL, [integer(hsize_t) :: size(values)], unlimited, dset, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (size(values) > 0) then
+         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(values), err)
+         if (.not. ok(err, name//": write failed", stat, errmsg)) then
+            call h5dclose_f(dset, err)
+            return
+         end if
+      end if
+      call finish_scale(dset, name, units, long_name, stat, errmsg)
+   end subroutine h5_scale_real
+
+   !> Create a variable over named dimensions, given in Fortran order (the last one
+   !> may be unlimited and then starts at length 0). Each dimension must already
+   !> exist as a scale of that name at `loc` and is attached to the variable.
+   subroutine h5_var_create(loc, name, kind, dimnames, extents, unlimited, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      !> FOLD_H5_REAL or FOLD_H5_INT
+      integer, intent(in) :: kind
+      !> Dimension names, Fortran order (fastest first)
+      character(len=*), intent(in) :: dimnames(:)
+      !> Extents, Fortran order (the last is ignored when unlimited)
+      integer(hsize_t), intent(in) :: extents(:)
+      !> The last dimension grows (time, snapshot)
+      logical, intent(in) :: unlimited
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset, scale
+      integer :: err, k, r
+
+      r = size(dimnames)
+      call create_extendible(loc, name, kind, extents, unlimited, dset, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call annotate(dset, name, units, long_name, stat, errmsg)
+      do k = 1, r
+         if (stat /= FOLD_OK) exit
+         call h5dopen_f(loc, trim(dimnames(k)), scale, err)
+         if (.not. ok(err, name//": dimension scale "//trim(dimnames(k))//" missing", stat, errmsg)) exit
+         ! The H5DS Fortran binding takes the C (row-major) dimension index + 1.
+         call h5dsattach_scale_f(dset, scale, r - k + 1, err)
+         call check_err(err, name//": cannot attach dimension "//trim(dimnames(k)), stat, errmsg)
+         call h5dclose_f(scale, err)
+      end do
+      call h5dclose_f(dset, err)
+   end subroutine h5_var_create
+
+   !> Current length of the last (growing) dimension of a variable.
+   subroutine h5_var_length(loc, name, length, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(out) :: length
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: rank
+      integer(hsize_t) :: shape(7)
+      length = 0
+      call h5_shape(loc, name, rank, shape, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (rank > 0) length = shape(rank)
+   end subroutine h5_var_length
+
+   !> Shrink (or grow) the last dimension of a variable to `length` records.
+   subroutine h5_var_truncate(loc, name, length, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: length
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: rank, err
+      integer(hsize_t) :: shape(7)
+      call h5_shape(loc, name, rank, shape, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      shape(rank) = length
+      if (.not. open_dataset(loc, name, dset, stat, errmsg)) return
+      call h5dset_extent_f(dset, shape(1:rank), err)
+      call check_err(err, name//": cannot change its extent", stat, errmsg)
+      call h5dclose_f(dset, err)
+   end subroutine h5_var_truncate
+
+   !> Write one record (all but the last dimension) at position `record` (1-based)
+   !> of the growing dimension, extending it when needed.
+   subroutine h5_var_append_real(loc, name, record, buf, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: record
+      real(dp), intent(in), target, contiguous :: buf(:)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call write_record(loc, name, record, H5T_NATIVE_DOUBLE, c_loc(buf), int(size(buf), hsize_t), stat, errmsg)
+   end subroutine h5_var_append_real
+
+   !> Integer counterpart of h5_var_append_real.
+   subroutine h5_var_append_int(loc, name, record, buf, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: record
+      integer(i8), intent(in), target, contiguous :: buf(:)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call write_record(loc, name, record, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(buf), &
+                        int(size(buf), hsize_t), stat, errmsg)
+   end subroutine h5_var_append_int
+
+   ! ------------------------------------------------------------------ internals
+
+   !> Turn an HDF5 error code into stat/errmsg; true when the call succeeded.
+   logical function ok(err, what, stat, errmsg)
+      integer, intent(in) :: err
+      character(len=*), intent(in) :: what
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      ok = err >= 0
+      if (ok) then
+         stat = FOLD_OK
+         errmsg = ""
+      else
+         stat = FOLD_IO_ERROR
+         errmsg = what
+      end if
+   end function ok
+
+   !> Like ok() for calls whose failure is the last thing a routine reports.
+   subroutine check_err(err, what, stat, errmsg)
+      integer, intent(in) :: err
+      character(len=*), intent(in) :: what
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      if (ok(err, what, stat, errmsg)) return
+   end subroutine check_err
+
+   logical function open_dataset(loc, name, dset, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hid_t), intent(out) :: dset
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: err
+      dset = -1
+      open_dataset = .false.
+      if (.not. h5_exists(loc, name)) then
+         ! A missing dataset is a defect of the file's content, not of the disk.
+         stat = FOLD_INPUT_ERROR
+         errmsg = name//": dataset missing"
+         return
+      end if
+      call h5dopen_f(loc, name, dset, err)
+      open_dataset = ok(err, name//": not a dataset", stat, errmsg)
+   end function open_dataset
+
+   !> Open a dataset and check its shape against `expected` (Fortran order; empty =
+   !> scalar or one element); returns its type class.
+   logical function checked_dataset(loc, name, expected, dset, tclass, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: expected(:)
+      integer(hid_t), intent(out) :: dset
+      integer, intent(out) :: tclass
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: rank, err, k
+      integer(hsize_t) :: shape(7)
+      integer(hid_t) :: ftype
+      character(len=200) :: want, got
+
+      checked_dataset = .false.
+      tclass = -1
+      dset = -1
+      call h5_shape(loc, name, rank, shape, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (size(expected) == 0) then
+         if (rank > 0) then
+            if (product(shape(1:rank)) /= 1) then
+               stat = FOLD_INPUT_ERROR
+               write (errmsg, '(a,a,i0,a)') name, ": must be a scalar, got ", product(shape(1:rank)), " values"
+               return
+            end if
+         end if
+      else if (rank /= size(expected) .or. any(shape(1:rank) /= expected)) then
+         ! Report shapes in the Python (C) order the file's writer sees.
+         write (want, '(*(i0,:,", "))') (expected(k), k=size(expected), 1, -1)
+         write (got, '(*(i0,:,", "))') (shape(k), k=rank, 1, -1)
+         stat = FOLD_INPUT_ERROR
+         errmsg = name//": expected shape ("//trim(want)//"), got ("//trim(got)//")"
+         return
+      end if
+      if (.not. open_dataset(loc, name, dset, stat, errmsg)) return
+      call h5dget_type_f(dset, ftype, err)
+      call h5tget_class_f(ftype, tclass, err)
+      call h5tclose_f(ftype, err)
+      checked_dataset = .true.
+   end function checked_dataset
+
+   !> Create an attribute, deleting a previous one of the same name.
+   subroutine replace_attr(loc, name, atype, space, attr, stat, errmsg)
+      integer(hid_t), intent(in) :: loc, atype, space
+      character(len=*), intent(in) :: name
+      integer(hid_t), intent(out) :: attr
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      logical :: there
+      integer :: err
+      call h5aexists_f(loc, name, there, err)
+      if (there) call h5adelete_f(loc, name, err)
+      call h5acreate_f(loc, name, atype, space, attr, err)
+      if (.not. ok(err, "attribute "//name//": cannot create", stat, errmsg)) return
+   end subroutine replace_attr
+
+   !> units and long_name attributes of a variable.
+   subroutine annotate(dset, name, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: dset
+      character(len=*), intent(in) :: name, units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call h5_attr_string(dset, "units", units, stat, errmsg)
+      if (stat == FOLD_OK) call h5_attr_string(dset, "long_name", long_name, stat, errmsg)
+      if (stat /= FOLD_OK) errmsg = name//": "//trim(errmsg)
+   end subroutine annotate
+
+   !> Chunked dataset whose last Fortran dimension may be unlimited.
+   subroutine create_extendible(loc, name, kind, extents, unlimited, dset, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer, intent(in) :: kind
+      integer(hsize_t), intent(in) :: extents(:)
+      logical, intent(in) :: unlimited
+      integer(hid_t), intent(out) :: dset
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: space, dcpl, dtype
+      integer(hsize_t) :: dims(size(extents)), maxdims(size(extents)), chunk(size(extents))
+      integer :: err, r
+      integer(hsize_t), parameter :: target_chunk = 8192  ! elements per chunk, ~64 kB of doubles
+
+      dset = -1
+      r = size(extents)
+      dims = extents
+      maxdims = extents
+      if (kind == FOLD_H5_REAL) then
+         dtype = H5T_NATIVE_DOUBLE
+      else
+         dtype = h5kind_to_type(c_int64_t, H5_INTEGER_KIND)
+      end if
+      call h5pcreate_f(H5P_DATASET_CREATE_F, dcpl, err)
+      if (unlimited) then
+         dims(r) = 0
+         maxdims(r) = H5S_UNLIMITED_F
+         chunk = max(1_hsize_t, extents)
+         ! Whole records per chunk; several records when a record is small.
+         chunk(r) = max(1_hsize_t, target_chunk/max(1_hsize_t, product(chunk(1:r - 1))))
+         if (r == 1) chunk(1) = 512
+         call h5pset_chunk_f(dcpl, r, chunk, err)
+         if (.not. ok(err, name//": cannot set chunking", stat, errmsg)) then
+            call h5pclose_f(dcpl, err)
+            return
+         end if
+      end if
+      call h5screate_simple_f(r, dims, space, err, maxdims)
+      if (.not. ok(err, name//": cannot create dataspace", stat, errmsg)) then
+         call h5pclose_f(dcpl, err)
+         return
+      end if
+      call h5dcreate_f(loc, name, dtype, space, dset, err, dcpl)
+      call h5sclose_f(space, err)
+      call h5pclose_f(dcpl, err)
+      if (.not. ok(err, name//": cannot create dataset (does it exist already?)", stat, errmsg)) return
+   end subroutine create_extendible
+
+   subroutine finish_scale(dset, name, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: dset
+      character(len=*), intent(in) :: name, units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: err
+      call h5dsset_scale_f(dset, err, name)
+      if (ok(err, name//": cannot make it a dimension scale", stat, errmsg)) &
+         call annotate(dset, name, units, long_name, stat, errmsg)
+      call h5dclose_f(dset, err)
+   end subroutine finish_scale
+
+   subroutine write_record(loc, name, record, mtype, ptr, count, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: record
+      integer(hid_t), intent(in) :: mtype
+      type(c_ptr), intent(in) :: ptr
+      integer(hsize_t), intent(in) :: count
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset, fspace, mspace
+      integer(hsize_t) :: shape(7), offset(7), block(7)
+      integer :: rank, err
+
+      call h5_shape(loc, name, rank, shape, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (product(shape(1:rank - 1)) /= count) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,a,i0,a,i0)') name, ": record of ", count, " values, expected ", product(shape(1:rank - 1))
+         return
+      end if
+      if (.not. open_dataset(loc, name, dset, stat, errmsg)) return
+      if (record > shape(rank)) then
+         shape(rank) = record
+         call h5dset_extent_f(dset, shape(1:rank), err)
+         if (.not. ok(err, name//": cannot extend", stat, errmsg)) then
+            call h5dclose_f(dset, err)
+            return
+         end if
+      end if
+      call h5dget_space_f(dset, fspace, err)
+      offset = 0
+      offset(rank) = record - 1
+      block(1:rank) = shape(1:rank)
+      block(rank) = 1
+      call h5sselect_hyperslab_f(fspace, H5S_SELECT_SET_F, offset(1:rank), block(1:rank), err)
+      call h5screate_simple_f(1, [count], mspace, err)
+      call h5dwrite_f(dset, mtype, ptr, err, mspace, fspace)
+      call check_err(err, name//": write failed", stat, errmsg)
+      call h5sclose_f(mspace, err)
+      call h5sclose_f(fspace, err)
+      call h5dclose_f(dset, err)
+   end subroutine write_record
+
+end module fold_h5

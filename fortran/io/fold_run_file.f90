@@ -1,0 +1,288 @@
+!> Reader of a pyfold run file: `/setup/resolved` (parameters) and `/initial`
+!> (the particle population), with range checks that name the dataset.
+!>
+!> The file is written by the Python scene layer (`pyfold run`, h5py); see the
+!> micro contract. h5py stores C-ordered arrays, so `/initial/x` of Python shape
+!> (n, dim) is read here as the Fortran `x(dim, n)`, and the velocity gradient
+!> stored with `G[i, j] == G_ij` comes in transposed and is transposed back.
+!> Any problem is returned as FOLD_INPUT_ERROR (wrong content) or FOLD_IO_ERROR
+!> (missing dataset, unreadable file) with the dataset path and the allowed range.
+module fold_run_file
+   use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
+   use fold_particles, only: particle_set_t, particles_init, particles_check
+   use fold_h5, only: hid_t, hsize_t, h5_open_file, h5_close_file, h5_exists, h5_shape, &
+                      h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
+   implicit none
+   private
+
+   !> Hydrodynamics codes of /setup/resolved/hydrodynamics
+   integer, parameter, public :: FOLD_HYDRO_JEFFERY = 0, FOLD_HYDRO_STOKES = 1
+
+   !> Everything the run driver needs from /setup/resolved.
+   type, public :: run_setup_t
+      !> Spatial dimension (2 or 3)
+      integer(ip) :: dim = 3
+      !> Cell edge lengths (Lx, Ly, Lz) [m]
+      real(dp) :: cell_lengths(3) = 0.0_dp
+      !> No-slip walls at y = 0 and y = Ly (else fully periodic, Lees-Edwards in shear)
+      logical :: walls = .false.
+      !> Wall speed U (walls move at -U and +U) [m/s]
+      real(dp) :: wall_speed = 0.0_dp
+      !> Imposed velocity gradient G(i, j) = du_i/dx_j [1/s]
+      real(dp) :: velocity_gradient(3, 3) = 0.0_dp
+      !> Shear rate [1/s]
+      real(dp) :: shear_rate = 0.0_dp
+      !> Fluid viscosity [Pa s]
+      real(dp) :: viscosity = 0.0_dp
+      !> Time step [s]
+      real(dp) :: dt = 0.0_dp
+      !> End time [s]
+      real(dp) :: t_end = 0.0_dp
+      !> Seed of every random draw of the run
+      integer(i8) :: seed = 0
+      !> FOLD_HYDRO_JEFFERY or FOLD_HYDRO_STOKES
+      integer :: hydrodynamics = FOLD_HYDRO_JEFFERY
+      !> Contact mode: 0 none, 1 naive, 2 strategy (fold_contacts codes)
+      integer :: collisions = 0
+      !> Security zone alpha [m]
+      real(dp) :: alpha = 0.0_dp
+      !> Iteration cap of the contact loop
+      integer :: contact_max_iter = 1
+      !> On reaching the cap: 0 stop, 1 continue
+      integer :: on_contact_cap = 0
+      !> Sphere lubrication force on/off
+      logical :: lubrication = .false.
+      !> Steps between time-series records (>= 1)
+      integer(i8) :: output_every = 1
+      !> Steps between snapshots (0 = none)
+      integer(i8) :: snapshot_every = 0
+      !> Steps between checkpoints (0 = none)
+      integer(i8) :: checkpoint_every = 0
+      !> Number of particle families (entries of /setup/resolved/family_names)
+      integer(ip) :: n_families = 1
+      !> Number of steps, ceiling(t_end/dt) (the run ends at nsteps*dt >= t_end)
+      integer(i8) :: nsteps = 0
+   end type run_setup_t
+
+   public :: read_run_file
+
+   character(len=*), parameter :: R = "/setup/resolved/"
+   character(len=*), parameter :: INI = "/initial/"
+
+contains
+
+   !> Read and check the run parameters and the initial particle state.
+   subroutine read_run_file(path, setup, parts, stat, errmsg)
+      !> Run file path
+      character(len=*), intent(in) :: path
+      type(run_setup_t), intent(out) :: setup
+      !> Initial particles (x, p, shape, family, radius, length, xi); v = omega = 0
+      type(particle_set_t), intent(out) :: parts
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: file
+      integer :: s2
+      character(len=msg_len) :: m2
+
+      call h5_open_file(path, .false., file, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call read_setup(file, setup, stat, errmsg)
+      if (stat == FOLD_OK) call read_initial(file, setup, parts, stat, errmsg)
+      call h5_close_file(file, s2, m2)
+      if (stat == FOLD_OK .and. s2 /= FOLD_OK) then
+         stat = s2
+         errmsg = m2
+      end if
+   end subroutine read_run_file
+
+   subroutine read_setup(file, s, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      type(run_setup_t), intent(inout) :: s
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(i8) :: iv
+      real(dp), allocatable :: buf(:)
+      integer :: rank
+      integer(hsize_t) :: shape(7)
+      real(dp), parameter :: big = huge(1.0_dp)
+
+      call get_int(file, R//"dim", 2_i8, 3_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%dim = int(iv, ip)
+      call h5_read_real_array(file, R//"cell_lengths", [3_hsize_t], buf, stat, errmsg); if (stat /= FOLD_OK) return
+      s%cell_lengths = buf
+      if (.not. all(buf(1:s%dim) > 0.0_dp .and. buf(1:s%dim) <= big)) then
+         call range_error(R//"cell_lengths", "the first dim entries must be finite and > 0", stat, errmsg)
+         return
+      end if
+      call get_int(file, R//"walls", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%walls = iv == 1
+      call get_real(file, R//"wall_speed", -big, big, s%wall_speed, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_read_real_array(file, R//"velocity_gradient", [3_hsize_t, 3_hsize_t], buf, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (.not. all(abs(buf) <= big)) then
+         call range_error(R//"velocity_gradient", "entries must be finite", stat, errmsg)
+         return
+      end if
+      ! h5py wrote G[i, j] = G_ij row-major; the column-major read gives G_ji.
+      s%velocity_gradient = transpose(reshape(buf, [3, 3]))
+      call get_real(file, R//"shear_rate", -big, big, s%shear_rate, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_real(file, R//"viscosity", tiny(1.0_dp), big, s%viscosity, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_real(file, R//"dt", tiny(1.0_dp), big, s%dt, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_real(file, R//"t_end", tiny(1.0_dp), big, s%t_end, stat, errmsg); if (stat /= FOLD_OK) return
+      if (s%t_end/s%dt > 1.0e12_dp) then
+         call range_error(R//"t_end", "t_end/dt must be <= 1e12 steps", stat, errmsg)
+         return
+      end if
+      ! The relative slack keeps t_end = k*dt (up to round-off) at exactly k steps.
+      s%nsteps = max(1_i8, ceiling(s%t_end/s%dt*(1.0_dp - 1.0e-12_dp), i8))
+      call get_int(file, R//"seed", -huge(1_i8), huge(1_i8), s%seed, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"hydrodynamics", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%hydrodynamics = int(iv)
+      if (s%hydrodynamics == FOLD_HYDRO_STOKES) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = R//"hydrodynamics: 1 (stokes) is not available in this fold_run build; allowed: 0 (jeffery)"
+         return
+      end if
+      call get_int(file, R//"collisions", 0_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%collisions = int(iv)
+      call get_real(file, R//"alpha", 0.0_dp, big, s%alpha, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"contact_max_iter", 1_i8, int(huge(1), i8), iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%contact_max_iter = int(iv)
+      call get_int(file, R//"on_contact_cap", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%on_contact_cap = int(iv)
+      call get_int(file, R//"lubrication", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%lubrication = iv == 1
+      call get_int(file, R//"output_every", 1_i8, huge(1_i8), s%output_every, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"snapshot_every", 0_i8, huge(1_i8), s%snapshot_every, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"checkpoint_every", 0_i8, huge(1_i8), s%checkpoint_every, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      ! Only the number of families is needed here (names stay in the file for Python).
+      call h5_shape(file, R//"family_names", rank, shape, stat, errmsg); if (stat /= FOLD_OK) return
+      if (rank /= 1 .or. shape(1) < 1) then
+         call range_error(R//"family_names", "must be a 1-D array of at least one name", stat, errmsg)
+         return
+      end if
+      s%n_families = int(shape(1), ip)
+   end subroutine read_setup
+
+   subroutine read_initial(file, s, parts, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      type(run_setup_t), intent(in) :: s
+      type(particle_set_t), intent(out) :: parts
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: rank, k
+      integer(hsize_t) :: shape(7), n, d
+      real(dp), allocatable :: buf(:)
+      integer(i8), allocatable :: ibuf(:)
+
+      call h5_shape(file, INI//"x", rank, shape, stat, errmsg); if (stat /= FOLD_OK) return
+      d = int(s%dim, hsize_t)
+      if (rank /= 2 .or. shape(1) /= d .or. shape(2) < 1) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,i0,a)') INI//"x: expected shape (n >= 1, ", s%dim, ") with dim from /setup/resolved/dim"
+         return
+      end if
+      n = shape(2)
+      if (n > huge(1_ip)) then
+         call range_error(INI//"x", "more particles than a default integer can count", stat, errmsg)
+         return
+      end if
+      call particles_init(parts, s%dim, int(n, ip), stat, errmsg); if (stat /= FOLD_OK) return
+
+      call h5_read_real_array(file, INI//"x", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) return
+      parts%x = reshape(buf, [s%dim, int(n, ip)])
+      if (.not. all(abs(buf) <= huge(1.0_dp))) then
+         call range_error(INI//"x", "entries must be finite", stat, errmsg)
+         return
+      end if
+      call h5_read_real_array(file, INI//"p", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) return
+      parts%p = reshape(buf, [s%dim, int(n, ip)])
+      do k = 1, int(n)
+         if (.not. abs(norm2(parts%p(:, k)) - 1.0_dp) <= 1.0e-8_dp) then
+            stat = FOLD_INPUT_ERROR
+            write (errmsg, '(a,i0,a,es12.5,a)') INI//"p: row ", k - 1, " has |p| = ", norm2(parts%p(:, k)), &
+               " (allowed: |p| = 1 within 1e-8)"
+            return
+         end if
+      end do
+      call h5_read_int_array(file, INI//"shape", [n], ibuf, stat, errmsg); if (stat /= FOLD_OK) return
+      if (any(ibuf < 1 .or. ibuf > 3)) then
+         call range_error(INI//"shape", "allowed codes 1 (fibre), 2 (sphere), 3 (spheroid)", stat, errmsg)
+         return
+      end if
+      parts%shape = int(ibuf, ip)
+      call h5_read_int_array(file, INI//"family", [n], ibuf, stat, errmsg); if (stat /= FOLD_OK) return
+      if (any(ibuf < 0 .or. ibuf >= s%n_families)) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,i0,a)') INI//"family: allowed 0 ... ", s%n_families - 1, &
+            " (one per entry of /setup/resolved/family_names)"
+         return
+      end if
+      parts%family = int(ibuf, ip)
+      call h5_read_real_array(file, INI//"radius", [n], buf, stat, errmsg); if (stat /= FOLD_OK) return
+      if (.not. all(buf > 0.0_dp .and. buf <= huge(1.0_dp))) then
+         call range_error(INI//"radius", "must be finite and > 0", stat, errmsg)
+         return
+      end if
+      parts%radius = buf
+      call h5_read_real_array(file, INI//"length", [n], buf, stat, errmsg); if (stat /= FOLD_OK) return
+      if (.not. all(buf > 0.0_dp .and. buf <= huge(1.0_dp))) then
+         call range_error(INI//"length", "must be finite and > 0", stat, errmsg)
+         return
+      end if
+      parts%length = buf
+      call h5_read_real_array(file, INI//"xi", [n], buf, stat, errmsg); if (stat /= FOLD_OK) return
+      if (.not. all(abs(buf) <= 1.0_dp)) then
+         call range_error(INI//"xi", "allowed range [-1, 1]", stat, errmsg)
+         return
+      end if
+      parts%xi = buf
+      ! Remaining cross-field rules (sphere length = 2R, prolate spheroids) live with the type.
+      call particles_check(parts, stat, errmsg)
+      if (stat /= FOLD_OK) errmsg = INI//": "//trim(errmsg)
+   end subroutine read_initial
+
+   !> Integer scalar dataset within [lo, hi].
+   subroutine get_int(file, name, lo, hi, val, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      character(len=*), intent(in) :: name
+      integer(i8), intent(in) :: lo, hi
+      integer(i8), intent(out) :: val
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call h5_read_int(file, name, val, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (val < lo .or. val > hi) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,a,i0,a,i0,a,i0,a)') name, " = ", val, " out of range (allowed ", lo, " ... ", hi, ")"
+      end if
+   end subroutine get_int
+
+   !> Real scalar dataset within [lo, hi] (NaN is always out of range).
+   subroutine get_real(file, name, lo, hi, val, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      character(len=*), intent(in) :: name
+      real(dp), intent(in) :: lo, hi
+      real(dp), intent(out) :: val
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call h5_read_real(file, name, val, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (.not. (val >= lo .and. val <= hi)) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,a,es12.5,a,es10.3,a,es10.3,a)') name, " = ", val, " out of range (allowed ", lo, &
+            " ... ", hi, ")"
+      end if
+   end subroutine get_real
+
+   subroutine range_error(name, rule, stat, errmsg)
+      character(len=*), intent(in) :: name, rule
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      stat = FOLD_INPUT_ERROR
+      errmsg = name//": out of range ("//rule//")"
+   end subroutine range_error
+
+end module fold_run_file

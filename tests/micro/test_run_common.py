@@ -1,0 +1,179 @@
+"""Shared helpers of the fold_run tests: write run files with h5py, run fold_run.
+
+The run files follow the micro contract (/setup/resolved + /initial, root
+attributes); they are written directly here so that the executable can be tested
+independently of the scene layer. The executable is found, in order, from
+``$PYFOLD_FOLD_RUN``, the package directory (``pyfold/fold_run``, wheel or editable
+build) and ``build/editable/fortran/app/fold_run``.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def fold_run_path() -> Path | None:
+    env = os.environ.get("PYFOLD_FOLD_RUN")
+    if env:
+        return Path(env)
+    try:
+        from pyfold.native import fold_run_executable  # provided with the package when present
+
+        return Path(fold_run_executable())
+    except Exception:
+        pass
+    for cand in (ROOT / "build" / "editable" / "fortran" / "app" / "fold_run", ROOT / "build" / "editable" / "fold_run"):
+        if cand.exists():
+            return cand
+    return None
+
+
+def require_fold_run() -> Path:
+    exe = fold_run_path()
+    if exe is None or not exe.exists():
+        pytest.skip("fold_run executable not built")
+    return exe
+
+
+def run_fold(path, np_ranks: int = 1, resume: bool = False, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    """Run fold_run on ``path`` (through mpiexec when np_ranks > 1)."""
+    exe = require_fold_run()
+    cmd = [str(exe), str(path)] + (["--resume"] if resume else [])
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_rmaps_base_oversubscribe="1")
+    if np_ranks > 1:
+        mpiexec = shutil.which("mpiexec") or shutil.which("mpirun")
+        if mpiexec is None:
+            pytest.skip("mpiexec not found")
+        cmd = [mpiexec, "-np", str(np_ranks), "--oversubscribe"] + cmd
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def shear(rate: float) -> np.ndarray:
+    g = np.zeros((3, 3))
+    g[0, 1] = rate
+    return g
+
+
+def write_run_file(
+    path,
+    *,
+    x,
+    p,
+    radius,
+    length,
+    xi,
+    shape=None,
+    family=None,
+    family_names=("fibres",),
+    dim=3,
+    cell_lengths=(1.0, 1.0, 1.0),
+    walls=0,
+    shear_rate=1.0,
+    dt=0.01,
+    t_end=0.1,
+    collisions=0,
+    alpha=0.0,
+    contact_max_iter=50,
+    on_contact_cap=0,
+    lubrication=0,
+    output_every=1,
+    snapshot_every=0,
+    checkpoint_every=0,
+    seed=1,
+    drop=(),
+    override=None,
+):
+    """Write a run file. ``drop`` lists /setup/resolved or /initial datasets to leave
+    out, ``override`` maps dataset paths to replacement values (to make bad files)."""
+    x = np.asarray(x, dtype=float)
+    n = x.shape[0]
+    shape = np.full(n, 1) if shape is None else np.asarray(shape)
+    family = np.zeros(n, dtype=np.int64) if family is None else np.asarray(family)
+    cell = np.asarray(cell_lengths, dtype=float)
+    resolved = {
+        "dim": np.int64(dim),
+        "cell_lengths": cell,
+        "walls": np.int64(walls),
+        "wall_speed": 0.5 * shear_rate * cell[1],
+        "velocity_gradient": shear(shear_rate),
+        "shear_rate": float(shear_rate),
+        "viscosity": 1.0,
+        "dt": float(dt),
+        "t_end": float(t_end),
+        "seed": np.int64(seed),
+        "hydrodynamics": np.int64(0),
+        "hydrodynamics_reason": "test: jeffery requested",
+        "collisions": np.int64(collisions),
+        "alpha": float(alpha),
+        "contact_max_iter": np.int64(contact_max_iter),
+        "on_contact_cap": np.int64(on_contact_cap),
+        "lubrication": np.int64(lubrication),
+        "output_every": np.int64(output_every),
+        "snapshot_every": np.int64(snapshot_every),
+        "checkpoint_every": np.int64(checkpoint_every),
+        "family_names": np.array(list(family_names), dtype=object),
+    }
+    initial = {
+        "x": x,
+        "p": np.asarray(p, dtype=float),
+        "shape": shape.astype(np.int64),
+        "family": family.astype(np.int64),
+        "radius": np.broadcast_to(np.asarray(radius, dtype=float), (n,)).copy(),
+        "length": np.broadcast_to(np.asarray(length, dtype=float), (n,)).copy(),
+        "xi": np.broadcast_to(np.asarray(xi, dtype=float), (n,)).copy(),
+    }
+    override = override or {}
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = "pyfold.run"
+        f.attrs["format_version"] = "1.0"
+        f.attrs["creator"] = "tests/micro/test_run_common.py"
+        f.attrs["created"] = "1970-01-01T00:00:00Z"
+        f.attrs["command"] = " ".join(sys.argv[:1])
+        setup = f.create_group("setup")
+        setup.attrs["scene_toml"] = "# written by the fold_run tests"
+        res = setup.create_group("resolved")
+        for key, val in resolved.items():
+            full = f"/setup/resolved/{key}"
+            if key in drop or full in drop:
+                continue
+            val = override.get(full, val)
+            if isinstance(val, np.ndarray) and val.dtype == object:
+                res.create_dataset(key, data=val, dtype=h5py.string_dtype())
+            else:
+                res.create_dataset(key, data=val)
+        ini = f.create_group("initial")
+        for key, val in initial.items():
+            full = f"/initial/{key}"
+            if key in drop or full in drop:
+                continue
+            ini.create_dataset(key, data=override.get(full, val))
+
+
+def random_unit(rng, n: int, dim: int) -> np.ndarray:
+    v = rng.normal(size=(n, dim))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def xi_of(beta: float) -> float:
+    return (beta**2 - 1.0) / (beta**2 + 1.0)
+
+
+def test_writer_produces_contract_layout(tmp_path):
+    """The helper itself writes what the contract lists (guards the other tests)."""
+    rng = np.random.default_rng(0)
+    path = tmp_path / "r.h5"
+    write_run_file(path, x=rng.uniform(size=(3, 3)), p=random_unit(rng, 3, 3), radius=0.01, length=0.1, xi=0.9)
+    with h5py.File(path) as f:
+        assert f["/setup/resolved/velocity_gradient"][0, 1] == 1.0
+        assert f["/initial/x"].shape == (3, 3)
+        assert f.attrs["format"] == "pyfold.run"
