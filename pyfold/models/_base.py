@@ -1,0 +1,97 @@
+"""Common machinery of the orientation models: parameter fields, closure, validation."""
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+import numpy as np
+
+from pyfold._jax import jax, jnp
+from pyfold.closures import resolve
+from pyfold.errors import InputError
+
+DEFAULT_CLOSURE = "ibof"
+
+
+def _as_float(x) -> jax.Array:
+    return jnp.asarray(x, dtype=jnp.float64)
+
+
+def parameter(default: float):
+    """A float model parameter: stored as a float64 JAX array so that it is a dynamic
+    leaf (differentiable, vmappable over a leading axis, no recompilation per value)."""
+    return eqx.field(default=default, converter=_as_float)
+
+
+def closure_field(default: Any = DEFAULT_CLOSURE):
+    """The closure: a name, a plain ``f(a2)`` or a ``TabulatedA4``.
+
+    Kept as an ordinary field rather than ``static=True``: a ``TabulatedA4`` carries
+    arrays that must stay dynamic, while names and plain functions are non-array
+    leaves that ``equinox.filter_jit`` / ``eqx.partition(model, eqx.is_array)``
+    treat as static anyway. Use the ``equinox.filter_*`` transformations on models.
+    """
+    return eqx.field(default=default)
+
+
+def check_range(name: str, value, low: float | None = None, high: float | None = None) -> None:
+    """Raise InputError if a *concrete* parameter value leaves ``[low, high]``.
+
+    Traced values (inside jit/vmap/grad) are not checked.
+    """
+    if isinstance(value, jax.core.Tracer):
+        return
+    v = np.asarray(value, dtype=np.float64)
+    lo = -np.inf if low is None else low
+    hi = np.inf if high is None else high
+    if not np.all(np.isfinite(v)) or np.any(v < lo) or np.any(v > hi):
+        raise InputError(f"{name}: must be finite and in [{lo:g}, {hi:g}], got {value!r}")
+
+
+class OrientationModel(eqx.Module):
+    """Base class: a model is a pure ``rate(t, a2, L) -> da2/dt``.
+
+    Subclasses declare their parameters with :func:`parameter`, a ``closure`` field
+    and a static ``dim`` (3 or 2), and implement :meth:`_rate`.
+    """
+
+    def _rate(self, t, a2: jax.Array, L: jax.Array) -> jax.Array:  # pragma: no cover
+        raise NotImplementedError
+
+    def a4(self, a2: jax.Array, t) -> jax.Array:
+        """Fourth-order tensor from the model's closure (``(a2, t) -> a4``)."""
+        return resolve(self.closure)(a2, t)  # type: ignore[attr-defined]
+
+    def rate(self, t, a2: jax.Array, L: jax.Array) -> jax.Array:
+        """Material derivative ``Da2/Dt`` [1/s] at time ``t`` for the gradient ``L`` (d, d).
+
+        The result is symmetrised: the models are symmetric in exact arithmetic,
+        and closures without full index symmetry would otherwise leak a tiny
+        antisymmetric part into the integrated ``a2``.
+        """
+        a2 = jnp.asarray(a2, dtype=jnp.float64)
+        L = jnp.asarray(L, dtype=jnp.float64)
+        d = self.dim  # type: ignore[attr-defined]
+        if a2.shape[-2:] != (d, d) or L.shape[-2:] != (d, d):
+            raise InputError(
+                f"{type(self).__name__}(dim={d}): a2 and L must have shape (d, d) = ({d}, {d}); "
+                f"got a2 {a2.shape}, L {L.shape}"
+            )
+        r = self._rate(t, a2, L)
+        return 0.5 * (r + jnp.swapaxes(r, -1, -2))
+
+    def __check_init__(self):
+        d = self.dim  # type: ignore[attr-defined]
+        if d not in (2, 3):
+            raise InputError(f"dim must be 2 (planar) or 3 (spatial), got {d!r}")
+        closure = self.closure  # type: ignore[attr-defined]
+        if isinstance(closure, str):
+            from pyfold.closures import get_closure
+
+            get_closure(closure, d)  # raises InputError listing the allowed names
+        else:
+            resolve(closure)
+            table_dim = getattr(closure, "dim", None)
+            if isinstance(table_dim, int) and table_dim != d:
+                raise InputError(f"closure: tabulated a4 has d = {table_dim}, but the model has dim = {d}")
+        check_range("xi", self.xi, -1.0, 1.0)  # type: ignore[attr-defined]
