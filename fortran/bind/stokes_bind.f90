@@ -1,0 +1,228 @@
+! Thin f2py layer over the fictitious-domain Stokes solver (serial FFTW backend).
+! Each call makes the FFTW plans, solves and frees everything, so Python holds no
+! native state; explicit-shape arguments let stokes.pyf hide the sizes.
+module fold_stokes_bind_util
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_fft_backend, only: fft_backend_t
+   use fold_fft_serial, only: fft_serial_t, fft_serial_create
+   use fold_stokes_fft, only: stokes_settings_t
+   use fold_particles, only: particle_set_t, particles_init
+   implicit none
+   private
+   public :: make_settings, make_backend, make_particles
+contains
+   function make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, &
+                          plan_effort) result(set)
+      real(dp), intent(in) :: eta_f, kappa, tol
+      integer(ip), intent(in) :: max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, plan_effort
+      type(stokes_settings_t) :: set
+      set%eta_f = eta_f
+      set%kappa = kappa
+      set%tol = tol
+      set%max_iter = max_iter
+      set%derivative = derivative
+      set%mixing = mixing
+      set%subsamples = subsamples
+      set%fibre_ends = fibre_ends
+      set%warm_start = warm_start /= 0
+      set%plan_effort = plan_effort
+   end function make_settings
+
+   subroutine make_backend(dim, n, effort, fft, stat, errmsg)
+      integer(ip), intent(in) :: dim, n(3), effort
+      class(fft_backend_t), allocatable, intent(out) :: fft
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      type(fft_serial_t), allocatable :: serial
+      allocate (serial)
+      call fft_serial_create(serial, dim, n, effort, stat, errmsg)
+      call move_alloc(serial, fft)
+   end subroutine make_backend
+
+   subroutine make_particles(dim, np, shape, radius, length, xi, x, p, parts, stat, errmsg)
+      integer(ip), intent(in) :: dim, np, shape(np)
+      real(dp), intent(in) :: radius(np), length(np), xi(np), x(dim, np), p(dim, np)
+      type(particle_set_t), intent(out) :: parts
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call particles_init(parts, dim, np, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      parts%shape = shape
+      parts%radius = radius
+      parts%length = length
+      parts%xi = xi
+      parts%x = x
+      parts%p = p
+   end subroutine make_particles
+end module fold_stokes_bind_util
+
+subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa, tol, max_iter, derivative, mixing, &
+                                 plan_effort, u, stress, eta_eff, eta_diss, iterations, residual, history, stat, errmsg)
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
+   use fold_fft_backend, only: fft_backend_t
+   use fold_stokes_fft
+   use fold_stress, only: bulk_stress_t, bulk_stress
+   use fold_stokes_bind_util, only: make_settings, make_backend
+   implicit none
+   integer(ip), intent(in) :: dim, n1, n2, n3, max_iter, derivative, mixing, plan_effort
+   real(dp), intent(in) :: lattice(3, 3), g(3, 3), chi(n1, n2, n3), eta_f, kappa, tol
+   real(dp), intent(out) :: u(n1, n2, n3, dim), stress(3, 3), eta_eff, eta_diss, residual, history(max_iter + 1)
+   integer(ip), intent(out) :: iterations
+   integer, intent(out) :: stat
+   character(len=msg_len), intent(out) :: errmsg
+   class(fft_backend_t), allocatable :: fft
+   type(stokes_fft_t) :: s
+   type(bulk_stress_t) :: b
+   integer :: solve_stat, c
+   character(len=msg_len) :: solve_msg
+
+   u = 0.0_dp
+   stress = 0.0_dp
+   eta_eff = 0.0_dp
+   eta_diss = 0.0_dp
+   residual = 0.0_dp
+   history = 0.0_dp
+   iterations = 0
+   call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call stokes_fft_init(s, fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, 1_ip, 0_ip, 0_ip, &
+                                              plan_effort), stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call stokes_fft_set_lattice(s, lattice, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call stokes_fft_solve(s, chi, g, solve_stat, solve_msg)
+   iterations = s%iterations
+   residual = s%residual
+   history(1:iterations + 1) = s%history(0:iterations)
+   if (solve_stat == FOLD_OK .or. solve_stat == FOLD_NOT_CONVERGED) then
+      call stokes_fft_velocity(s)
+      do c = 1, dim
+         u(:, :, :, c) = s%vel(c)%r(1:n1, :, :)
+      end do
+      call bulk_stress(s, chi, b, stat, errmsg)
+      stress = b%sigma
+      eta_eff = b%eta_eff
+      eta_diss = b%eta_dissipation
+   end if
+   stat = solve_stat
+   errmsg = solve_msg
+   call stokes_fft_destroy(s)
+end subroutine fold_stokes_solve_chi
+
+subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offset, g, shape, radius, length, xi, x, p, &
+                                       eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, &
+                                       plan_effort, chi, u, v, omega, rigidity, stress, sigma_p, scalars, &
+                                       iterations, history, stat, errmsg)
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
+   use fold_fft_backend, only: fft_backend_t
+   use fold_cell, only: cell_t, cell_init
+   use fold_particles, only: particle_set_t
+   use fold_stokes_step
+   use fold_stokes_bind_util, only: make_settings, make_backend, make_particles
+   implicit none
+   integer(ip), intent(in) :: dim, n1, n2, n3, np, max_iter, derivative, mixing, subsamples, fibre_ends, plan_effort
+   integer(ip), intent(in) :: shape(np)
+   real(dp), intent(in) :: lengths(3), shear_offset, g(3, 3), radius(np), length(np), xi(np), x(dim, np), p(dim, np)
+   real(dp), intent(in) :: eta_f, kappa, tol
+   real(dp), intent(out) :: chi(n1, n2, n3), u(n1, n2, n3, dim), v(dim, np), omega(3, np), rigidity(np)
+   !> scalars: residual, eta_eff, eta_dissipation, solid_strain, solid_fraction
+   real(dp), intent(out) :: stress(3, 3), sigma_p(3, 3), scalars(5), history(max_iter + 1)
+   integer(ip), intent(out) :: iterations
+   integer, intent(out) :: stat
+   character(len=msg_len), intent(out) :: errmsg
+   class(fft_backend_t), allocatable :: fft
+   type(stokes_context_t) :: ctx
+   type(cell_t) :: cell
+   type(particle_set_t) :: parts
+   type(stokes_record_t) :: rec
+   integer :: c
+
+   chi = 0.0_dp
+   u = 0.0_dp
+   v = 0.0_dp
+   omega = 0.0_dp
+   rigidity = 0.0_dp
+   stress = 0.0_dp
+   sigma_p = 0.0_dp
+   scalars = 0.0_dp
+   history = 0.0_dp
+   iterations = 0
+   call cell_init(cell, dim, lengths, .false., g, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   cell%shear_offset = shear_offset
+   call make_particles(dim, np, shape, radius, length, xi, x, p, parts, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call stokes_context_init(ctx, fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
+                                                    fibre_ends, 0_ip, plan_effort), stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call stokes_rigid_velocities(ctx, cell, parts, rec, stat, errmsg)
+   iterations = ctx%solver%iterations
+   history(1:iterations + 1) = ctx%solver%history(0:iterations)
+   if (stat == FOLD_OK .or. stat == FOLD_NOT_CONVERGED) then
+      chi = ctx%vox%chi
+      do c = 1, dim
+         u(:, :, :, c) = ctx%solver%vel(c)%r(1:n1, :, :)
+      end do
+      v = parts%v
+      omega = parts%omega
+      rigidity = ctx%rigidity
+      stress = rec%bulk%sigma
+      sigma_p = rec%bulk%sigma_particles
+      scalars = [rec%residual, rec%bulk%eta_eff, rec%bulk%eta_dissipation, rec%bulk%solid_strain, &
+                 rec%bulk%solid_fraction]
+   end if
+   call stokes_context_destroy(ctx)
+end subroutine fold_stokes_solve_particles
+
+subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, scheme, shape, radius, length, xi, &
+                             x0, p0, eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, &
+                             warm_start, plan_effort, x_hist, p_hist, records, stat, errmsg)
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK
+   use fold_fft_backend, only: fft_backend_t
+   use fold_cell, only: cell_t, cell_init
+   use fold_particles, only: particle_set_t
+   use fold_stokes_step
+   use fold_stokes_bind_util, only: make_settings, make_backend, make_particles
+   implicit none
+   integer(ip), intent(in) :: dim, n1, n2, n3, np, nsteps, scheme, max_iter, derivative, mixing, subsamples
+   integer(ip), intent(in) :: fibre_ends, warm_start, plan_effort, shape(np)
+   real(dp), intent(in) :: lengths(3), g(3, 3), t0, dt, radius(np), length(np), xi(np), x0(dim, np), p0(dim, np)
+   real(dp), intent(in) :: eta_f, kappa, tol
+   real(dp), intent(out) :: x_hist(dim, np, nsteps + 1), p_hist(dim, np, nsteps + 1)
+   !> records(:, step): iterations, residual, rigidity_max, eta_eff, solid_strain, solid_fraction
+   real(dp), intent(out) :: records(6, nsteps)
+   integer, intent(out) :: stat
+   character(len=msg_len), intent(out) :: errmsg
+   class(fft_backend_t), allocatable :: fft
+   type(stokes_context_t) :: ctx
+   type(cell_t) :: cell
+   type(particle_set_t) :: parts
+   type(stokes_record_t), allocatable :: recs(:)
+   integer :: k
+
+   x_hist = 0.0_dp
+   p_hist = 0.0_dp
+   records = 0.0_dp
+   call cell_init(cell, dim, lengths, .false., g, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call make_particles(dim, np, shape, radius, length, xi, x0, p0, parts, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   call stokes_context_init(ctx, fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
+                                                    fibre_ends, warm_start, plan_effort), stat, errmsg)
+   if (stat /= FOLD_OK) return
+   allocate (recs(max(nsteps, 1)))
+   call stokes_march(ctx, cell, parts, t0, dt, nsteps, scheme, x_hist, p_hist, recs, stat, errmsg)
+   do k = 1, nsteps
+      records(:, k) = [real(recs(k)%iterations, dp), recs(k)%residual, recs(k)%rigidity_max, recs(k)%bulk%eta_eff, &
+                       recs(k)%bulk%solid_strain, recs(k)%bulk%solid_fraction]
+   end do
+   call stokes_context_destroy(ctx)
+end subroutine fold_stokes_march

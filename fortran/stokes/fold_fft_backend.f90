@@ -1,0 +1,117 @@
+!> Distributed-or-not real-to-complex FFTs behind one abstract type.
+!>
+!> The Stokes solver does all its arithmetic on the rank-local slab of a
+!> padded real array r(nxp, n2l, n3l) and of its half spectrum c(nxh, n2l, n3l),
+!> nxp = 2 (nx/2 + 1), nxh = nx/2 + 1 (FFTW in-place r2c layout). The slab is
+!> cut along the slowest Fortran index that is > 1: z in 3-D, y in 2-D (then
+!> n3l = 1). A serial backend (fold_fft_serial, in the core library that the
+!> Python extensions link) owns the whole grid; an FFTW-MPI backend
+!> (fold_fft_mpi, executable only) owns one slab and sums over ranks. The
+!> solver never sees which one it has, so serial and parallel runs share every
+!> line of numerics.
+module fold_fft_backend
+   use, intrinsic :: iso_c_binding
+   use fold_kinds, only: dp, ip, i8
+   implicit none
+   private
+
+   include 'fftw3.f03'
+
+   !> One FFTW-aligned field usable for in-place transforms: the same memory seen
+   !> as a padded real array and as a half spectrum.
+   type, public :: fft_field_t
+      type(c_ptr) :: mem = c_null_ptr
+      !> Real view (nxp, n2l, n3l); only r(1:nx, :, :) is data, the rest padding
+      real(dp), pointer, contiguous :: r(:, :, :) => null()
+      !> Complex view (nxh, n2l, n3l)
+      complex(dp), pointer, contiguous :: c(:, :, :) => null()
+   end type fft_field_t
+
+   !> Abstract FFT engine of a fixed grid (global sizes n, local slab nl/off).
+   type, abstract, public :: fft_backend_t
+      !> Spatial dimension (2 or 3)
+      integer(ip) :: dim = 3
+      !> Global grid sizes (n(3) = 1 in 2-D)
+      integer(ip) :: n(3) = 1
+      !> Local extents of the real-space (and spectral) slab
+      integer(ip) :: nl(3) = 1
+      !> Global 0-based offset of the local slab in each direction
+      integer(ip) :: off(3) = 0
+      !> Padded real leading extent 2 (nx/2 + 1) and spectral one nx/2 + 1
+      integer(ip) :: nxp = 2, nxh = 1
+      !> Number of complex numbers to allocate per field (FFTW-MPI may ask for more than the slab)
+      integer(i8) :: alloc_complex = 1
+      !> Rank of this process and number of ranks
+      integer :: rank = 0, nranks = 1
+   contains
+      !> In-place forward transform of a field (real view -> complex view), unnormalised
+      procedure(transform_iface), deferred :: r2c
+      !> In-place backward transform (complex view -> real view), unnormalised; destroys the input
+      procedure(transform_iface), deferred :: c2r
+      !> Sum an array over all ranks (in place)
+      procedure(reduce_iface), deferred :: sum_all
+      !> Maximum of an array over all ranks (in place)
+      procedure(reduce_iface), deferred :: max_all
+      !> Release the FFTW plans
+      procedure(destroy_iface), deferred :: destroy
+      !> Allocate an aligned field of this grid
+      procedure :: alloc_field => backend_alloc_field
+   end type fft_backend_t
+
+   abstract interface
+      subroutine transform_iface(self, f)
+         import :: fft_backend_t, fft_field_t
+         class(fft_backend_t), intent(inout) :: self
+         type(fft_field_t), intent(inout) :: f
+      end subroutine transform_iface
+      subroutine reduce_iface(self, x)
+         import :: fft_backend_t, dp
+         class(fft_backend_t), intent(in) :: self
+         real(dp), intent(inout) :: x(:)
+      end subroutine reduce_iface
+      subroutine destroy_iface(self)
+         import :: fft_backend_t
+         class(fft_backend_t), intent(inout) :: self
+      end subroutine destroy_iface
+   end interface
+
+   public :: field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag
+
+   !> FFTW planning effort: FFTW_ESTIMATE (instant) or FFTW_MEASURE (seconds, faster transforms)
+   integer, parameter :: FOLD_PLAN_ESTIMATE = 0, FOLD_PLAN_MEASURE = 1
+
+contains
+
+   !> Allocate an FFTW-aligned field (every field of a grid has the same
+   !> alignment, which FFTW's new-array execute functions require).
+   subroutine backend_alloc_field(self, f)
+      class(fft_backend_t), intent(in) :: self
+      type(fft_field_t), intent(inout) :: f
+      call field_free(f)
+      f%mem = fftw_alloc_complex(int(max(self%alloc_complex, 1_i8), c_size_t))
+      call c_f_pointer(f%mem, f%r, [self%nxp, self%nl(2), self%nl(3)])
+      call c_f_pointer(f%mem, f%c, [self%nxh, self%nl(2), self%nl(3)])
+      f%r = 0.0_dp
+   end subroutine backend_alloc_field
+
+   !> Free a field (no-op when not allocated).
+   subroutine field_free(f)
+      type(fft_field_t), intent(inout) :: f
+      if (c_associated(f%mem)) call fftw_free(f%mem)
+      f%mem = c_null_ptr
+      f%r => null()
+      f%c => null()
+   end subroutine field_free
+
+   !> FFTW planner flag for a planning-effort code.
+   pure function plan_flag(effort) result(flag)
+      integer, intent(in) :: effort
+      integer :: flag
+      if (effort == FOLD_PLAN_MEASURE) then
+         flag = FFTW_MEASURE
+      else
+         flag = FFTW_ESTIMATE
+      end if
+   end function plan_flag
+
+end module fold_fft_backend

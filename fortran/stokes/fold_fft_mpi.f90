@@ -1,0 +1,130 @@
+!> FFTW-MPI slab backend: each rank owns a slab of the slowest Fortran index
+!> (z in 3-D, y in 2-D) in real and in Fourier space (no transposed output,
+!> so both spaces share one layout and the solver code is unchanged).
+!> Executable only (needs MPI); the solver sees it as an fft_backend_t.
+module fold_fft_mpi
+   use, intrinsic :: iso_c_binding
+   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Allreduce, MPI_IN_PLACE, &
+                      MPI_DOUBLE_PRECISION, MPI_SUM, MPI_MAX
+   use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag
+   implicit none
+   private
+
+   include 'fftw3-mpi.f03'
+
+   !> FFTW-MPI in-place r2c/c2r plans of one slab-decomposed grid.
+   type, extends(fft_backend_t), public :: fft_mpi_t
+      type(c_ptr) :: fwd = c_null_ptr, bwd = c_null_ptr
+      type(MPI_Comm) :: comm
+   contains
+      procedure :: r2c => slab_r2c
+      procedure :: c2r => slab_c2r
+      procedure :: sum_all => slab_sum
+      procedure :: max_all => slab_max
+      procedure :: destroy => slab_destroy
+   end type fft_mpi_t
+
+   public :: fft_mpi_create
+
+contains
+
+   !> Make the distributed plans once (collective over comm). fftw_mpi_init must
+   !> have been called after MPI_Init.
+   subroutine fft_mpi_create(self, comm, dim, n, effort, stat, errmsg)
+      type(fft_mpi_t), intent(inout) :: self
+      type(MPI_Comm), intent(in) :: comm
+      integer(ip), intent(in) :: dim
+      integer(ip), intent(in) :: n(3)
+      integer, intent(in) :: effort
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(c_intptr_t) :: alloc, local_n, local_0
+      type(fft_field_t) :: scratch
+
+      stat = FOLD_OK
+      errmsg = ""
+      if (dim /= 2 .and. dim /= 3) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,i0)') "fft_mpi_create: dim must be 2 or 3, got ", dim
+         return
+      end if
+      if (any(n(1:dim) < 2)) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,3(1x,i0))') "fft_mpi_create: every grid size must be >= 2, got", n(1:dim)
+         return
+      end if
+      call slab_destroy(self)
+      self%comm = comm
+      call MPI_Comm_rank(comm, self%rank)
+      call MPI_Comm_size(comm, self%nranks)
+      self%dim = dim
+      self%n = 1
+      self%n(1:dim) = n(1:dim)
+      self%nxh = self%n(1)/2 + 1
+      self%nxp = 2*self%nxh
+      self%nl = self%n
+      self%off = 0
+      if (dim == 3) then
+         alloc = fftw_mpi_local_size_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
+                                        int(self%nxh, c_intptr_t), comm%MPI_VAL, local_n, local_0)
+         self%nl(3) = int(local_n, ip)
+         self%off(3) = int(local_0, ip)
+      else
+         alloc = fftw_mpi_local_size_2d(int(self%n(2), c_intptr_t), int(self%nxh, c_intptr_t), &
+                                        comm%MPI_VAL, local_n, local_0)
+         self%nl(2) = int(local_n, ip)
+         self%off(2) = int(local_0, ip)
+      end if
+      self%alloc_complex = max(int(alloc, i8), 1_i8)
+      call self%alloc_field(scratch)
+      if (dim == 3) then
+         self%fwd = fftw_mpi_plan_dft_r2c_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
+                                             int(self%n(1), c_intptr_t), scratch%r, scratch%c, comm%MPI_VAL, &
+                                             plan_flag(effort))
+         self%bwd = fftw_mpi_plan_dft_c2r_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
+                                             int(self%n(1), c_intptr_t), scratch%c, scratch%r, comm%MPI_VAL, &
+                                             plan_flag(effort))
+      else
+         self%fwd = fftw_mpi_plan_dft_r2c_2d(int(self%n(2), c_intptr_t), int(self%n(1), c_intptr_t), &
+                                             scratch%r, scratch%c, comm%MPI_VAL, plan_flag(effort))
+         self%bwd = fftw_mpi_plan_dft_c2r_2d(int(self%n(2), c_intptr_t), int(self%n(1), c_intptr_t), &
+                                             scratch%c, scratch%r, comm%MPI_VAL, plan_flag(effort))
+      end if
+      call field_free(scratch)
+   end subroutine fft_mpi_create
+
+   subroutine slab_r2c(self, f)
+      class(fft_mpi_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call fftw_mpi_execute_dft_r2c(self%fwd, f%r, f%c)
+   end subroutine slab_r2c
+
+   subroutine slab_c2r(self, f)
+      class(fft_mpi_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call fftw_mpi_execute_dft_c2r(self%bwd, f%c, f%r)
+   end subroutine slab_c2r
+
+   subroutine slab_sum(self, x)
+      class(fft_mpi_t), intent(in) :: self
+      real(dp), intent(inout) :: x(:)
+      if (size(x) > 0) call MPI_Allreduce(MPI_IN_PLACE, x, size(x), MPI_DOUBLE_PRECISION, MPI_SUM, self%comm)
+   end subroutine slab_sum
+
+   subroutine slab_max(self, x)
+      class(fft_mpi_t), intent(in) :: self
+      real(dp), intent(inout) :: x(:)
+      if (size(x) > 0) call MPI_Allreduce(MPI_IN_PLACE, x, size(x), MPI_DOUBLE_PRECISION, MPI_MAX, self%comm)
+   end subroutine slab_max
+
+   subroutine slab_destroy(self)
+      class(fft_mpi_t), intent(inout) :: self
+      if (c_associated(self%fwd)) call fftw_destroy_plan(self%fwd)
+      if (c_associated(self%bwd)) call fftw_destroy_plan(self%bwd)
+      self%fwd = c_null_ptr
+      self%bwd = c_null_ptr
+   end subroutine slab_destroy
+
+end module fold_fft_mpi

@@ -1,0 +1,102 @@
+!> Serial FFTW backend: the whole grid on one process (used by the Python
+!> extension, the tests and single-rank runs).
+module fold_fft_serial
+   use, intrinsic :: iso_c_binding
+   use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag
+   implicit none
+   private
+
+   include 'fftw3.f03'
+
+   !> Serial in-place r2c/c2r plans of one grid.
+   type, extends(fft_backend_t), public :: fft_serial_t
+      type(c_ptr) :: fwd = c_null_ptr, bwd = c_null_ptr
+   contains
+      procedure :: r2c => serial_r2c
+      procedure :: c2r => serial_c2r
+      procedure :: sum_all => serial_reduce
+      procedure :: max_all => serial_reduce
+      procedure :: destroy => serial_destroy
+   end type fft_serial_t
+
+   public :: fft_serial_create
+
+contains
+
+   !> Make the plans of an nx x ny (x nz) grid once; effort FOLD_PLAN_ESTIMATE/MEASURE.
+   subroutine fft_serial_create(self, dim, n, effort, stat, errmsg)
+      type(fft_serial_t), intent(inout) :: self
+      !> Spatial dimension (2 or 3)
+      integer(ip), intent(in) :: dim
+      !> Grid sizes (n(3) ignored in 2-D)
+      integer(ip), intent(in) :: n(3)
+      !> Planning effort code
+      integer, intent(in) :: effort
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      type(fft_field_t) :: scratch
+
+      stat = FOLD_OK
+      errmsg = ""
+      if (dim /= 2 .and. dim /= 3) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,i0)') "fft_serial_create: dim must be 2 or 3, got ", dim
+         return
+      end if
+      if (any(n(1:dim) < 2)) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,3(1x,i0))') "fft_serial_create: every grid size must be >= 2, got", n(1:dim)
+         return
+      end if
+      call serial_destroy(self)
+      self%dim = dim
+      self%n = 1
+      self%n(1:dim) = n(1:dim)
+      self%nl = self%n
+      self%off = 0
+      self%nxh = self%n(1)/2 + 1
+      self%nxp = 2*self%nxh
+      self%alloc_complex = int(self%nxh, i8)*self%n(2)*self%n(3)
+      self%rank = 0
+      self%nranks = 1
+      call self%alloc_field(scratch)
+      ! Column-major a(nx, ny, nz) is FFTW's row-major (nz, ny, nx): sizes reversed.
+      if (dim == 3) then
+         self%fwd = fftw_plan_dft_r2c_3d(self%n(3), self%n(2), self%n(1), scratch%r, scratch%c, plan_flag(effort))
+         self%bwd = fftw_plan_dft_c2r_3d(self%n(3), self%n(2), self%n(1), scratch%c, scratch%r, plan_flag(effort))
+      else
+         self%fwd = fftw_plan_dft_r2c_2d(self%n(2), self%n(1), scratch%r, scratch%c, plan_flag(effort))
+         self%bwd = fftw_plan_dft_c2r_2d(self%n(2), self%n(1), scratch%c, scratch%r, plan_flag(effort))
+      end if
+      call field_free(scratch)
+   end subroutine fft_serial_create
+
+   subroutine serial_r2c(self, f)
+      class(fft_serial_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call fftw_execute_dft_r2c(self%fwd, f%r, f%c)
+   end subroutine serial_r2c
+
+   subroutine serial_c2r(self, f)
+      class(fft_serial_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call fftw_execute_dft_c2r(self%bwd, f%c, f%r)
+   end subroutine serial_c2r
+
+   !> One process: a global sum or maximum is the local value.
+   subroutine serial_reduce(self, x)
+      class(fft_serial_t), intent(in) :: self
+      real(dp), intent(inout) :: x(:)
+   end subroutine serial_reduce
+
+   subroutine serial_destroy(self)
+      class(fft_serial_t), intent(inout) :: self
+      if (c_associated(self%fwd)) call fftw_destroy_plan(self%fwd)
+      if (c_associated(self%bwd)) call fftw_destroy_plan(self%bwd)
+      self%fwd = c_null_ptr
+      self%bwd = c_null_ptr
+   end subroutine serial_destroy
+
+end module fold_fft_serial

@@ -1,0 +1,198 @@
+!> Driver-level Stokes step: particles -> chi -> flow -> rigid (v, omega) + records.
+!>
+!> The run driver holds one stokes_context_t (plans and storage made once) and
+!> calls stokes_rigid_velocities every step with the current cell (its
+!> Lees-Edwards offset gives the lattice) and particle set; v and omega of the
+!> set are overwritten with the rigid motion fitted to the computed flow
+!> (contacts are resolved afterwards, as for the Jeffery kinematics). The
+!> per-step record holds what physics.md §5 asks to record every step.
+!> stokes_march integrates a set in time (explicit Euler or Adams-Bashforth 2,
+!> exact rotations) for tests and studies; the run driver has its own loop.
+module fold_stokes_step
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED
+   use fold_fft_backend, only: fft_backend_t
+   use fold_cell, only: cell_t, cell_set_time, cell_wrap
+   use fold_particles, only: particle_set_t, particles_check
+   use fold_kinematics, only: rigid_update
+   use fold_grid, only: shear_lattice
+   use fold_voxelise, only: voxel_set_t, voxelise
+   use fold_stokes_fft, only: stokes_fft_t, stokes_settings_t, stokes_fft_init, stokes_fft_set_lattice, &
+                              stokes_fft_solve, stokes_fft_velocity, stokes_fft_destroy
+   use fold_rigid_fit, only: rigid_fit
+   use fold_stress, only: bulk_stress_t, bulk_stress
+   implicit none
+   private
+
+   !> Time-stepping schemes of stokes_march
+   integer(ip), parameter, public :: FOLD_EULER = 1, FOLD_AB2 = 2
+
+   !> What one Stokes step reports (recorded every step).
+   type, public :: stokes_record_t
+      !> CG iterations and relative preconditioned residual reached
+      integer(ip) :: iterations = 0
+      real(dp) :: residual = 0.0_dp
+      logical :: converged = .false.
+      !> Largest and mean rigidity residual of the particles [-]
+      real(dp) :: rigidity_max = 0.0_dp, rigidity_mean = 0.0_dp
+      !> Bulk stress, effective viscosity, solid strain ratio, solid fraction
+      type(bulk_stress_t) :: bulk
+   end type stokes_record_t
+
+   !> Solver + voxel storage kept across steps.
+   type, public :: stokes_context_t
+      type(stokes_fft_t) :: solver
+      type(voxel_set_t) :: vox
+      !> Rigidity residual of each particle after the last step [-]
+      real(dp), allocatable :: rigidity(:)
+   end type stokes_context_t
+
+   public :: stokes_context_init, stokes_context_destroy, stokes_rigid_velocities, stokes_march
+
+contains
+
+   !> Take over an FFT backend (serial or MPI) and allocate once.
+   subroutine stokes_context_init(ctx, fft, set, stat, errmsg)
+      type(stokes_context_t), intent(inout) :: ctx
+      class(fft_backend_t), allocatable, intent(inout) :: fft
+      type(stokes_settings_t), intent(in) :: set
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call stokes_fft_init(ctx%solver, fft, set, stat, errmsg)
+   end subroutine stokes_context_init
+
+   subroutine stokes_context_destroy(ctx)
+      type(stokes_context_t), intent(inout) :: ctx
+      call stokes_fft_destroy(ctx%solver)
+      if (allocated(ctx%rigidity)) deallocate (ctx%rigidity)
+   end subroutine stokes_context_destroy
+
+   !> Rigid velocities of every particle from the fictitious-domain Stokes flow.
+   !> On FOLD_NOT_CONVERGED v/omega/rec are still filled from the last iterate
+   !> (the driver decides: halve the step or stop).
+   subroutine stokes_rigid_velocities(ctx, cell, parts, rec, stat, errmsg)
+      type(stokes_context_t), intent(inout) :: ctx
+      !> Periodic cell (no walls) with its current Lees-Edwards offset
+      type(cell_t), intent(in) :: cell
+      type(particle_set_t), intent(inout) :: parts
+      type(stokes_record_t), intent(out) :: rec
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: solve_stat, st
+      character(len=msg_len) :: solve_msg
+
+      if (cell%walls) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "stokes_rigid_velocities: the FFT Stokes solver needs a fully periodic cell (walls = false)"
+         return
+      end if
+      if (cell%dim /= ctx%solver%dim .or. parts%dim /= ctx%solver%dim) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,i0,a,i0,a,i0)') "stokes_rigid_velocities: dimensions differ: solver ", ctx%solver%dim, &
+            ", cell ", cell%dim, ", particles ", parts%dim
+         return
+      end if
+      call particles_check(parts, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call stokes_fft_set_lattice(ctx%solver, shear_lattice(cell%lengths, cell%shear_offset), stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
+                    stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call stokes_fft_solve(ctx%solver, ctx%vox%chi, cell%G, solve_stat, solve_msg)
+      if (solve_stat /= FOLD_OK .and. solve_stat /= FOLD_NOT_CONVERGED) then
+         stat = solve_stat
+         errmsg = solve_msg
+         return
+      end if
+      rec%iterations = ctx%solver%iterations
+      rec%residual = ctx%solver%residual
+      rec%converged = solve_stat == FOLD_OK
+      call stokes_fft_velocity(ctx%solver)
+      if (allocated(ctx%rigidity)) then
+         if (size(ctx%rigidity) /= parts%n) deallocate (ctx%rigidity)
+      end if
+      if (.not. allocated(ctx%rigidity)) allocate (ctx%rigidity(parts%n))
+      call rigid_fit(ctx%solver%fft, cell, ctx%vox, ctx%solver%vel, ctx%solver%eta, ctx%solver%set%eta_f, &
+                     ctx%solver%set%kappa, parts, ctx%rigidity, st, errmsg)
+      if (st /= FOLD_OK) then
+         stat = st
+         return
+      end if
+      if (parts%n > 0) then
+         rec%rigidity_max = maxval(ctx%rigidity)
+         rec%rigidity_mean = sum(ctx%rigidity)/parts%n
+      end if
+      call bulk_stress(ctx%solver, ctx%vox%chi, rec%bulk, st, errmsg)
+      if (st /= FOLD_OK) then
+         stat = st
+         return
+      end if
+      stat = solve_stat
+      errmsg = solve_msg
+   end subroutine stokes_rigid_velocities
+
+   !> Integrate parts over nsteps steps of dt from time t0 with the Stokes rigid
+   !> velocities: Euler (first order) or Adams-Bashforth 2 (second order; first
+   !> step Euler) on v and omega, with exact rotations (rigid_update) and the
+   !> Lees-Edwards wrap (the stored previous velocity gets the same jump).
+   !> Histories: x_hist/p_hist(dim, n, 0:nsteps), records recs(1:nsteps).
+   subroutine stokes_march(ctx, cell, parts, t0, dt, nsteps, scheme, x_hist, p_hist, recs, stat, errmsg)
+      type(stokes_context_t), intent(inout) :: ctx
+      type(cell_t), intent(inout) :: cell
+      type(particle_set_t), intent(inout) :: parts
+      !> Start time (sets the Lees-Edwards offset) and step [s]
+      real(dp), intent(in) :: t0, dt
+      integer(ip), intent(in) :: nsteps
+      !> FOLD_EULER or FOLD_AB2
+      integer(ip), intent(in) :: scheme
+      real(dp), intent(out) :: x_hist(:, :, 0:), p_hist(:, :, 0:)
+      type(stokes_record_t), intent(out) :: recs(:)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      real(dp), allocatable :: v_old(:, :), w_old(:, :), v_now(:, :), w_now(:, :)
+      integer(ip) :: step, k
+
+      stat = FOLD_OK
+      errmsg = ""
+      if (scheme /= FOLD_EULER .and. scheme /= FOLD_AB2) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,i0)') "stokes_march: scheme must be 1 (Euler) or 2 (Adams-Bashforth 2), got ", scheme
+         return
+      end if
+      if (.not. (dt > 0.0_dp) .or. nsteps < 0) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,es10.3,a,i0)') "stokes_march: need dt > 0 and nsteps >= 0, got dt ", dt, &
+            ", nsteps ", nsteps
+         return
+      end if
+      allocate (v_old(parts%dim, parts%n), w_old(3, parts%n), v_now(parts%dim, parts%n), w_now(3, parts%n))
+      x_hist(:, :, 0) = parts%x
+      p_hist(:, :, 0) = parts%p
+      do step = 1, nsteps
+         call cell_set_time(cell, t0 + (step - 1)*dt)
+         call stokes_rigid_velocities(ctx, cell, parts, recs(step), stat, errmsg)
+         if (stat /= FOLD_OK) then
+            write (errmsg, '(a,i0,a,a)') "stokes_march: step ", step, ": ", trim(errmsg)
+            return
+         end if
+         v_now = parts%v
+         w_now = parts%omega
+         if (scheme == FOLD_AB2 .and. step > 1) then
+            parts%v = 1.5_dp*v_now - 0.5_dp*v_old
+            parts%omega = 1.5_dp*w_now - 0.5_dp*w_old
+         end if
+         call rigid_update(parts, dt)
+         v_old = v_now
+         w_old = w_now
+         ! wrapping applies the Lees-Edwards jump to the stored velocity too, so
+         ! the AB2 combination at the next step stays in one frame
+         do k = 1, parts%n
+            call cell_wrap(cell, parts%x(:, k), v_old(:, k))
+         end do
+         x_hist(:, :, step) = parts%x
+         p_hist(:, :, step) = parts%p
+      end do
+   end subroutine stokes_march
+
+end module fold_stokes_step
