@@ -6,12 +6,12 @@
 !> over the rectangle [-h1,h1] x [-h2,h2]. Its unconstrained minimiser is the seed's
 !> interior formula (physics.md section 3, Laure, Megally & Coupez):
 !>     s* = (b e - d)/(1 - b^2),  t* = (e - b d)/(1 - b^2),  b = p1.p2, d = p1.r, e = p2.r;
-!> on the rectangle the minimiser is found by clamping s, taking the best t for it
-!> (clamped), then the best s for that t (clamped) -- exact for this problem because
-!> f is convex and separable along each edge (Ericson 2005, Real-Time Collision
-!> Detection, section 5.1.9). When the axes are parallel (1 - b^2 <= eps_par) every s
-!> of the overlap of the two projections is optimal; we take the middle of the overlap,
-!> so the contact point (and hence the torque of a contact force) is symmetric.
+!> f is convex, so on the rectangle its minimum is either that interior point or lies
+!> on an edge, i.e. an end point of one segment against the other segment, where the
+!> 1-D minimiser is a clamped projection (Ericson 2005, Real-Time Collision Detection,
+!> section 5.1.9). When the axes are parallel (1 - b^2 <= eps_parallel) every s of the
+!> overlap of the two projections is optimal; we take the middle of the overlap, so the
+!> contact point (and hence the torque of a contact force) is symmetric.
 !>
 !> Shapes as capsules (see fold_particles): fibre = capsule over its axis (contains the
 !> cylinder), sphere = capsule of zero length (exact), spheroid = bounding capsule of
@@ -38,6 +38,11 @@ contains
    !> Closest points of two segments: parameters s (on 1), t (on 2) and the vector
    !> dvec = (c1 + s p1) - (c2 + t p2) from the point on 2 to the point on 1.
    !> r = c1 - c2 is given (already reduced to its minimum image by the caller).
+   !> Candidates: the interior stationary point (if it lies in the rectangle), the four
+   !> edges (an end point of one segment against the other segment: a clamped 1-D
+   !> projection, exact), and for parallel axes the middle of the overlap. The
+   !> candidate with the smallest actual |dvec| wins, so ill-conditioning of the
+   !> interior formula for nearly parallel axes cannot give a wrong answer.
    pure subroutine segment_closest(r, p1, h1, p2, h2, s, t, dvec)
       !> Centre displacement c1 - c2 [m]
       real(dp), intent(in) :: r(:)
@@ -56,33 +61,65 @@ contains
       !> Closest-point vector (point on 1) - (point on 2) [m]
       real(dp), intent(out) :: dvec(size(r))
 
-      real(dp) :: b, d, e, denom, lo, hi, half
+      real(dp) :: b, d, e, denom, lo, hi, half, best, sc, tc, tie, dist
+      real(dp) :: cs(7), ct(7), cm(7)
+      integer :: k, nc
 
       b = dot_product(p1, p2)
       d = dot_product(p1, r)
       e = dot_product(p2, r)
       denom = 1.0_dp - b*b
-      if (h1 <= 0.0_dp) then
-         s = 0.0_dp
-      else if (h2 <= 0.0_dp) then
-         ! point-segment: the projection of c2 on segment 1
-         s = clamp(-d, -h1, h1)
-      else if (denom > eps_parallel) then
-         s = clamp((b*e - d)/denom, -h1, h1)
-      else
-         ! parallel: segment 2 projects on line 1 onto s in [-d - h2|b|, -d + h2|b|]
+      tie = 8.0_dp*epsilon(1.0_dp)*(norm2(r) + h1 + h2)
+      nc = 0
+      if (denom <= eps_parallel .and. h1 > 0.0_dp .and. h2 > 0.0_dp) then
+         ! parallel: segment 2 projects on line 1 onto s in [-d - h2|b|, -d + h2|b|];
+         ! the middle of the overlap keeps the contact point symmetric
          half = h2*abs(b)
          lo = max(-h1, -d - half)
          hi = min(h1, -d + half)
          if (lo <= hi) then
-            s = 0.5_dp*(lo + hi)
-         else
-            s = clamp(-d, -h1, h1)
+            nc = nc + 1
+            cs(nc) = 0.5_dp*(lo + hi)
+            ct(nc) = clamp(e + cs(nc)*b, -h2, h2)
+            cm(nc) = 0.0_dp
          end if
       end if
-      ! best t for this s, then best s for that t
-      t = clamp(e + s*b, -h2, h2)
-      if (h1 > 0.0_dp) s = clamp(t*b - d, -h1, h1)
+      if (denom > 0.0_dp) then
+         ! interior stationary point (ill-conditioned when nearly parallel, but judged
+         ! by its actual distance like every other candidate)
+         sc = (b*e - d)/denom
+         tc = (e - b*d)/denom
+         if (abs(sc) <= h1 .and. abs(tc) <= h2) then
+            nc = nc + 1
+            cs(nc) = sc
+            ct(nc) = tc
+            cm(nc) = tie
+         end if
+      end if
+      do k = -1, 1, 2
+         ! end point s = +/-h1 of segment 1 against segment 2
+         nc = nc + 1
+         cs(nc) = k*h1
+         ct(nc) = clamp(e + cs(nc)*b, -h2, h2)
+         cm(nc) = tie
+         ! end point t = +/-h2 of segment 2 against segment 1
+         nc = nc + 1
+         ct(nc) = k*h2
+         cs(nc) = clamp(ct(nc)*b - d, -h1, h1)
+         cm(nc) = tie
+      end do
+      ! the overlap middle (parallel axes) is replaced only by a clearly closer candidate
+      best = huge(1.0_dp)
+      s = 0.0_dp
+      t = 0.0_dp
+      do k = 1, nc
+         dist = norm2(r + cs(k)*p1 - ct(k)*p2)
+         if (dist < best - cm(k)) then
+            best = dist
+            s = cs(k)
+            t = ct(k)
+         end if
+      end do
       dvec = r + s*p1 - t*p2
    end subroutine segment_closest
 

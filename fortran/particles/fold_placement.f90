@@ -215,9 +215,9 @@ contains
          if (stat == FOLD_OK) return
       end if
       stat = FOLD_INPUT_ERROR
-      write (errmsg, '(a,f8.5,a,f8.5,a,i0,a,i0,a,i0,a,i0,a)') "placement: could not reach volume fraction ", &
-         phi_target, ": random sequential addition reached ", phi_rsa, " (", n_rsa, " of ", n, &
-         " particles, ", max_attempts, " attempts each) and ", relax_sweeps, &
+      write (errmsg, '(a,a,a,a,a,i0,a,i0,a,i0,a,i0,a)') "placement: could not reach volume fraction ", &
+         fmt_fraction(phi_target), ": random sequential addition reached ", fmt_fraction(phi_rsa), " (", n_rsa, &
+         " of ", n, " particles, ", max_attempts, " attempts each) and ", relax_sweeps, &
          " relaxation sweeps did not remove the overlaps; lower the volume fraction or alpha"
 
    contains
@@ -302,6 +302,15 @@ contains
       end subroutine relax
 
    end subroutine place_particles
+
+   !> A volume fraction as text, e.g. "0.4948".
+   pure function fmt_fraction(phi) result(txt)
+      real(dp), intent(in) :: phi
+      character(len=:), allocatable :: txt
+      character(len=32) :: buf
+      write (buf, '(f12.4)') phi
+      txt = trim(adjustl(buf))
+   end function fmt_fraction
 
    !> Indices sorted by decreasing extent (stable: ties keep index order).
    function sort_by_extent(ext) result(order)

@@ -1,0 +1,196 @@
+"""The seed's collision strategy (fold_contacts): no gap below alpha after resolution, the seed's
+sphere formula, naive == cell lists, momentum conservation, fibre rotation, MPI-style ownership."""
+import numpy as np
+import pytest
+
+from pyfold.errors import OverlapError
+from pyfold.native import geometry as geo
+
+# The kernel accepts d_ij >= -tol_gap with tol_gap = 64 eps max(L_cell) (~2e-14 here):
+# round-off of a distance between coordinates of size L. Re-evaluating the gaps in numpy
+# from the updated positions adds a few more ulps, hence 1e-12 [m] in the checks.
+GAP_TOL = 1e-12
+
+
+def half_segments(shape, radius, length):
+    return np.where(shape == geo.FIBRE, 0.5 * length, np.where(shape == geo.SPHEROID, 0.5 * length - radius, 0.0))
+
+
+def predicted_gaps(cell, dt, shape, radius, length, x, p, v, omega):
+    """Surface gaps of every pair after rigid_update(dt), with the cell offset at t + dt."""
+    x1, p1 = geo.rigid_update(x, p, v, omega, dt)
+    cell1 = geo.Cell(cell.lengths, cell.walls, cell.shear_rate,
+                     cell.shear_offset + cell.shear_rate * dt * cell.lengths[1])
+    n = len(shape)
+    i, j = np.triu_indices(n, 1)
+    h = half_segments(shape, radius, length)
+    r = geo.min_image(x1[i] - x1[j], cell1)
+    return geo.capsule_contact(r, p1[i], h[i], radius[i], p1[j], h[j], radius[j])["dist"], x1, p1
+
+
+def disk_scene(walls, seed):
+    """The seed's disks (1.5 x 1, R = 0.075, phi = 50 %, alpha = 0.005) with the shear-flow
+    velocities of dt = 0.05 plus a random agitation that makes many pairs collide."""
+    cell = geo.Cell((1.5, 1.0), walls=walls, shear_rate=1.0)
+    n = 42
+    shape, radius, length = np.full(n, geo.SPHERE), np.full(n, 0.075), np.full(n, 0.15)
+    pl = geo.place_particles(cell, shape, radius, length, alpha=0.005, seed=seed)
+    v, omega = geo.jeffery_velocities(cell, pl.x, pl.p, np.zeros(n))
+    v = v + np.random.default_rng(seed).normal(scale=0.3, size=v.shape)
+    return cell, shape, radius, length, pl.x, pl.p, v, omega
+
+
+def fibre_scene(seed, n_l3=12.0):
+    """3-D fibres, beta = 10, n L^3 = 12 > L/d, random translation and rotation rates."""
+    L, R = 0.5, 0.025
+    cell = geo.Cell((1.6, 1.6, 1.6), shear_rate=1.0, shear_offset=0.37)
+    n = int(n_l3 * 1.6**3 / L**3)
+    shape, radius, length = np.full(n, geo.FIBRE), np.full(n, R), np.full(n, L)
+    pl = geo.place_particles(cell, shape, radius, length, alpha=0.002, seed=seed)
+    rng = np.random.default_rng(seed)
+    v = rng.normal(scale=0.25, size=(n, 3))
+    omega = rng.normal(scale=1.0, size=(n, 3))
+    return cell, shape, radius, length, pl.x, pl.p, v, omega
+
+
+@pytest.fixture(scope="module")
+def disks():
+    return disk_scene(True, 4)
+
+
+@pytest.fixture(scope="module")
+def fibres():
+    return fibre_scene(8)
+
+
+def test_head_on_spheres_are_corrected_by_the_seed_formula():
+    # D = |O_jO_i| - 2R - alpha < 0 at t + dt  ->  u_i += |D|/(2 dt) n_ij, u_j -= ..., one sweep
+    for dim in (2, 3):
+        R, alpha, dt = 0.075, 0.005, 0.05
+        cell = geo.Cell((1.5, 1.0, 1.0)[:dim])
+        x = np.zeros((2, dim)) + 0.5
+        x[1, 0] += 0.16
+        p = np.tile(np.eye(dim)[0], (2, 1))
+        v = np.zeros((2, dim))
+        v[0, 0], v[1, 0] = 0.1, -0.1
+        omega = np.zeros((2, 3))
+        d = (0.16 - 2 * 0.1 * dt) - 2 * R - alpha
+        assert d < 0
+        vo, oo, st = geo.resolve_contacts(cell, [2, 2], [R, R], [2 * R, 2 * R], x, p, v, omega, dt, alpha=alpha)
+        delta = abs(d) / (2 * dt)
+        np.testing.assert_allclose(vo[:, 0], [0.1 - delta, -0.1 + delta], rtol=0, atol=1e-14)
+        np.testing.assert_array_equal(vo[:, 1:], 0.0)
+        np.testing.assert_array_equal(oo, 0.0)
+        assert st.iterations == 1 and st.n_corrections == 1 and st.pairs_left == 0
+        assert st.min_gap == pytest.approx(alpha, abs=1e-14)
+
+
+@pytest.mark.parametrize("walls", [True, False])
+def test_dense_seed_disks_keep_every_gap_above_alpha(walls):
+    cell, shape, radius, length, x, p, v, omega = disk_scene(walls, 4)
+    dt, alpha = 0.05, 0.005
+    before, _, _ = predicted_gaps(cell, dt, shape, radius, length, x, p, v, omega)
+    assert (before < alpha).sum() >= 10  # a real test: many pairs would violate the zone
+    vo, oo, st = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, dt, alpha=alpha, max_iter=500)
+    after, x1, _ = predicted_gaps(cell, dt, shape, radius, length, x, p, vo, oo)
+    assert after.min() >= alpha - GAP_TOL
+    assert st.pairs_left == 0 and not st.capped and st.worst_gap >= -GAP_TOL
+    assert st.min_gap == pytest.approx(min(after.min(), 2 * alpha + 0.075), abs=1e-12)
+    if walls:  # alpha/2 from the walls, which are immovable
+        assert np.all(x1[:, 1] - 0.075 >= alpha / 2 - GAP_TOL) and np.all(1 - x1[:, 1] - 0.075 >= alpha / 2 - GAP_TOL)
+
+
+def test_dense_3d_fibres_keep_every_gap_above_alpha(fibres):
+    cell, shape, radius, length, x, p, v, omega = fibres
+    dt, alpha = 0.02, 0.002
+    before, _, _ = predicted_gaps(cell, dt, shape, radius, length, x, p, v, omega)
+    assert (before < alpha).sum() >= 20
+    vo, oo, st = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, dt, alpha=alpha, max_iter=500)
+    after, _, p1 = predicted_gaps(cell, dt, shape, radius, length, x, p, vo, oo)
+    assert after.min() >= alpha - GAP_TOL
+    assert st.pairs_left == 0 and st.iterations >= 2
+    np.testing.assert_allclose(np.linalg.norm(p1, axis=1), 1.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("scene", ["disks", "fibres"])
+def test_naive_and_strategy_give_identical_corrections(scene, request):
+    cell, shape, radius, length, x, p, v, omega = request.getfixturevalue(scene)
+    dt, alpha = (0.05, 0.005) if scene == "disks" else (0.02, 0.002)
+    a = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, dt, alpha=alpha, mode="naive", max_iter=500)
+    b = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, dt, alpha=alpha, mode="strategy",
+                             max_iter=500)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    assert a[2] == b[2]
+    assert a[2].n_corrections > 0
+
+
+def test_corrections_conserve_total_momentum(fibres):
+    # equal masses, equal and opposite impulses (periodic cell: no wall takes momentum)
+    cell, shape, radius, length, x, p, v, omega = fibres
+    vo, _, st = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, 0.02, alpha=0.002, max_iter=500)
+    assert st.n_corrections > 50
+    np.testing.assert_allclose(vo.sum(axis=0), v.sum(axis=0), rtol=0, atol=1e-12)
+    assert np.abs(vo - v).max() > 1e-2
+
+
+def test_a_fibre_contact_changes_translation_and_rotation():
+    # two crossed fibres (x and y axes) touching near the end of the first one
+    L, R, alpha, dt = 1.0, 0.05, 0.01, 0.1
+    cell = geo.Cell((4.0, 4.0, 4.0))
+    x = np.array([[2.0, 2.0, 2.0], [2.35, 2.0, 2.105]])
+    p = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+    v = np.array([[0.0, 0, 0.05], [0.0, 0, -0.05]])
+    omega = np.zeros((2, 3))
+    # first sweep: one impulse, computed at the predicted contact
+    vo, oo, st = geo.resolve_contacts(cell, [1, 1], [R, R], [L, L], x, p, v, omega, dt, alpha=alpha,
+                                      max_iter=1, on_cap="continue")
+    dv, dw = vo - v, oo - omega
+    assert st.n_corrections == 1
+    # impulse along the normal (z): fibre 1 pushed down, fibre 2 up, equal and opposite
+    np.testing.assert_allclose(dv[:, :2], 0.0, atol=1e-15)
+    assert dv[0, 2] < 0 < dv[1, 2] and dv[0, 2] == pytest.approx(-dv[1, 2], rel=1e-14)
+    # fibre 1 is hit at its arm s = +0.35 along x: it turns about y (r x n = s e_x x (-e_z)
+    # = +s e_y); fibre 2 is hit at its centre line (arm 0): no rotation
+    assert dw[0, 1] > 0 and abs(dw[0, 0]) < 1e-15 and abs(dw[0, 2]) < 1e-15
+    np.testing.assert_allclose(dw[1], 0.0, atol=1e-15)
+    # the lever arm makes the impulse J (1/m + s^2/I) reach the contact point
+    inertia = (3 * R**2 + L**2) / 12
+    np.testing.assert_allclose(dw[0, 1], -dv[0, 2] * 0.35 / inertia, rtol=1e-12)
+    # the rotation tilts the contact normal, so full resolution takes a few more sweeps
+    vo, oo, st = geo.resolve_contacts(cell, [1, 1], [R, R], [L, L], x, p, v, omega, dt, alpha=alpha)
+    after, _, _ = predicted_gaps(cell, dt, np.array([1, 1]), np.array([R, R]), np.array([L, L]), x, p, vo, oo)
+    assert after.min() >= alpha - GAP_TOL and st.iterations >= 2
+    assert abs(oo[0, 1]) > 0 and abs(vo[0, 2] - v[0, 2]) > 0
+
+
+def test_owned_ranges_sum_to_the_serial_sweep(fibres):
+    # Jacobi: one sweep's corrections are a sum over issuing particles, so ranks owning
+    # 0..k-1 and k..n-1 add up to the serial result (what the MPI driver relies on)
+    cell, shape, radius, length, x, p, v, omega = fibres
+    n = len(shape)
+    kw = dict(alpha=0.002, max_iter=1, on_cap="continue")
+    full = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, 0.02, **kw)
+    parts = [geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, 0.02, owned=o, **kw)
+             for o in ((0, n // 3 - 1), (n // 3, n - 1))]
+    np.testing.assert_allclose(sum(q[0] - v for q in parts), full[0] - v, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(sum(q[1] - omega for q in parts), full[1] - omega, rtol=0, atol=1e-13)
+    assert sum(q[2].n_corrections for q in parts) == full[2].n_corrections > 0
+
+
+def test_iteration_cap_stops_or_is_counted(disks):
+    cell, shape, radius, length, x, p, v, omega = disks
+    with pytest.raises(OverlapError, match="security zone after 1 sweeps"):
+        geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, 0.05, alpha=0.005, max_iter=1)
+    vo, oo, st = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, 0.05, alpha=0.005,
+                                      max_iter=1, on_cap="continue")
+    assert st.capped and st.pairs_left > 0 and st.iterations == 1 and st.worst_gap < 0
+
+
+def test_mode_none_only_measures(disks):
+    cell, shape, radius, length, x, p, v, omega = disks
+    vo, oo, st = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, 0.05, alpha=0.005, mode="none")
+    np.testing.assert_array_equal(vo, v)
+    before, _, _ = predicted_gaps(cell, 0.05, shape, radius, length, x, p, v, omega)
+    assert st.n_corrections == 0 and st.pairs_left > 0
+    assert st.min_gap == pytest.approx(before.min(), abs=1e-12) and st.min_gap < 0.005
