@@ -3,9 +3,13 @@
 !> chi of a voxel is the fraction of its volume covered by particles (between 0
 !> and 1, physics.md §3), so a particle can move by less than one voxel and its
 !> discrete volume changes smoothly. The fraction is the mean over S^dim
-!> sub-voxel points of a linear ramp clamp(1/2 - phi/w, 0, 1) of the signed
-!> distance phi (w = h/S the sub-voxel size): for a plane interface the ramp
-!> integrates to the exact covered volume, curved interfaces err by O(w^2/R).
+!> sub-voxel points of a smooth ramp H(1/2 - phi/w) of the signed distance phi
+!> (w = h/S the sub-voxel size), H(t) = 10t^3 - 15t^4 + 6t^5 on [0, 1] (0 below,
+!> 1 above). H(1 - t) = 1 - H(t), so for a plane interface the ramp integrates
+!> to the exact covered volume like a linear one, curved interfaces err by
+!> O(w^2/R); being C2 (a clamped linear ramp is only C0) it makes chi, hence
+!> the rigid velocities, twice differentiable in the particle position and
+!> orientation, which the second-order time stepping needs to show its order.
 !> Signed distances: sphere |r| - R; flat cylinder (exact, radius R, length L);
 !> capped fibre = G's contact capsule (segment of half-length L/2, radius R);
 !> prolate spheroid (a = L/2, b = R) by the first-order estimate
@@ -117,8 +121,9 @@ contains
          ! extent in voxel units along each lattice direction
          span = real(grid%n, dp)*matmul(abs(grid%Ainv), ext)
          if (any(2.0_dp*span(1:dim) > real(grid%n(1:dim), dp) - 2.0_dp)) then
-            write (errmsg, '(a,i0,a,3(1x,f0.1),a,3(1x,i0),a)') "voxelise: particle ", k, &
-               " spans", 2.0_dp*span(1:dim), " voxels but the grid has", grid%n(1:dim), &
+            l(1:1) = maxloc(2.0_dp*span(1:dim) - real(grid%n(1:dim), dp))
+            write (errmsg, '(a,i0,a,f0.1,a,i0,a,i0,a)') "voxelise: particle ", k, " spans ", 2.0_dp*span(l(1)), &
+               " voxels along lattice direction ", l(1), " of ", grid%n(l(1)), &
                " (a particle must stay clear of its own periodic image: enlarge the cell)"
             return
          end if
@@ -147,7 +152,7 @@ contains
                      do is = 1, nsub
                         phi = signed_distance(parts%shape(k), ends, parts%radius(k), parts%length(k), hseg, pk, &
                                               r + dr(:, is))
-                        f = f + min(1.0_dp, max(0.0_dp, 0.5_dp - phi/w))
+                        f = f + smooth_step(0.5_dp - phi/w)
                      end do
                      f = f/nsub
                      if (f <= 0.0_dp) cycle
@@ -203,6 +208,14 @@ contains
          end if
       end select
    end function signed_distance
+
+   !> C2 step 10t^3 - 15t^4 + 6t^5 clamped to [0, 1]; H(1-t) = 1 - H(t).
+   pure function smooth_step(t) result(h)
+      real(dp), intent(in) :: t
+      real(dp) :: h, c
+      c = min(1.0_dp, max(0.0_dp, t))
+      h = c*c*c*(10.0_dp + c*(-15.0_dp + 6.0_dp*c))
+   end function smooth_step
 
    !> Half extents of the axis-aligned bounding box of a particle of axis p [m].
    pure function aabb_half_extent(shape, radius, length, p) result(e)

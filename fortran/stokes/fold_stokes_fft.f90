@@ -38,6 +38,7 @@
 !> (relative preconditioned, i.e. energy-like, residual).
 !> No allocation happens inside the iteration; the FFT plans are made once.
 module fold_stokes_fft
+   use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
    use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, FOLD_PLAN_ESTIMATE
@@ -391,12 +392,12 @@ contains
       s%iterations = it
       s%have_guess = .true.
       if (.not. (s%residual <= s%set%tol)) then
-         if (s%residual /= s%residual) then
+         if (ieee_is_nan(s%residual)) then
             stat = FOLD_NUMERICAL
             errmsg = "stokes_fft_solve: residual is NaN"
          else
             stat = FOLD_NOT_CONVERGED
-            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a,es10.3)') "stokes_fft_solve: not converged after ", it, &
+            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a,es10.3,a)') "stokes_fft_solve: not converged after ", it, &
                " CG iterations: residual ", s%residual, " > tol ", s%set%tol, " (kappa ", s%set%kappa, ")"
          end if
       end if
