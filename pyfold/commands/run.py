@@ -42,10 +42,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def find_fold_run() -> Path:
     """Locate the ``fold_run`` executable.
 
-    Order: ``$PYFOLD_FOLD_RUN``; next to pyfold's compiled extension modules
-    (editable build folder, and its ``fortran/app``); ``pyfold/bin`` of an
-    installed package; ``fold_run`` on ``PATH`` (a non-editable install puts it
-    in the environment's ``bin``).
+    Order (``fortran/app/README.md``): ``$PYFOLD_FOLD_RUN``; the build tree of an
+    editable install (next to pyfold's compiled extension modules, and their
+    ``fortran/app``); ``<site-packages>/pyfold/fold_run`` of a regular install;
+    the environment's ``bin``; ``fold_run`` on ``PATH``.
     """
     explicit = os.environ.get(FOLD_RUN_ENV)
     if explicit:
@@ -60,10 +60,12 @@ def find_fold_run() -> Path:
         candidates += [build / "fold_run", build / "fortran" / "app" / "fold_run"]
     except ImportError:
         pass
-    try:
+    try:  # a regular install puts it inside the package (fortran/app/README.md)
         from importlib.resources import files
 
-        candidates.append(Path(str(files("pyfold") / "bin" / "fold_run")))
+        installed = files("pyfold") / "fold_run"
+        if isinstance(installed, Path):
+            candidates.append(installed)
     except (ModuleNotFoundError, TypeError):  # pragma: no cover
         pass
     candidates.append(Path(sys.prefix) / "bin" / "fold_run")
@@ -122,7 +124,7 @@ def _execute(command: list[str], env: dict[str, str], n_steps: int) -> tuple[int
                 fields = line.split()
                 if len(fields) == 4 and fields[0] == "PROGRESS":
                     try:
-                        progress.update(task, completed=int(fields[1]), total=int(fields[2]), t=fields[3])
+                        progress.update(task, completed=int(fields[1]), total=int(fields[2]), t=f"{float(fields[3]):.6g}")
                         continue
                     except ValueError:
                         pass

@@ -11,12 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pyfold.errors import checked
+from pyfold.native.geometry import ORIENT_GIVEN, ORIENT_ISOTROPIC, ORIENT_PLANAR
 from pyfold.run_file import InitialState
 from pyfold.scene.normalise import ResolvedScene
 
-#: fold_placement orientation modes
-ORIENT_GIVEN, ORIENT_ISOTROPIC, ORIENT_PLANAR = 0, 1, 2
 #: Random positions tried per particle before it is left to the relaxation sweeps.
 MAX_ATTEMPTS = 2000
 #: Relaxation sweeps allowed to remove the overlaps RSA could not avoid.
@@ -61,14 +59,13 @@ def initial_state(resolved: ResolvedScene) -> InitialState:
     PyfoldError
         The native extension is not built.
     """
-    from pyfold.native import load
+    from pyfold.native.geometry import Cell, place_particles
 
-    geometry = load("_fold_geometry")
     a = particle_arrays(resolved)
-    x, p, _n_rsa, _sweeps, stat, errmsg = geometry.fold_geo_place(
-        np.asarray(resolved.cell_lengths, dtype=np.float64), int(resolved.walls), 0.0,
-        a["shape"], a["radius"], a["length"], a["orient_mode"], np.asfortranarray(a["axis"].T), resolved.alpha,
-        resolved.seed, MAX_ATTEMPTS, RELAX_SWEEPS)
-    checked(stat, errmsg)
-    return InitialState(x=np.ascontiguousarray(x.T), p=np.ascontiguousarray(p.T), shape=a["shape"],
-                        family=a["family"], radius=a["radius"], length=a["length"], xi=a["xi"])
+    cell = Cell(tuple(resolved.cell_lengths[: resolved.dim]), walls=resolved.walls,
+                shear_rate=float(resolved.velocity_gradient[0, 1]))
+    placed = place_particles(cell, a["shape"], a["radius"], a["length"], alpha=resolved.alpha, seed=resolved.seed,
+                             orientation=a["orient_mode"], axis=a["axis"], max_attempts=MAX_ATTEMPTS,
+                             relax_sweeps=RELAX_SWEEPS)
+    return InitialState(x=placed.x, p=placed.p, shape=a["shape"], family=a["family"], radius=a["radius"],
+                        length=a["length"], xi=a["xi"])
