@@ -10,8 +10,12 @@ integrate it with diffrax.
 from __future__ import annotations
 
 from pyfold.models._base import OrientationModel
+from pyfold.models.ard import ARDRSC, IARD, IARDRPR, PARD, PARDRPR
 from pyfold.models.folgar_tucker import FTMS, FolgarTucker
 from pyfold.models.jeffery import Jeffery, jeffery_vectors
+from pyfold.models.mori_tanaka import MoriTanaka
+from pyfold.models.mrd import MRD
+from pyfold.models.rsc import RSC
 from pyfold.models.solve import OrientationSolution, solve_batch, solve_orientation, status_message
 
 __all__ = [
@@ -19,6 +23,14 @@ __all__ = [
     "Jeffery",
     "FolgarTucker",
     "FTMS",
+    "RSC",
+    "ARDRSC",
+    "IARD",
+    "IARDRPR",
+    "PARD",
+    "PARDRPR",
+    "MRD",
+    "MoriTanaka",
     "jeffery_vectors",
     "OrientationSolution",
     "solve_orientation",
@@ -32,4 +44,12 @@ MODELS: dict[str, type[OrientationModel]] = {
     "jeffery": Jeffery,
     "folgar_tucker": FolgarTucker,
     "ftms": FTMS,
+    "rsc": RSC,
+    "ard_rsc": ARDRSC,
+    "iard": IARD,
+    "iard_rpr": IARDRPR,
+    "pard": PARD,
+    "pard_rpr": PARDRPR,
+    "mrd": MRD,
+    "mori_tanaka": MoriTanaka,
 }

@@ -43,6 +43,7 @@ class Jeffery(OrientationModel):
         return rotation_term(a2, W) + stretching_term(a2, self.a4(a2, t), D, self.xi)
 
 
+@jax.jit
 def _propagators_constant(A: jax.Array, t_rel: jax.Array) -> jax.Array:
     return jax.vmap(lambda s: jax.scipy.linalg.expm(s * A))(t_rel)
 
@@ -126,12 +127,22 @@ def jeffery_vectors(p0, L, t_eval, xi, *, rtol: float = 1e-10, atol: float = 1e-
     t = jnp.asarray(t)
     if isinstance(grad, ConstantGradient):
         D, W, _ = flow_parts(grad.L)
-        B = _propagators_constant(W + xi * D, t - t[0])
+        # pad the time axis to a power of two (at least 64): one compilation of the
+        # vmapped expm (seconds) then serves every t_eval length up to that size
+        n = t.shape[0]
+        size = max(64, 1 << max(n - 1, 1).bit_length())
+        t_rel = jnp.pad(t - t[0], (0, size - n))
+        return _normalised_images(_propagators_constant(W + xi * D, t_rel)[:n], p0)
     else:
         if t.shape[0] < 2:
             return jnp.broadcast_to(p0, (1,) + p0.shape)
         B, status = _propagators_ode(grad, xi, t, float(rtol), float(atol), int(max_steps))
         if int(status) != 0:
             raise ConvergenceError(f"jeffery_vectors: propagator ODE failed with diffrax status {int(status)}")
+    return _normalised_images(B, p0)
+
+
+@jax.jit
+def _normalised_images(B, p0):
     q = jnp.einsum("tij,nj->tni", B, p0)
     return q / jnp.linalg.norm(q, axis=-1, keepdims=True)

@@ -1,0 +1,48 @@
+"""Moldflow rotational diffusion (MRD) model."""
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+
+from pyfold._jax import jax, jnp
+from pyfold.models._base import check_range, closure_field, parameter
+from pyfold.models._terms import principal_tensor
+from pyfold.models.ard import _ARDBase
+
+
+class MRD(_ARDBase):
+    """Moldflow rotational diffusion model (Bakharev, Yu, Speight & Wang 2018,
+    ANTEC, Orlando).
+
+    **Definition used: the ARD-operator form** of Tucker's Fiber-Orientation-Tools
+    (``Adot2.m``), fiberoripy (``mrd_ode``) and Favaloro & Tucker (2019,
+    Composites A 126:105605): the Phelps-Tucker ARD term
+    (:func:`~pyfold.models._terms.ard_diffusion`) with
+
+    ``C = C_I R diag(D1, D2, D3) R^T``
+
+    (``R`` the principal axes of ``a2``, eigenvalues descending). The other form in
+    circulation, ``2 C_I gamma_dot (D_r - tr(D_r) a)``, is *not* implemented.
+    ``D1 = D2 = D3 = 1`` is exactly Folgar-Tucker. Planar: ``diag(D1, D2)``.
+    Repeated eigenvalues are handled as in :class:`~pyfold.models.PARD`.
+
+    Defaults ``D1, D2, D3 = 1, 0.8, 0.15`` (fiberoripy's defaults).
+    """
+
+    ci: jax.Array = parameter(0.01)
+    d1: jax.Array = parameter(1.0)
+    d2: jax.Array = parameter(0.8)
+    d3: jax.Array = parameter(0.15)
+    xi: jax.Array = parameter(1.0)
+    closure: Any = closure_field()
+    dim: int = eqx.field(default=3, static=True)
+
+    def __check_init__(self):
+        check_range("ci", self.ci, 0.0)
+        for name in ("d1", "d2", "d3"):
+            check_range(name, getattr(self, name), 0.0)
+
+    def diffusivity(self, a2, D, gamma_dot):
+        coeffs = [self.d1, self.d2, self.d3][: a2.shape[-1]]
+        return self.ci * principal_tensor(a2, jnp.stack(coeffs))
