@@ -374,10 +374,8 @@ contains
             return
          end if
          alpha = rz/pq
-         s%x = s%x + alpha*s%p
-         s%r = s%r - alpha*s%q
-         ! z = M^-1 r (diagonal) is formed on the fly in the p update
-         rz_new = precond_dot(s, s%r)
+         ! one fused pass: x += alpha p, r -= alpha q, local <r, M^-1 r>
+         rz_new = update_xr(s, alpha)
          red = [rz_new, 0.0_dp]
          call s%fft%sum_all(red)
          rz_new = red(1)
@@ -421,7 +419,13 @@ contains
    !> (components ci/cj; nc c2r FFTs).
    subroutine stokes_fft_strain(s)
       type(stokes_fft_t), intent(inout) :: s
+      integer(ip) :: c
+      real(dp) :: scale
       call strain(s, s%x)
+      scale = 1.0_dp/real(grid_total(s%grid), dp)
+      do c = 1, s%nc
+         s%work(c)%r = s%work(c)%r*scale
+      end do
    end subroutine stokes_fft_strain
 
    !> Release plans and storage.
@@ -459,26 +463,46 @@ contains
    subroutine strain(s, u)
       type(stokes_fft_t), intent(inout) :: s
       complex(dp), intent(in) :: u(:, :, :, :)
-      integer(ip) :: i, j, k, c, a, b
-      complex(dp) :: d(3), uu(3)
-      real(dp) :: scale
-      scale = 1.0_dp/real(grid_total(s%grid), dp)
-      do k = 1, s%grid%nl(3)
-         do j = 1, s%grid%nl(2)
-            do i = 1, s%fft%nxh
-               d(1:s%dim) = (iu*s%phase(i, j, k))*s%kv(:, i, j, k)
-               uu(1:s%dim) = u(i, j, k, :)
-               do c = 1, s%nc
-                  a = s%ci(c)
-                  b = s%cj(c)
-                  s%work(c)%c(i, j, k) = 0.5_dp*(d(a)*uu(b) + d(b)*uu(a))
+      integer(ip) :: i, j, k, c
+      complex(dp) :: d(3), uu(3), ph
+      if (s%dim == 3) then
+         do k = 1, s%grid%nl(3)
+            do j = 1, s%grid%nl(2)
+               do i = 1, s%fft%nxh
+                  ph = iu*s%phase(i, j, k)
+                  d(1) = ph*s%kv(1, i, j, k)
+                  d(2) = ph*s%kv(2, i, j, k)
+                  d(3) = ph*s%kv(3, i, j, k)
+                  uu(1) = u(i, j, k, 1)
+                  uu(2) = u(i, j, k, 2)
+                  uu(3) = u(i, j, k, 3)
+                  s%work(1)%c(i, j, k) = d(1)*uu(1)
+                  s%work(2)%c(i, j, k) = d(2)*uu(2)
+                  s%work(3)%c(i, j, k) = d(3)*uu(3)
+                  s%work(4)%c(i, j, k) = 0.5_dp*(d(1)*uu(2) + d(2)*uu(1))
+                  s%work(5)%c(i, j, k) = 0.5_dp*(d(1)*uu(3) + d(3)*uu(1))
+                  s%work(6)%c(i, j, k) = 0.5_dp*(d(2)*uu(3) + d(3)*uu(2))
                end do
             end do
          end do
-      end do
+      else
+         do k = 1, s%grid%nl(3)
+            do j = 1, s%grid%nl(2)
+               do i = 1, s%fft%nxh
+                  ph = iu*s%phase(i, j, k)
+                  d(1) = ph*s%kv(1, i, j, k)
+                  d(2) = ph*s%kv(2, i, j, k)
+                  uu(1) = u(i, j, k, 1)
+                  uu(2) = u(i, j, k, 2)
+                  s%work(1)%c(i, j, k) = d(1)*uu(1)
+                  s%work(2)%c(i, j, k) = d(2)*uu(2)
+                  s%work(3)%c(i, j, k) = 0.5_dp*(d(1)*uu(2) + d(2)*uu(1))
+               end do
+            end do
+         end do
+      end if
       do c = 1, s%nc
          call s%fft%c2r(s%work(c))
-         s%work(c)%r = s%work(c)%r*scale
       end do
    end subroutine strain
 
@@ -487,12 +511,15 @@ contains
       type(stokes_fft_t), intent(inout) :: s
       complex(dp), intent(in) :: u(:, :, :, :)
       complex(dp), intent(out) :: au(:, :, :, :)
-      integer(ip) :: i, j, k, c, a, b, nx
-      complex(dp) :: dc(3), f(3), sg
+      integer(ip) :: i, j, k, c, nx
+      complex(dp) :: dc(3), f(3)
+      real(dp) :: two_over_n
       call strain(s, u)
       nx = s%grid%n(1)
+      ! strain() leaves the unnormalised c2r: 1/N folds into the viscosity pass
+      two_over_n = 2.0_dp/real(grid_total(s%grid), dp)
       do c = 1, s%nc
-         s%work(c)%r(1:nx, :, :) = 2.0_dp*s%eta%r(1:nx, :, :)*s%work(c)%r(1:nx, :, :)
+         s%work(c)%r(1:nx, :, :) = (two_over_n*s%eta%r(1:nx, :, :))*s%work(c)%r(1:nx, :, :)
          call s%fft%r2c(s%work(c))
       end do
       do k = 1, s%grid%nl(3)
@@ -503,18 +530,14 @@ contains
                   cycle
                end if
                dc(1:s%dim) = (-iu*conjg(s%phase(i, j, k)))*s%kv(:, i, j, k)
-               f = 0.0_dp
-               do c = 1, s%nc
-                  a = s%ci(c)
-                  b = s%cj(c)
-                  sg = s%work(c)%c(i, j, k)
-                  if (a == b) then
-                     f(a) = f(a) + dc(a)*sg
-                  else
-                     f(a) = f(a) + dc(b)*sg
-                     f(b) = f(b) + dc(a)*sg
-                  end if
-               end do
+               if (s%dim == 3) then
+                  f(1) = dc(1)*s%work(1)%c(i, j, k) + dc(2)*s%work(4)%c(i, j, k) + dc(3)*s%work(5)%c(i, j, k)
+                  f(2) = dc(1)*s%work(4)%c(i, j, k) + dc(2)*s%work(2)%c(i, j, k) + dc(3)*s%work(6)%c(i, j, k)
+                  f(3) = dc(1)*s%work(5)%c(i, j, k) + dc(2)*s%work(6)%c(i, j, k) + dc(3)*s%work(3)%c(i, j, k)
+               else
+                  f(1) = dc(1)*s%work(1)%c(i, j, k) + dc(2)*s%work(3)%c(i, j, k)
+                  f(2) = dc(1)*s%work(3)%c(i, j, k) + dc(2)*s%work(2)%c(i, j, k)
+               end if
                f(1:s%dim) = f(1:s%dim) - s%kv(:, i, j, k)*sum(s%kv(:, i, j, k)*f(1:s%dim))*s%ik2(i, j, k)
                au(i, j, k, :) = f(1:s%dim)
             end do
@@ -575,6 +598,29 @@ contains
       call s%fft%sum_all(red)
       v = red(1)
    end function dot
+
+   !> x += alpha p, r -= alpha q and the local <r, M^-1 r> in one pass.
+   function update_xr(s, alpha) result(v)
+      type(stokes_fft_t), intent(inout) :: s
+      real(dp), intent(in) :: alpha
+      real(dp) :: v
+      integer(ip) :: i, j, k, c
+      complex(dp) :: rr
+      v = 0.0_dp
+      do c = 1, s%dim
+         do k = 1, size(s%r, 3)
+            do j = 1, size(s%r, 2)
+               do i = 1, size(s%r, 1)
+                  s%x(i, j, k, c) = s%x(i, j, k, c) + alpha*s%p(i, j, k, c)
+                  rr = s%r(i, j, k, c) - alpha*s%q(i, j, k, c)
+                  s%r(i, j, k, c) = rr
+                  v = v + s%wx(i)*s%ik2(i, j, k)*(real(rr)**2 + aimag(rr)**2)
+               end do
+            end do
+         end do
+      end do
+      v = v/s%eta0
+   end function update_xr
 
    !> Local <r, M^-1 r> (not yet summed over ranks).
    function precond_dot(s, r) result(v)
