@@ -127,7 +127,8 @@ contains
             parts%omega(3, k) = atan2(ax(3), cs)/st%dt
          else
             sn = norm2(ax)
-            if (sn > 0.0_dp) parts%omega(:, k) = ax/sn*atan2(sn, cs)/st%dt
+            ! p' = p: no rotation; a NaN from an overflowing propagator must propagate
+            if (.not. (sn == 0.0_dp)) parts%omega(:, k) = ax/sn*atan2(sn, cs)/st%dt
          end if
       end do
    end subroutine jeffery_step_velocities
