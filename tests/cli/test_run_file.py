@@ -42,7 +42,8 @@ def test_scene_round_trips_verbatim_and_normalised(run_file, disks):
     assert setup.scene_toml == SEED_DISKS.read_text(encoding="utf-8")
     assert setup.scene == json.loads(resolved.scene_json())
     # defaults are filled in the normalised scene
-    assert setup.scene["model"]["contact_max_iter"] == 100 and setup.scene["fluid"]["viscosity"] == 1.0
+    assert setup.scene["model"]["on_contact_cap"] == "stop" and setup.scene["fluid"]["viscosity"] == 1.0
+    assert setup.scene["model"]["contact_max_iter"] == 2000  # given in the file
     r = setup.resolved
     assert r["dim"] == 2 and r["walls"] == 1 and r["collisions"] == 2 and r["hydrodynamics"] == 0
     assert r["n_steps"] == 600 and r["output_every"] == 10 and r["snapshot_every"] == 20
