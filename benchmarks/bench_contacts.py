@@ -1,0 +1,96 @@
+"""Cost of a fold_run step with the collision strategy vs the number of fibres.
+
+Question: does the seed's collision strategy with cell lists scale as O(N) at fixed
+concentration, and how much faster is it than the O(N^2) naive search?
+
+Command (serial; a few minutes on one core):
+    .venv/bin/python benchmarks/bench_contacts.py [--sizes 1000 3000 10000 30000 100000] [--repeats 3]
+
+Scene: fibres L = 1, aspect ratio 20 (R = 0.025), n L^3 = 2 (cell edge (N/2)^(1/3)),
+isotropic, placed by fold_placement (alpha = 0.01), simple shear gamma_dot = 1,
+dt = 0.01, Jeffery kinematics. Time per step = (wall time of a K+1-step run minus
+that of a 1-step run) / K, so start-up, placement I/O and the step-0 record cancel;
+the median over repeats is reported. Prints the log-log slope of time per step vs N
+(goal <= 1.1) and strategy / naive at N = 2000 (goal >= 50x). Not a test.
+"""
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "micro"))
+from test_run_common import fold_run_path, write_run_file, xi_of  # noqa: E402
+
+# Parameters
+N_L3 = 2.0
+BETA = 20.0
+K = 4
+
+
+def scene(n: int, seed: int = 1) -> dict:
+    from pyfold.native.geometry import FIBRE, Cell, place_particles
+
+    cell = (n / N_L3) ** (1.0 / 3.0)
+    R = 0.5 / BETA
+    c = Cell(lengths=(cell, cell, cell), shear_rate=1.0)
+    pl = place_particles(c, np.full(n, FIBRE), np.full(n, R), np.full(n, 1.0), alpha=0.01, seed=seed)
+    return dict(x=pl.x, p=pl.p, radius=R, length=1.0, xi=xi_of(BETA), cell_lengths=(cell, cell, cell),
+                shear_rate=1.0, dt=0.01, alpha=0.01)
+
+
+def run_time(exe: Path, sc: dict, steps: int, mode: int, tmp: Path) -> float:
+    path = tmp / f"b{steps}_{mode}.h5"
+    write_run_file(path, **sc, t_end=steps * 0.01, collisions=mode, contact_max_iter=100, on_contact_cap=1,
+                   output_every=1000)
+    t0 = time.perf_counter()
+    proc = subprocess.run([str(exe), str(path)], capture_output=True, text=True)
+    dt = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(proc.stderr)
+    path.unlink()
+    return dt
+
+
+def per_step(exe: Path, sc: dict, mode: int, repeats: int, tmp: Path) -> float:
+    samples = [(run_time(exe, sc, K + 1, mode, tmp) - run_time(exe, sc, 1, mode, tmp)) / K for _ in range(repeats)]
+    return float(np.median(samples))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", type=int, nargs="+", default=[1000, 3000, 10000, 30000, 100000])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--naive-n", type=int, default=2000)
+    args = ap.parse_args()
+    exe = fold_run_path()
+    if exe is None:
+        sys.exit("fold_run not built")
+
+    # Run
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        rows = []
+        for n in args.sizes:
+            t = per_step(exe, scene(n), 2, args.repeats, tmp)
+            rows.append((n, t))
+            print(f"N = {n:7d}  strategy: {1e3 * t:9.2f} ms/step  ({1e6 * t / n:6.2f} us per fibre)", flush=True)
+        ns, ts = np.array(rows).T
+        slope = np.polyfit(np.log(ns), np.log(ts), 1)[0]
+        print(f"log-log slope of time per step vs N: {slope:.3f} (goal <= 1.1)")
+
+        sc = scene(args.naive_n)
+        t_s = per_step(exe, sc, 2, args.repeats, tmp)
+        t_n = per_step(exe, sc, 1, args.repeats, tmp)
+        print(f"N = {args.naive_n}: strategy {1e3 * t_s:.2f} ms/step, naive {1e3 * t_n:.2f} ms/step, "
+              f"naive/strategy = {t_n / t_s:.1f}x (goal >= 50x)")
+
+
+if __name__ == "__main__":
+    main()
