@@ -43,6 +43,15 @@ def _text(value) -> str:
     return str(value)
 
 
+def _attr(value):
+    """Root attribute as a Python scalar or string (a 1-element array counts as a scalar)."""
+    if isinstance(value, bytes | np.bytes_ | str):
+        return _text(value)
+    if isinstance(value, np.ndarray) and value.size == 1:
+        value = value.reshape(())[()]
+    return value.item() if hasattr(value, "item") else value
+
+
 def open_run(path: str | Path) -> xr.Dataset:
     """Open a run file as a labelled :class:`xarray.Dataset`.
 
@@ -77,8 +86,7 @@ def open_run(path: str | Path) -> xr.Dataset:
     try:
         with h5py.File(path, "r") as f:
             check_format(f, path)
-            root_attrs = {k: (_text(v) if isinstance(v, bytes | np.bytes_ | str) else
-                              (v.item() if np.ndim(v) == 0 and hasattr(v, "item") else v)) for k, v in f.attrs.items()}
+            root_attrs = {k: _attr(v) for k, v in f.attrs.items()}
             initial = {name: (f["initial"][name][()], dict(f["initial"][name].attrs)) for name in _INITIAL
                        if "initial" in f and name in f["initial"]}
     except OSError as exc:
