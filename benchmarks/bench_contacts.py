@@ -16,6 +16,7 @@ the median over repeats is reported. Prints the log-log slope of time per step v
 from __future__ import annotations
 
 import argparse
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -69,13 +70,16 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--naive-n", type=int, default=2000)
     args = ap.parse_args()
-    exe = fold_run_path()
-    if exe is None:
+    built = fold_run_path()
+    if built is None:
         sys.exit("fold_run not built")
 
     # Run
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
+        # a private copy: an editable rebuild may relink the build-tree binary mid-run
+        exe = tmp / "fold_run"
+        shutil.copy2(built, exe)
         rows = []
         for n in args.sizes:
             t = per_step(exe, scene(n), 2, args.repeats, tmp)
