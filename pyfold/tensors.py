@@ -26,6 +26,7 @@ __all__ = [
     "symmetrize4",
     "contract4",
     "invariants",
+    "det",
     "eigen_frame",
     "check_orientation_tensor",
     "isotropic_a2",
@@ -128,10 +129,29 @@ def invariants(a2: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
     tr2 = jnp.einsum("...ij,...ji->...", a2, a2)
     second = 0.5 * (tr**2 - tr2)
     if a2.shape[-1] == 3:
-        third = jnp.linalg.det(a2)
+        third = det(a2)
     else:
         third = jnp.zeros_like(tr)
     return tr, second, third
+
+
+def det(a: jax.Array) -> jax.Array:
+    """Determinant of (..., 2, 2) or (..., 3, 3) arrays by cofactors.
+
+    Written out (rather than ``jnp.linalg.det``, whose LU-based derivative is NaN for
+    singular matrices) so that gradients stay finite for aligned fibres, where
+    ``det a2 = 0``.
+    """
+    a = jnp.asarray(a)
+    if a.shape[-1] == 2:
+        return a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+    if a.shape[-1] != 3:
+        raise InputError(f"det: expected (..., 2, 2) or (..., 3, 3), got {a.shape}")
+    return (
+        a[..., 0, 0] * (a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1])
+        - a[..., 0, 1] * (a[..., 1, 0] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 0])
+        + a[..., 0, 2] * (a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0])
+    )
 
 
 @jax.custom_jvp

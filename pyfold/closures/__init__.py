@@ -25,6 +25,12 @@ from pyfold.closures.linear import linear
 from pyfold.closures.quadratic import quadratic
 from pyfold.closures.hybrid import hybrid
 from pyfold.closures.tabulated import TabulatedA4
+from pyfold.closures.implicit import siq, sihyb
+from pyfold.closures.symmetric_quadratic import sqc
+from pyfold.closures.natural import natural_2d
+from pyfold.closures.ibof import ibof
+from pyfold.closures.orthotropic import orf, orl, orw, orw3
+from pyfold.closures.exact import fec
 
 __all__ = [
     "get_closure",
@@ -35,6 +41,16 @@ __all__ = [
     "linear",
     "quadratic",
     "hybrid",
+    "siq",
+    "sihyb",
+    "sqc",
+    "natural_2d",
+    "ibof",
+    "orf",
+    "orl",
+    "orw",
+    "orw3",
+    "fec",
 ]
 
 Closure = Callable[[jax.Array], jax.Array]
@@ -44,6 +60,19 @@ CLOSURES: dict[str, dict[int, Closure]] = {
     "linear": {2: linear, 3: linear},
     "quadratic": {2: quadratic, 3: quadratic},
     "hybrid": {2: hybrid, 3: hybrid},
+    # Karl, Schneider & Böhlke (2023) call their implicit hybrid closure SIHYB;
+    # "implicit_hybrid" is the same function under the contract's generic name.
+    "implicit_hybrid": {2: sihyb, 3: sihyb},
+    "sihyb": {2: sihyb, 3: sihyb},
+    "siq": {2: siq, 3: siq},
+    "sqc": {2: sqc, 3: sqc},
+    "natural": {2: natural_2d},
+    "ibof": {3: ibof},
+    "orf": {3: orf},
+    "orl": {3: orl},
+    "orw": {3: orw},
+    "orw3": {3: orw3},
+    "fec": {2: fec, 3: fec},
 }
 
 _EXACT_HINT = (

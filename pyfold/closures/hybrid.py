@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pyfold._jax import jax, jnp
+from pyfold.tensors import det
 from pyfold.closures.linear import linear
 from pyfold.closures.quadratic import quadratic
 
@@ -13,7 +14,7 @@ def hybrid_weight(a2: jax.Array) -> jax.Array:
     1 for any a2 with a zero eigenvalue (in 3-D) / for aligned fibres.
     """
     d = a2.shape[-1]
-    return 1.0 - d**d * jnp.linalg.det(a2)
+    return 1.0 - d**d * det(a2)
 
 
 def hybrid(a2: jax.Array) -> jax.Array:

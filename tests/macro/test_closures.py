@@ -7,6 +7,8 @@ behaviour shows up either way.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -17,15 +19,25 @@ from pyfold.errors import InputError
 
 # Closures whose a4 is not fully index-symmetric (documented in their docstrings).
 NOT_FULLY_SYMMETRIC = {"quadratic", "hybrid"}
-# Closures violating a4_ijkk = a2_ij, with the size of the violation we accept as
-# the published fit's own error (absolute, on valid a2).
-TRACE_TOLERANCE: dict[str, float] = {}
-# Closures not exact at isotropy, in each dimension.
+# Closures violating a4_ijkk = a2_ij (documented): SQC contracts to (a + 2a.a)/(1 + 2a:a).
+TRACE_VIOLATED = {"sqc"}
+# Closures not exact at isotropy.
 NOT_EXACT_ISOTROPIC = {"quadratic"}
 # Closures not exact for perfectly aligned fibres.
 NOT_EXACT_ALIGNED = {"linear"}
-# Absolute tolerance of the aligned / isotropic limits for fitted closures.
-LIMIT_TOLERANCE: dict[str, float] = {}
+# Fitted closures reproduce the isotropic / aligned limits only to their fit error:
+# (isotropic tolerance, aligned tolerance), max-abs over components, each set just
+# above the value measured for the published coefficients (ORF misses A_1111 = 1 by
+# 0.0125: 0.060964 + 0.371243 + 0.555301 = 0.987508).
+LIMIT_TOLERANCE: dict[str, tuple[float, float]] = {
+    "ibof": (1e-12, 4e-4),
+    "orf": (1.5e-3, 1.3e-2),
+    "orl": (4.2e-3, 3.5e-3),
+    "orw": (1.2e-3, 2.5e-4),
+    "orw3": (2.3e-4, 1.7e-4),
+    # the exact closure: quadrature and Gauss-Newton round-off only
+    "fec": (1e-12, 1e-12),
+}
 
 
 def _random_a2(d, n, seed):
@@ -42,17 +54,53 @@ def _random_a2(d, n, seed):
 
 A2 = {3: _random_a2(3, 6, seed=10), 2: _random_a2(2, 6, seed=11)}
 CASES = [(name, d) for d in (3, 2) for name in C.available(d)]
+N_RANDOM = 6
 
 
-@pytest.fixture(scope="module")
-def jitted():
-    return {(name, d): jax.jit(C.get_closure(name, d)) for name, d in CASES}
+def _rotation(d):
+    if d == 2:
+        th = 0.7
+        return np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    return np.linalg.qr(np.random.default_rng(5).normal(size=(3, 3)))[0]
+
+
+def _directions(d):
+    # a generic direction and an axis (where two eigenvalues of a2 are 0 and repeat)
+    return (np.array([0.6, 0.8, 0.0]) if d == 3 else np.array([0.6, 0.8]), np.eye(d)[0])
+
+
+def _inputs(d):
+    """One batch per dimension (one compilation per closure): random states, two aligned
+    states, isotropy, and the first random state rotated."""
+    rot = _rotation(d)
+    a2 = np.asarray(A2[d])
+    extra = [np.asarray(T.aligned(jnp.asarray(q))) for q in _directions(d)]
+    extra += [np.asarray(T.isotropic_a2(d)), rot @ a2[0] @ rot.T]
+    return jnp.asarray(np.concatenate([a2, np.stack(extra)]))
+
+
+@functools.cache
+def _evaluate(name, d):
+    """Closure values on the test batch, its vmap on the first states, and gradients of
+    a scalar of a4:D at isotropy, alignment and a random state — each jitted once."""
+    f = C.get_closure(name, d)
+    batch = _inputs(d)
+    a4, a4_vmap = jax.jit(lambda x: (f(x), jax.vmap(f)(x[:3])))(batch)
+    D = jnp.asarray(np.arange(d * d, dtype=float).reshape(d, d))
+    D = D + D.T
+
+    def scalar(x):
+        return jnp.sum(T.contract4(f(x), D) ** 2)
+
+    points = jnp.stack([T.isotropic_a2(d), T.aligned(jnp.eye(d)[0]), A2[d][0]])
+    grads = jax.jit(jax.vmap(jax.grad(scalar)))(points)
+    return np.asarray(batch), np.asarray(a4), np.asarray(a4_vmap), np.asarray(grads)
 
 
 @pytest.mark.parametrize("name,d", CASES)
-def test_closure_output_shape_and_index_symmetry(jitted, name, d):
-    a4 = np.asarray(jitted[name, d](A2[d]))
-    assert a4.shape == (len(A2[d]),) + (d,) * 4
+def test_closure_output_shape_and_index_symmetry(name, d):
+    batch, a4, _, _ = _evaluate(name, d)
+    assert a4.shape == (len(batch),) + (d,) * 4
     assert np.all(np.isfinite(a4))
     # pair symmetries ij <-> ji, kl <-> lk, (ij) <-> (kl) hold for every closure
     np.testing.assert_allclose(a4, np.swapaxes(a4, -4, -3), atol=1e-13)
@@ -66,63 +114,49 @@ def test_closure_output_shape_and_index_symmetry(jitted, name, d):
 
 
 @pytest.mark.parametrize("name,d", CASES)
-def test_closure_trace_identity_a4_ijkk_equals_a2_ij(jitted, name, d):
-    a2 = A2[d]
-    err = np.abs(np.einsum("...ijkk->...ij", np.asarray(jitted[name, d](a2))) - np.asarray(a2)).max()
-    tol = TRACE_TOLERANCE.get(name, 1e-12)
-    assert err < tol, f"{name}: |a4_ijkk - a2_ij| = {err:.2e}"
-    if name in TRACE_TOLERANCE:
-        assert err > 1e-12, f"{name}: documented trace error but found {err:.1e}"
+def test_closure_trace_identity_a4_ijkk_equals_a2_ij(name, d):
+    batch, a4, _, _ = _evaluate(name, d)
+    err = np.abs(np.einsum("...ijkk->...ij", a4) - batch)[:N_RANDOM].max()
+    if name in TRACE_VIOLATED:
+        assert err > 1e-3, f"{name}: documented trace violation but found {err:.1e}"
+    else:
+        assert err < 1e-12, f"{name}: |a4_ijkk - a2_ij| = {err:.2e}"
 
 
 @pytest.mark.parametrize("name,d", CASES)
-def test_closure_exact_for_aligned_fibres(jitted, name, d):
-    p = np.array([0.6, 0.8, 0.0])[:d] if d == 3 else np.array([0.6, 0.8])
-    # also an axis-aligned direction, where eigenvalues (0, 0) repeat
-    for q in (p, np.eye(d)[0]):
-        err = np.abs(np.asarray(jitted[name, d](T.aligned(q))) - np.asarray(T.aligned_a4(q))).max()
+def test_closure_exact_for_aligned_fibres(name, d):
+    _, a4, _, _ = _evaluate(name, d)
+    for offset, q in enumerate(_directions(d)):
+        err = np.abs(a4[N_RANDOM + offset] - np.asarray(T.aligned_a4(jnp.asarray(q)))).max()
         if name in NOT_EXACT_ALIGNED:
             assert err > 1e-2
         else:
-            assert err < LIMIT_TOLERANCE.get(name, 1e-10), f"{name}: aligned error {err:.2e}"
+            assert err < LIMIT_TOLERANCE.get(name, (1e-10, 1e-10))[1], f"{name}: aligned error {err:.2e}"
 
 
 @pytest.mark.parametrize("name,d", CASES)
-def test_closure_exact_at_isotropy(jitted, name, d):
-    err = np.abs(np.asarray(jitted[name, d](T.isotropic_a2(d))) - np.asarray(T.isotropic_a4(d))).max()
+def test_closure_exact_at_isotropy(name, d):
+    _, a4, _, _ = _evaluate(name, d)
+    err = np.abs(a4[N_RANDOM + 2] - np.asarray(T.isotropic_a4(d))).max()
     if name in NOT_EXACT_ISOTROPIC:
         assert err > 1e-3
     else:
-        assert err < LIMIT_TOLERANCE.get(name, 1e-10), f"{name}: isotropic error {err:.2e}"
+        assert err < LIMIT_TOLERANCE.get(name, (1e-10, 1e-10))[0], f"{name}: isotropic error {err:.2e}"
 
 
 @pytest.mark.parametrize("name,d", CASES)
-def test_closure_is_rotation_equivariant(jitted, name, d):
-    th = 0.7
-    if d == 2:
-        R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
-    else:
-        R = np.linalg.qr(np.random.default_rng(5).normal(size=(3, 3)))[0]
-    a2 = np.asarray(A2[d][0])
-    a4 = np.asarray(jitted[name, d](jnp.asarray(a2)))
-    a4r = np.asarray(jitted[name, d](jnp.asarray(R @ a2 @ R.T)))
-    np.testing.assert_allclose(a4r, np.einsum("ia,jb,kc,ld,abcd->ijkl", R, R, R, R, a4), atol=1e-9)
+def test_closure_is_rotation_equivariant(name, d):
+    _, a4, _, _ = _evaluate(name, d)
+    R = _rotation(d)
+    np.testing.assert_allclose(a4[N_RANDOM + 3], np.einsum("ia,jb,kc,ld,abcd->ijkl", R, R, R, R, a4[0]), atol=1e-9)
 
 
 @pytest.mark.parametrize("name,d", CASES)
-def test_closure_vmap_matches_batch_and_grad_is_finite_at_isotropy_and_alignment(jitted, name, d):
-    f = C.get_closure(name, d)
-    a2 = A2[d][:3]
-    np.testing.assert_allclose(jax.vmap(f)(a2), jitted[name, d](a2), atol=1e-13)
-    D = jnp.asarray(np.arange(d * d, dtype=float).reshape(d, d))
-    D = D + D.T
-
-    def scalar(x):
-        return jnp.sum(T.contract4(f(x), D) ** 2)
-
-    g = jax.jit(jax.grad(scalar))
-    for point in (T.isotropic_a2(d), T.aligned(jnp.eye(d)[0]), a2[0]):
-        assert np.all(np.isfinite(np.asarray(g(point)))), f"{name}: non-finite gradient"
+def test_closure_vmap_matches_batch_and_grad_is_finite_at_isotropy_and_alignment(name, d):
+    _, a4, a4_vmap, grads = _evaluate(name, d)
+    np.testing.assert_allclose(a4_vmap, a4[:3], atol=1e-13)
+    assert np.all(np.isfinite(grads)), f"{name}: non-finite gradient"
+    assert np.abs(grads[2]).max() > 0.0
 
 
 def test_registry_names_errors_and_dimensions():
