@@ -195,9 +195,12 @@ def eigen_frame(a2: jax.Array) -> tuple[jax.Array, jax.Array]:
     non-unique and their exact derivative singular. The forward values are those
     of LAPACK; the derivative of the axes uses a regularised gap
     (:data:`EIGEN_GAP_REGULARISATION`), so ``jax.grad`` of any function of the
-    frame stays finite there. Functions that are symmetric in the degenerate
-    eigenvalues (all exact closures) then get the exact derivative; eigenvalue
-    derivatives are always exact.
+    frame stays finite there. It is exact wherever the eigenvalues are separated by
+    much more than that gap; *at* an exact degeneracy the rotation of the axes within
+    the degenerate subspace is dropped, so a function of the frame loses that part of
+    its derivative. Closures that need an exact derivative there avoid the frame:
+    matrix functions use ``pyfold.closures._spectral.spectral_function``
+    (Daleckii-Krein), the exact closure uses a fixed frame and rotation equivariance.
     """
     a2 = jnp.asarray(a2, dtype=jnp.float64)
     return _eigh_desc(a2)
