@@ -67,8 +67,8 @@ class FTMS(OrientationModel):
     diffusion goes back to Maier & Saupe (1958) and its use for rod suspensions to
     Doi (1981) and Kuzuu & Doi (1983). The drift term ``a.a - a4:a`` has the same
     form in 2-D (it comes from the projected gradient of ``pp:a``, which carries
-    no dimension factor); the diffusion term uses ``d``. Latz et al. note
-    stability of the isotropic state in 3-D for ``U_0 < 8 C_I``-type bounds.
+    no dimension factor); the diffusion term uses ``d``. ``U_0 = 0`` is exactly
+    Folgar-Tucker.
 
     Parameters
     ----------

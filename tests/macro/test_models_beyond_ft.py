@@ -30,7 +30,14 @@ def general_gradient(rng, d):
 @pytest.fixture(scope="module")
 def states():
     rng = np.random.default_rng(7)
-    return {d: [(random_a2(rng, d), general_gradient(rng, d)) for _ in range(4)] for d in (2, 3)}
+    return {d: [(random_a2(rng, d), general_gradient(rng, d)) for _ in range(3)] for d in (2, 3)}
+
+
+def rates(model, states_d):
+    """model.rate at every (a2, L) of a list, in one vmapped evaluation."""
+    a2 = jnp.asarray(np.stack([a for a, _ in states_d]))
+    L = jnp.asarray(np.stack([g for _, g in states_d]))
+    return np.asarray(jax.vmap(lambda a, g: model.rate(0.0, a, g))(a2, L))
 
 
 REDUCTIONS = [
@@ -51,27 +58,23 @@ REDUCTIONS = [
 @pytest.mark.parametrize("k", range(len(REDUCTIONS)))
 def test_model_reduces_exactly_to_its_parent(states, dim, k):
     make, parent = REDUCTIONS[k]
-    for a2, L in states[dim]:
-        np.testing.assert_allclose(make(dim).rate(0.0, a2, L), parent(dim).rate(0.0, a2, L), atol=1e-15)
+    np.testing.assert_allclose(rates(make(dim), states[dim]), rates(parent(dim), states[dim]), atol=1e-15)
 
 
 def test_pard_is_mrd_with_principal_coefficients_and_planar_pard_omega_one_is_ft(states):
-    for a2, L in states[3]:
-        np.testing.assert_allclose(
-            PARD(ci=0.02, omega=0.7, closure=Q).rate(0.0, a2, L),
-            MRD(ci=0.02, d1=1.0, d2=0.7, d3=0.3, closure=Q).rate(0.0, a2, L), atol=1e-15)
-    for a2, L in states[2]:
-        np.testing.assert_allclose(
-            PARD(ci=0.02, omega=1.0, closure=Q, dim=2).rate(0.0, a2, L),
-            FolgarTucker(ci=0.02, closure=Q, dim=2).rate(0.0, a2, L), atol=1e-15)
+    np.testing.assert_allclose(
+        rates(PARD(ci=0.02, omega=0.7, closure=Q), states[3]),
+        rates(MRD(ci=0.02, d1=1.0, d2=0.7, d3=0.3, closure=Q), states[3]), atol=1e-15)
+    np.testing.assert_allclose(
+        rates(PARD(ci=0.02, omega=1.0, closure=Q, dim=2), states[2]),
+        rates(FolgarTucker(ci=0.02, closure=Q, dim=2), states[2]), atol=1e-15)
 
 
 def test_planar_iard_is_ft_with_reduced_interaction(states):
     # 2-D traceless D: D.D = (gamma_dot^2/4) I, so C = C_I (1 - C_M) I.
-    for a2, L in states[2]:
-        np.testing.assert_allclose(
-            IARD(ci=0.05, cm=0.6, closure=Q, dim=2).rate(0.0, a2, L),
-            FolgarTucker(ci=0.05 * 0.4, closure=Q, dim=2).rate(0.0, a2, L), atol=1e-15)
+    np.testing.assert_allclose(
+        rates(IARD(ci=0.05, cm=0.6, closure=Q, dim=2), states[2]),
+        rates(FolgarTucker(ci=0.05 * 0.4, closure=Q, dim=2), states[2]), atol=1e-15)
 
 
 def principal(a2, x):
@@ -81,9 +84,10 @@ def principal(a2, x):
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_rsc_scales_eigenvalue_rates_by_kappa_and_keeps_axis_rotation(states, dim):
-    for a2, L in states[dim]:
-        ft = principal(a2, FolgarTucker(ci=0.02, closure=Q, dim=dim).rate(0.0, a2, L))
-        rsc = principal(a2, RSC(ci=0.02, kappa=0.3, closure=Q, dim=dim).rate(0.0, a2, L))
+    ft_all = rates(FolgarTucker(ci=0.02, closure=Q, dim=dim), states[dim])
+    rsc_all = rates(RSC(ci=0.02, kappa=0.3, closure=Q, dim=dim), states[dim])
+    for (a2, _), ft, rsc in zip(states[dim], ft_all, rsc_all):
+        ft, rsc = principal(a2, ft), principal(a2, rsc)
         np.testing.assert_allclose(np.diag(rsc), 0.3 * np.diag(ft), atol=1e-15)
         off = ~np.eye(dim, dtype=bool)
         np.testing.assert_allclose(rsc[off], ft[off], atol=1e-15)
@@ -92,11 +96,12 @@ def test_rsc_scales_eigenvalue_rates_by_kappa_and_keeps_axis_rotation(states, di
 def test_rpr_matches_the_literal_principal_frame_formula(states):
     # Tseng et al. 2013: IOK_i = alpha (y_i - beta (y_i^2 + 2 y_j y_k)), y = eigenvalue rates.
     alpha, beta = 0.4, 0.7
-    for a2, L in states[3]:
-        base = principal(a2, IARD(ci=0.03, cm=0.5, closure=Q).rate(0.0, a2, L))
+    base_all = rates(IARD(ci=0.03, cm=0.5, closure=Q), states[3])
+    got_all = rates(IARDRPR(ci=0.03, cm=0.5, alpha=alpha, beta=beta, closure=Q), states[3])
+    for (a2, _), base, got in zip(states[3], base_all, got_all):
+        base, got = principal(a2, base), principal(a2, got)
         y = np.diag(base)
         iok = np.array([alpha * (y[i] - beta * (y[i] ** 2 + 2 * y[(i + 1) % 3] * y[(i + 2) % 3])) for i in range(3)])
-        got = principal(a2, IARDRPR(ci=0.03, cm=0.5, alpha=alpha, beta=beta, closure=Q).rate(0.0, a2, L))
         np.testing.assert_allclose(got, base - np.diag(iok), atol=1e-15)
 
 
