@@ -250,9 +250,9 @@ subroutine fold_geo_jeffery_advance(dim, n, nout, lengths, walls, G, x, p, xi, d
 end subroutine fold_geo_jeffery_advance
 
 subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, shape, radius, length, x, p, v, omega, &
-                                     dt, mode, alpha, max_iter, on_cap, first, last, vo, omegao, &
+                                     dt, mode, alpha, max_iter, on_cap, skin, first, last, vo, omegao, &
                                      n_corrections, iterations, min_gap, min_gap_over_alpha, pairs_left, &
-                                     worst_gap, capped, stat, errmsg)
+                                     worst_gap, capped, push, list_builds, list_pairs, stat, errmsg)
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK
    use fold_cell, only: cell_t
@@ -262,10 +262,10 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, sh
    implicit none
    integer(ip), intent(in) :: dim, n, walls, shape(n), mode, max_iter, on_cap, first, last
    real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), radius(n), length(n), x(dim, n), p(dim, n)
-   real(dp), intent(in) :: v(dim, n), omega(3, n), dt, alpha
-   real(dp), intent(out) :: vo(dim, n), omegao(3, n), min_gap, min_gap_over_alpha, worst_gap
-   integer(i8), intent(out) :: n_corrections, pairs_left
-   integer(ip), intent(out) :: iterations, capped
+   real(dp), intent(in) :: v(dim, n), omega(3, n), dt, alpha, skin
+   real(dp), intent(out) :: vo(dim, n), omegao(3, n), min_gap, min_gap_over_alpha, worst_gap, push
+   integer(i8), intent(out) :: n_corrections, pairs_left, list_pairs
+   integer(ip), intent(out) :: iterations, capped, list_builds
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
    type(cell_t) :: cell
@@ -281,6 +281,9 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, sh
    pairs_left = 0
    worst_gap = 0.0_dp
    capped = 0
+   push = 0.0_dp
+   list_builds = 0
+   list_pairs = 0
    call make_cell(dim, lengths, walls, G, shear_offset, cell, stat, errmsg)
    if (stat /= FOLD_OK) return
    call make_parts(dim, n, shape, radius, length, x, p, parts, stat, errmsg)
@@ -291,6 +294,7 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, sh
    cfg%alpha = alpha
    cfg%max_iter = max_iter
    cfg%on_cap = on_cap
+   cfg%skin = skin
    call resolve_contacts(cell, parts, dt, cfg, stats, stat, errmsg, first, last)
    vo = parts%v
    omegao = parts%omega
@@ -301,4 +305,7 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, sh
    pairs_left = stats%pairs_left
    worst_gap = stats%worst_gap
    if (stats%capped) capped = 1
+   push = stats%push
+   list_builds = stats%list_builds
+   list_pairs = stats%list_pairs
 end subroutine fold_geo_resolve_contacts

@@ -17,22 +17,57 @@
 !> Walls (Couette cell): a wall is an immovable body; the particle keeps a gap alpha/2
 !> to it (half the particle-particle zone: the gap to its mirror image is alpha).
 !>
+!> Target beyond the zone. Each correction aims at d_ij = +push, not at d_ij = 0:
+!>     J = (|D_i| + push) / (dt K),   push = max(1e-3 alpha, 16 tol_gap).
+!> Why: aiming at exactly zero leaves every corrected pair on the edge of the zone,
+!> where the next sweep sees -1e-14 of round-off, or the second-order residue of the
+!> exact rotation that the linearised impulse ignores (a fibre turned by dtheta misses
+!> by ~ h dtheta^2 / 2), and corrects it again: the loop then only converges
+!> geometrically and a residue just past tol_gap can outlive any cap (the 256-fibre
+!> default scene stalled at step 375 on -5.7e-14 after 100 sweeps). A push well above
+!> round-off and above that residue lets a corrected pair leave the loop after one or
+!> two sweeps. 1e-3 alpha is physically invisible (alpha is itself a mesh-dependent
+!> numerical margin) yet ~1e9 times the round-off of a gap; 16 tol_gap keeps the push
+!> above round-off when alpha = 0. Two spheres head on: delta = (|D| + push)/(2 dt),
+!> i.e. the seed's |D|/(2 dt) plus push/(2 dt), and the pair ends at gap alpha + push.
+!>
 !> Jacobi iteration: within one sweep every correction is computed from the same
 !> predicted state, then all are applied, so the result does not depend on the order
 !> of the particles nor on how they are split over MPI ranks (up to the round-off of
 !> the rank sum). A pair is corrected once per sweep: i issues its worst pair (i, j*)
-!> unless j* < i and j*'s own worst partner is i (then j* issues it). Ties in the worst gap are broken by the smaller index, so the
-!> naive O(N^2) scan and the cell-list scan choose the same pairs and give bit-identical
-!> corrections. The loop stops when every d_ij >= -tol_gap, with
+!> unless j* < i and j*'s own worst partner is i (then j* issues it). Ties in the
+!> worst gap are broken by the smaller index, so the outcome does not depend on the
+!> order in which pairs were found: the naive O(N^2) scan and the cell-list scan give
+!> bit-identical corrections. The loop stops when every d_ij >= -tol_gap, with
 !>     tol_gap = 64 eps max(L_cell)
 !> (round-off of a distance between coordinates of size L; the seed's exact
 !> criterion min d_ij >= 0 could loop forever on -1e-17), or after max_iter sweeps.
+!>
+!> Candidate pairs (Verlet list; Allen & Tildesley 2017, Computer Simulation of
+!> Liquids, 2nd ed., section 5.2). ONE list is built per pass, of the pairs whose
+!> surface distance at the predicted configuration is below
+!>     cutoff = alpha + skin,   skin = alpha + R_max (default),
+!> by the cell lists (strategy) or the O(N^2) double loop (naive); the sweeps visit
+!> only the list and re-evaluate only the pairs with a particle corrected in the
+!> previous sweep. Exactness: moving every point of a capsule by at most delta changes
+!> its distance to any other set by at most delta (a distance between sets is
+!> 1-Lipschitz in each set's displacement). Since the list was built, corrections
+!> have moved every axis point s pp_k + xp_k (|s| <= h_k) of particle k by at most
+!>     delta_k = |xp_k - xp0_k| + h_k |pp_k - pp0_k|,
+!> so an unlisted pair still has dist >= cutoff - delta_i - delta_j. The list is rebuilt
+!> as soon as max_k delta_k > skin/2, so an unlisted pair always has dist >= alpha: it
+!> can neither violate nor be the worst partner of a violating particle, and the
+!> corrections do not depend on the skin. Gap statistics are exact below
+!> cutoff - 2 max delta_k (>= alpha) and clipped there.
 !>
 !> MPI: resolve_contacts(..., first, last, reduce) issues only corrections originating
 !> from particles first..last; the optional callback `reduce` (supplied by the driver,
 !> an MPI_Allreduce; absent in serial) sums the correction arrays and counters and
 !> takes the minimum of the gaps over ranks after each sweep. All particle data are
-!> assumed replicated on every rank.
+!> assumed replicated on every rank, and so are the pair list and the pair gaps (the
+!> mutual check needs the worst partner of non-owned particles; O(N) per build with
+!> cells, O(pairs touched) per sweep). The rebuild decision depends only on the
+!> reduced velocities, so every rank takes it identically.
 module fold_contacts
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_OVERLAP
@@ -67,6 +102,11 @@ module fold_contacts
       integer(ip) :: on_cap = FOLD_ON_CAP_STOP
       !> Lubrication forces requested (applied by the Stokes coupling, see lubrication_force)
       logical :: lubrication = .false.
+      !> Verlet skin of the candidate-pair list [m]; < 0 (default): alpha + R_max.
+      !> Any value >= 0 gives the same corrections (the list is exact); a small one
+      !> only forces more rebuilds (tests use it to check exactly that). A larger one
+      !> widens the search range, which the cell must still exceed twice.
+      real(dp) :: skin = -1.0_dp
    end type contact_config_t
 
    !> What one collision pass did.
@@ -75,8 +115,9 @@ module fold_contacts
       integer(i8) :: n_corrections = 0
       !> Correcting sweeps performed
       integer(ip) :: iterations = 0
-      !> Smallest surface gap at t + dt after the pass, clipped at the range margin
-      !> 2 alpha + R_max (exact whenever it is below that) [m]
+      !> Smallest surface gap at t + dt after the pass, clipped at the list's exact
+      !> range alpha + skin - 2 max delta_k (>= alpha; 2 alpha + R_max with the default
+      !> skin before any correction), exact whenever it is below that [m]
       real(dp) :: min_gap = 0.0_dp
       !> min_gap / alpha (0 when alpha = 0) [-]
       real(dp) :: min_gap_over_alpha = 0.0_dp
@@ -87,6 +128,12 @@ module fold_contacts
       real(dp) :: worst_gap = 0.0_dp
       !> The iteration cap was reached
       logical :: capped = .false.
+      !> Margin beyond alpha each correction aims at, max(1e-3 alpha, 16 tol_gap) [m]
+      real(dp) :: push = 0.0_dp
+      !> Candidate-pair lists built during the pass (1 unless a rebuild was needed)
+      integer(ip) :: list_builds = 0
+      !> Pairs in the last list
+      integer(i8) :: list_pairs = 0
    end type contact_stats_t
 
    abstract interface
@@ -102,10 +149,35 @@ module fold_contacts
    end interface
    public :: contact_reduce_i
 
-   public :: resolve_contacts, contact_sweep, lubrication_force, transverse_inertia
+   public :: resolve_contacts, lubrication_force, transverse_inertia
 
    !> Index of the bottom / top wall as a "partner"
    integer(ip), parameter :: WALL_BOTTOM = -1, WALL_TOP = -2
+   !> push = max(PUSH_ALPHA alpha, PUSH_TOL tol_gap), see the module header
+   real(dp), parameter :: PUSH_ALPHA = 1.0e-3_dp, PUSH_TOL = 16.0_dp
+
+   !> Candidate pairs (a < b) of one pass with their geometry at the current prediction.
+   type :: pair_list_t
+      integer(ip) :: n = 0
+      !> ab(:, k) = [a, b], a < b
+      integer(ip), allocatable :: ab(:, :)
+      !> Surface distance [m]
+      real(dp), allocatable :: dist(:)
+      !> Unit normal from b to a
+      real(dp), allocatable :: nrm(:, :)
+      !> Closest-point arms on a and b [m]
+      real(dp), allocatable :: arm(:, :)
+   end type pair_list_t
+
+   !> Worst partner of every particle at the current prediction.
+   type :: worst_t
+      !> D_k = min_j d_kj (huge when k has no listed pair and no wall) [m]
+      real(dp), allocatable :: d(:)
+      !> Partner index (WALL_BOTTOM / WALL_TOP for walls, 0 for none)
+      integer(ip), allocatable :: j(:)
+      !> Index in the pair list of that pair (0 for walls or none)
+      integer(ip), allocatable :: k(:)
+   end type worst_t
 
 contains
 
@@ -172,32 +244,21 @@ contains
       end do
    end subroutine predict
 
-   !> Geometry of pair (a, b) evaluated with the lower index first, so that the value
-   !> is bit-identical whichever particle asks. Returns the surface distance, and the
-   !> normal / arms oriented for the asking particle i (n from j to i).
-   pure subroutine pair_geometry(cell, parts, xp, pp, hseg, i, j, dist, n, si, sj)
+   !> Geometry of pair (a, b), a < b, at the predicted configuration: surface distance,
+   !> unit normal from b to a, closest-point arms. Always evaluated in this order, so
+   !> the value is bit-identical however (and by whichever search) the pair was found.
+   pure subroutine pair_geometry(cell, parts, xp, pp, hseg, a, b, dist, n, sa, sb)
       type(cell_t), intent(in) :: cell
       type(particle_set_t), intent(in) :: parts
       real(dp), intent(in) :: xp(:, :), pp(:, :), hseg(:)
-      integer(ip), intent(in) :: i, j
-      real(dp), intent(out) :: dist, n(:), si, sj
-      integer(ip) :: a, b
-      real(dp) :: r(parts%dim), sa, sb
+      integer(ip), intent(in) :: a, b
+      real(dp), intent(out) :: dist, n(:), sa, sb
+      real(dp) :: r(parts%dim)
 
-      a = min(i, j)
-      b = max(i, j)
       r = xp(:, a) - xp(:, b)
       call cell_min_image(cell, r)
       call capsule_contact(r, pp(:, a), hseg(a), parts%radius(a), pp(:, b), hseg(b), parts%radius(b), &
                            dist, n, sa, sb)
-      if (i == a) then
-         si = sa
-         sj = sb
-      else
-         n = -n
-         si = sb
-         sj = sa
-      end if
    end subroutine pair_geometry
 
    !> Lowest (bottom) or highest (top) point of a capsule axis: arm s and surface gap to the wall.
@@ -221,124 +282,202 @@ contains
       end if
    end subroutine wall_geometry
 
-   !> Worst partner of particle i: D_i = min_j (dist_ij - alpha_ij) and its index
-   !> (walls: WALL_BOTTOM / WALL_TOP, with alpha/2); ties -> smaller index.
-   !> Also the smallest surface gap seen (for the statistics).
-   subroutine worst_partner(cell, parts, cfg, xp, pp, hseg, rc, use_cells, cl, cand, i, dmin, jbest, gapmin)
+   !> Append pair (a, b), a < b, to the list when its surface distance is below cutoff.
+   pure subroutine list_consider(cell, parts, xp, pp, hseg, a, b, cutoff, list)
       type(cell_t), intent(in) :: cell
       type(particle_set_t), intent(in) :: parts
-      type(contact_config_t), intent(in) :: cfg
-      real(dp), intent(in) :: xp(:, :), pp(:, :), hseg(:), rc
-      logical, intent(in) :: use_cells
-      type(cell_list_t), intent(in) :: cl
-      integer(ip), intent(inout) :: cand(:)
-      integer(ip), intent(in) :: i
-      real(dp), intent(out) :: dmin, gapmin
-      integer(ip), intent(out) :: jbest
-      integer(ip) :: nc, c, j
-      real(dp) :: dist, n(parts%dim), si, sj, d
+      real(dp), intent(in) :: xp(:, :), pp(:, :), hseg(:), cutoff
+      integer(ip), intent(in) :: a, b
+      type(pair_list_t), intent(inout) :: list
+      real(dp) :: r(parts%dim), dist, n(parts%dim), sa, sb
 
-      dmin = huge(1.0_dp)
-      gapmin = huge(1.0_dp)
-      jbest = 0
-      if (cell%walls) then
-         call wall_geometry(cell, parts, xp, pp, hseg, i, WALL_TOP, dist, n, si)
-         call consider(dist - 0.5_dp*cfg%alpha, dist, WALL_TOP)
-         call wall_geometry(cell, parts, xp, pp, hseg, i, WALL_BOTTOM, dist, n, si)
-         call consider(dist - 0.5_dp*cfg%alpha, dist, WALL_BOTTOM)
+      r = xp(:, a) - xp(:, b)
+      call cell_min_image(cell, r)
+      ! centre distance minus both capsule extents is a lower bound of the surface
+      ! distance: most pairs are rejected without the segment computation
+      if (norm2(r) - (hseg(a) + parts%radius(a) + hseg(b) + parts%radius(b)) >= cutoff) return
+      call pair_geometry(cell, parts, xp, pp, hseg, a, b, dist, n, sa, sb)
+      if (.not. (dist < cutoff)) return
+      if (list%n == size(list%dist)) call list_grow(list)
+      list%n = list%n + 1
+      list%ab(:, list%n) = [a, b]
+      list%dist(list%n) = dist
+      list%nrm(:, list%n) = n
+      list%arm(:, list%n) = [sa, sb]
+   end subroutine list_consider
+
+   !> Double the capacity of a pair list.
+   pure subroutine list_grow(list)
+      type(pair_list_t), intent(inout) :: list
+      integer(ip), allocatable :: ab(:, :)
+      real(dp), allocatable :: dist(:), nrm(:, :), arm(:, :)
+      integer(ip) :: cap
+      cap = 2*max(size(list%dist), 8)
+      allocate (ab(2, cap), dist(cap), nrm(size(list%nrm, 1), cap), arm(2, cap))
+      ab(:, 1:list%n) = list%ab(:, 1:list%n)
+      dist(1:list%n) = list%dist(1:list%n)
+      nrm(:, 1:list%n) = list%nrm(:, 1:list%n)
+      arm(:, 1:list%n) = list%arm(:, 1:list%n)
+      call move_alloc(ab, list%ab)
+      call move_alloc(dist, list%dist)
+      call move_alloc(nrm, list%nrm)
+      call move_alloc(arm, list%arm)
+   end subroutine list_grow
+
+   !> The candidate pairs: every pair whose surface distance at the prediction (xp, pp)
+   !> is below cutoff, found with the cell lists (use_cells) or the O(N^2) double loop
+   !> (the reference). The cell list is built in both modes: its setup checks that the
+   !> cell exceeds twice the range rc (unique minimum image).
+   subroutine build_pair_list(cell, parts, xp, pp, hseg, cutoff, rc, use_cells, list, stat, errmsg)
+      type(cell_t), intent(in) :: cell
+      type(particle_set_t), intent(in) :: parts
+      real(dp), intent(in) :: xp(:, :), pp(:, :), hseg(:), cutoff, rc
+      logical, intent(in) :: use_cells
+      type(pair_list_t), intent(inout) :: list
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      type(cell_list_t) :: cl
+      integer(ip), allocatable :: cand(:)
+      integer(ip) :: a, b, c, nc
+
+      if (.not. allocated(list%dist)) then
+         allocate (list%ab(2, 4*parts%n), list%dist(4*parts%n), list%nrm(parts%dim, 4*parts%n), &
+                   list%arm(2, 4*parts%n))
       end if
+      list%n = 0
+      call cell_list_build(cl, cell, xp, rc, stat, errmsg)
+      if (stat /= FOLD_OK) return
       if (use_cells) then
-         call cell_list_candidates(cl, cell, xp(:, i), cand, nc)
+         allocate (cand(parts%n))
+         do a = 1, parts%n
+            call cell_list_candidates(cl, cell, xp(:, a), cand, nc)
+            do c = 1, nc
+               b = cand(c)
+               if (b > a) call list_consider(cell, parts, xp, pp, hseg, a, b, cutoff, list)
+            end do
+         end do
       else
-         nc = parts%n
-         cand(1:nc) = [(j, j=1, parts%n)]
+         do a = 1, parts%n
+            do b = a + 1, parts%n
+               call list_consider(cell, parts, xp, pp, hseg, a, b, cutoff, list)
+            end do
+         end do
       end if
-      do c = 1, nc
-         j = cand(c)
-         if (j == i) cycle
-         call pair_geometry(cell, parts, xp, pp, hseg, i, j, dist, n, si, sj)
-         ! pairs beyond the range cannot violate (dist >= rc - 2 max(h+R) > alpha):
-         ! skipping them in BOTH modes keeps naive and cell-list results identical
-         if (dist + hseg(i) + hseg(j) + parts%radius(i) + parts%radius(j) >= rc) cycle
-         d = dist - cfg%alpha
-         call consider(d, dist, j)
+   end subroutine build_pair_list
+
+   !> Worst partner of every particle, D_k = min_j (dist_kj - alpha_kj) over the listed
+   !> pairs and the walls (alpha/2 to a wall); ties -> smaller partner index, so the
+   !> result does not depend on the order of the list. Also the smallest surface gap.
+   subroutine find_worst(cell, parts, alpha, xp, pp, hseg, list, w, gapmin)
+      type(cell_t), intent(in) :: cell
+      type(particle_set_t), intent(in) :: parts
+      real(dp), intent(in) :: alpha, xp(:, :), pp(:, :), hseg(:)
+      type(pair_list_t), intent(in) :: list
+      type(worst_t), intent(inout) :: w
+      real(dp), intent(out) :: gapmin
+      integer(ip) :: k, a, b
+      real(dp) :: dist, n(parts%dim), s, d
+
+      w%d = huge(1.0_dp)
+      w%j = 0
+      w%k = 0
+      gapmin = huge(1.0_dp)
+      if (cell%walls) then
+         do k = 1, parts%n
+            call wall_geometry(cell, parts, xp, pp, hseg, k, WALL_TOP, dist, n, s)
+            gapmin = min(gapmin, dist)
+            call consider(k, dist - 0.5_dp*alpha, WALL_TOP, 0)
+            call wall_geometry(cell, parts, xp, pp, hseg, k, WALL_BOTTOM, dist, n, s)
+            gapmin = min(gapmin, dist)
+            call consider(k, dist - 0.5_dp*alpha, WALL_BOTTOM, 0)
+         end do
+      end if
+      do k = 1, list%n
+         a = list%ab(1, k)
+         b = list%ab(2, k)
+         gapmin = min(gapmin, list%dist(k))
+         d = list%dist(k) - alpha
+         call consider(a, d, b, k)
+         call consider(b, d, a, k)
       end do
    contains
-      subroutine consider(dval, gap, idx)
-         real(dp), intent(in) :: dval, gap
-         integer(ip), intent(in) :: idx
-         gapmin = min(gapmin, gap)
-         if (dval < dmin .or. (dval == dmin .and. idx < jbest)) then
-            dmin = dval
-            jbest = idx
+      subroutine consider(i, dval, idx, kk)
+         integer(ip), intent(in) :: i, idx, kk
+         real(dp), intent(in) :: dval
+         if (dval < w%d(i) .or. (dval == w%d(i) .and. idx < w%j(i))) then
+            w%d(i) = dval
+            w%j(i) = idx
+            w%k(i) = kk
          end if
       end subroutine consider
-   end subroutine worst_partner
+   end subroutine find_worst
 
-   !> One Jacobi sweep of the seed's loop for the particles first..last: accumulates
-   !> the corrections into dv(dim, n), domega(3, n) (not applied), and reports
-   !> n_issued, n_violating (distinct worst pairs with D_i < -tol), the smallest
-   !> surface gap and the worst violation among them.
-   subroutine contact_sweep(cell_t1, parts, dt, cfg, xp, pp, hseg, rc, tol, use_cells, cl, first, last, &
-                            dv, domega, n_issued, n_violating, gapmin, worst)
-      !> Cell at t + dt
-      type(cell_t), intent(in) :: cell_t1
+   !> One Jacobi sweep of the seed's loop for the particles first..last, from the worst
+   !> partners w: accumulates the corrections into dv(dim, n), domega(3, n) (not
+   !> applied), and reports n_issued, n_violating (distinct worst pairs with
+   !> D_i < -tol) and the worst D_i of the owned particles.
+   subroutine issue_corrections(cell, parts, dt, cfg, push, tol, xp, pp, hseg, list, w, first, last, &
+                                dv, domega, n_issued, n_violating, worst)
+      type(cell_t), intent(in) :: cell
       type(particle_set_t), intent(in) :: parts
       real(dp), intent(in) :: dt
       type(contact_config_t), intent(in) :: cfg
-      real(dp), intent(in) :: xp(:, :), pp(:, :), hseg(:), rc, tol
-      logical, intent(in) :: use_cells
-      type(cell_list_t), intent(in) :: cl
+      real(dp), intent(in) :: push, tol, xp(:, :), pp(:, :), hseg(:)
+      type(pair_list_t), intent(in) :: list
+      type(worst_t), intent(in) :: w
       integer(ip), intent(in) :: first, last
       real(dp), intent(inout) :: dv(:, :), domega(:, :)
       integer(i8), intent(out) :: n_issued, n_violating
-      real(dp), intent(out) :: gapmin, worst
+      real(dp), intent(out) :: worst
 
-      integer(ip) :: i, jbest, kbest
-      integer(ip), allocatable :: cand(:)
-      real(dp) :: dmin, g, dk, gk, dist, n(parts%dim), si, sj, kk, jimp, inv_i, inv_j, ci(3), cj(3)
+      integer(ip) :: i, j, k
+      real(dp) :: dist, n(parts%dim), si, sj, kk, jimp, inv_i, inv_j, ci(3), cj(3)
 
-      allocate (cand(parts%n))
       n_issued = 0
       n_violating = 0
-      gapmin = huge(1.0_dp)
       worst = huge(1.0_dp)
       do i = first, last
-         call worst_partner(cell_t1, parts, cfg, xp, pp, hseg, rc, use_cells, cl, cand, i, dmin, jbest, g)
-         gapmin = min(gapmin, g)
-         worst = min(worst, dmin)
-         if (.not. (dmin < -tol)) cycle
-         if (jbest > 0 .and. jbest < i) then
-            ! mutual worst pair: issued once, by the lower index
-            call worst_partner(cell_t1, parts, cfg, xp, pp, hseg, rc, use_cells, cl, cand, jbest, dk, kbest, gk)
-            if (kbest == i) cycle
+         worst = min(worst, w%d(i))
+         if (.not. (w%d(i) < -tol)) cycle
+         j = w%j(i)
+         ! mutual worst pair: issued once, by the lower index
+         if (j > 0 .and. j < i) then
+            if (w%j(j) == i) cycle
          end if
          n_violating = n_violating + 1
          if (cfg%mode == FOLD_CONTACT_NONE) cycle
-         if (jbest > 0) then
-            call pair_geometry(cell_t1, parts, xp, pp, hseg, i, jbest, dist, n, si, sj)
+         inv_i = 1.0_dp/transverse_inertia(parts%dim, parts%shape(i), parts%radius(i), parts%length(i))
+         if (j > 0) then
+            k = w%k(i)
+            if (i == list%ab(1, k)) then
+               n = list%nrm(:, k)
+               si = list%arm(1, k)
+               sj = list%arm(2, k)
+            else
+               n = -list%nrm(:, k)
+               si = list%arm(2, k)
+               sj = list%arm(1, k)
+            end if
             ci = arm_cross(parts%dim, si*pp(:, i), n)
-            cj = arm_cross(parts%dim, sj*pp(:, jbest), n)
-            inv_i = 1.0_dp/transverse_inertia(parts%dim, parts%shape(i), parts%radius(i), parts%length(i))
-            inv_j = 1.0_dp/transverse_inertia(parts%dim, parts%shape(jbest), parts%radius(jbest), parts%length(jbest))
+            cj = arm_cross(parts%dim, sj*pp(:, j), n)
+            inv_j = 1.0_dp/transverse_inertia(parts%dim, parts%shape(j), parts%radius(j), parts%length(j))
             kk = 2.0_dp + sum(ci**2)*inv_i + sum(cj**2)*inv_j
-            jimp = abs(dmin)/(dt*kk)
+            jimp = (abs(w%d(i)) + push)/(dt*kk)
             dv(:, i) = dv(:, i) + jimp*n
-            dv(:, jbest) = dv(:, jbest) - jimp*n
+            dv(:, j) = dv(:, j) - jimp*n
             domega(:, i) = domega(:, i) + jimp*inv_i*ci
-            domega(:, jbest) = domega(:, jbest) - jimp*inv_j*cj
+            domega(:, j) = domega(:, j) - jimp*inv_j*cj
          else
-            call wall_geometry(cell_t1, parts, xp, pp, hseg, i, jbest, dist, n, si)
+            call wall_geometry(cell, parts, xp, pp, hseg, i, j, dist, n, si)
             ci = arm_cross(parts%dim, si*pp(:, i), n)
-            inv_i = 1.0_dp/transverse_inertia(parts%dim, parts%shape(i), parts%radius(i), parts%length(i))
             kk = 1.0_dp + sum(ci**2)*inv_i
-            jimp = abs(dmin)/(dt*kk)
+            jimp = (abs(w%d(i)) + push)/(dt*kk)
             dv(:, i) = dv(:, i) + jimp*n
             domega(:, i) = domega(:, i) + jimp*inv_i*ci
          end if
          n_issued = n_issued + 1
       end do
-   end subroutine contact_sweep
+   end subroutine issue_corrections
 
    !> r x n as a 3-vector (2-D: only the z component).
    pure function arm_cross(dim, r, n) result(c)
@@ -370,12 +509,14 @@ contains
       procedure(contact_reduce_i), optional :: reduce
 
       type(cell_t) :: cell1
-      type(cell_list_t) :: cl
-      integer(ip) :: i0, i1, k
-      real(dp), allocatable :: xp(:, :), pp(:, :), hseg(:), dv(:, :), domega(:, :)
-      real(dp) :: rc, margin, tol, mins(2)
+      type(pair_list_t) :: list
+      type(worst_t) :: w
+      integer(ip) :: i0, i1, k, a, b
+      real(dp), allocatable :: xp(:, :), pp(:, :), xp0(:, :), pp0(:, :), hseg(:), dv(:, :), domega(:, :), delta(:)
+      logical, allocatable :: moved(:)
+      real(dp) :: rc, skin, cutoff, reach, tol, push, mins(2)
       integer(i8) :: counts(2)
-      logical :: use_cells
+      logical :: use_cells, rebuild
 
       stat = FOLD_INPUT_ERROR
       errmsg = ""
@@ -413,30 +554,44 @@ contains
 
       cell1 = cell
       call cell_advance(cell1, dt)
-      allocate (xp(parts%dim, parts%n), pp(parts%dim, parts%n), hseg(parts%n))
-      allocate (dv(parts%dim, parts%n), domega(3, parts%n))
+      allocate (xp(parts%dim, parts%n), pp(parts%dim, parts%n), xp0(parts%dim, parts%n), pp0(parts%dim, parts%n))
+      allocate (hseg(parts%n), dv(parts%dim, parts%n), domega(3, parts%n), delta(parts%n), moved(parts%n))
+      allocate (w%d(parts%n), w%j(parts%n), w%k(parts%n))
       hseg = particle_half_segment(parts%shape, parts%radius, parts%length)
-      margin = 2.0_dp*cfg%alpha + maxval(parts%radius)
-      rc = 2.0_dp*maxval(hseg + parts%radius) + margin
+      skin = cfg%skin
+      if (skin < 0.0_dp) skin = cfg%alpha + maxval(parts%radius)
+      cutoff = cfg%alpha + skin
+      rc = 2.0_dp*maxval(hseg + parts%radius) + cutoff
       tol = 64.0_dp*epsilon(1.0_dp)*maxval(cell%lengths(1:cell%dim))
+      push = max(PUSH_ALPHA*cfg%alpha, PUSH_TOL*tol)
+      stats%push = push
       use_cells = cfg%mode /= FOLD_CONTACT_NAIVE
 
+      call predict(parts, dt, xp, pp)
+      rebuild = .true.
       do
-         call predict(parts, dt, xp, pp)
-         ! the cell list is rebuilt every sweep (positions moved); its setup also
-         ! checks that the cell is larger than twice the range (unique image)
-         call cell_list_build(cl, cell1, xp, rc, stat, errmsg)
-         if (stat /= FOLD_OK) then
-            errmsg = "resolve_contacts: "//trim(errmsg)
-            return
+         if (rebuild) then
+            call build_pair_list(cell1, parts, xp, pp, hseg, cutoff, rc, use_cells, list, stat, errmsg)
+            if (stat /= FOLD_OK) then
+               errmsg = "resolve_contacts: "//trim(errmsg)
+               return
+            end if
+            stats%list_builds = stats%list_builds + 1
+            stats%list_pairs = list%n
+            xp0 = xp
+            pp0 = pp
+            delta = 0.0_dp
          end if
+         ! every pair closer than reach is listed (module header)
+         reach = cutoff - 2.0_dp*maxval(delta)
+         call find_worst(cell1, parts, cfg%alpha, xp, pp, hseg, list, w, mins(1))
          dv = 0.0_dp
          domega = 0.0_dp
-         call contact_sweep(cell1, parts, dt, cfg, xp, pp, hseg, rc, tol, use_cells, cl, i0, i1, &
-                            dv, domega, counts(1), counts(2), mins(1), mins(2))
+         call issue_corrections(cell1, parts, dt, cfg, push, tol, xp, pp, hseg, list, w, i0, i1, &
+                                dv, domega, counts(1), counts(2), mins(2))
          if (present(reduce)) call reduce(dv, domega, counts, mins)
-         stats%min_gap = min(mins(1), margin)
-         stats%worst_gap = min(mins(2), margin - cfg%alpha)
+         stats%min_gap = min(mins(1), reach)
+         stats%worst_gap = min(mins(2), reach - cfg%alpha)
          stats%pairs_left = counts(2)
          if (counts(2) == 0 .or. cfg%mode == FOLD_CONTACT_NONE) exit
          if (stats%iterations >= cfg%max_iter) then
@@ -444,15 +599,32 @@ contains
             exit
          end if
          do k = 1, parts%n
+            moved(k) = any(dv(:, k) /= 0.0_dp) .or. any(domega(:, k) /= 0.0_dp)
+            if (.not. moved(k)) cycle
             parts%v(:, k) = parts%v(:, k) + dv(:, k)
             if (parts%dim == 2) then
                parts%omega(3, k) = parts%omega(3, k) + domega(3, k)
             else
                parts%omega(:, k) = parts%omega(:, k) + domega(:, k)
             end if
+            ! new prediction of the corrected particles only (the others are unchanged)
+            xp(:, k) = parts%x(:, k) + parts%v(:, k)*dt
+            pp(:, k) = rotate_axis(parts%dim, parts%p(:, k), parts%omega(:, k), dt)
+            delta(k) = norm2(xp(:, k) - xp0(:, k)) + hseg(k)*norm2(pp(:, k) - pp0(:, k))
          end do
          stats%iterations = stats%iterations + 1
          stats%n_corrections = stats%n_corrections + counts(1)
+         ! Verlet criterion: rebuild before an unlisted pair could come within alpha
+         rebuild = maxval(delta) > 0.5_dp*skin
+         if (.not. rebuild) then
+            do k = 1, list%n
+               a = list%ab(1, k)
+               b = list%ab(2, k)
+               if (moved(a) .or. moved(b)) &
+                  call pair_geometry(cell1, parts, xp, pp, hseg, a, b, list%dist(k), list%nrm(:, k), &
+                                     list%arm(1, k), list%arm(2, k))
+            end do
+         end if
       end do
       if (cfg%alpha > 0.0_dp) stats%min_gap_over_alpha = stats%min_gap/cfg%alpha
       if (stats%capped .and. cfg%on_cap == FOLD_ON_CAP_STOP) then

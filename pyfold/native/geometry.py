@@ -96,6 +96,13 @@ class ContactStats:
     pairs_left: int
     worst_gap: float
     capped: bool
+    push: float
+    """Margin beyond ``alpha`` each correction aims at, ``max(1e-3 alpha, 16 tol_gap)`` [m]."""
+    list_builds: int
+    """Candidate-pair (Verlet) lists built in the pass (1 unless corrections moved a
+    particle by more than half the skin)."""
+    list_pairs: int
+    """Pairs in the last candidate list."""
 
 
 def _vectors(name: str, a, dim: int | None = None, n: int | None = None) -> np.ndarray:
@@ -304,17 +311,21 @@ def jeffery_advance(cell: Cell, x, p, xi, dt: float, nsteps: int, every: int = 1
 
 def resolve_contacts(cell: Cell, shape, radius, length, x, p, v, omega, dt: float, *, alpha: float,
                      mode: str = "strategy", max_iter: int = 100, on_cap: str = "stop",
-                     owned: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray, ContactStats]:
+                     owned: Sequence[int] | None = None, skin: float | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, ContactStats]:
     """The seed's collision strategy on rigid velocities (``fold_contacts.resolve_contacts``).
 
     Gaps are taken at the predicted positions at ``t + dt`` (cell offset advanced by
     ``dt``); while a particle's worst gap is below ``alpha``, equal and opposite
-    impulses at the contact point make it close to first order (two spheres:
-    ``δ = |D|/(2Δt)``, the seed's rule). ``mode`` is ``"none"`` (statistics only),
-    ``"naive"`` (O(N²) search) or ``"strategy"`` (cell lists). ``owned = (first, last)``
-    (0-based, inclusive) restricts the particles whose corrections are computed (MPI
-    split); by default all. Returns the corrected ``v`` (N, dim), ``omega`` (N, 3) and
-    :class:`ContactStats`.
+    impulses at the contact point aim, to first order, at the gap ``alpha + push``
+    (two spheres: ``δ = (|D| + push)/(2Δt)``, the seed's ``|D|/(2Δt)`` plus the small
+    documented push ``max(1e-3 alpha, 16 tol_gap)`` that makes the loop terminate).
+    ``mode`` is ``"none"`` (statistics only), ``"naive"`` (O(N²) candidate search) or
+    ``"strategy"`` (cell lists); both sweep one Verlet list of candidate pairs per step.
+    ``owned = (first, last)`` (0-based, inclusive) restricts the particles whose
+    corrections are computed (MPI split); by default all. ``skin`` is the Verlet skin
+    [m] (default ``alpha + max(radius)``; any value gives the same corrections).
+    Returns the corrected ``v`` (N, dim), ``omega`` (N, 3) and :class:`ContactStats`.
 
     Raises
     ------
@@ -333,8 +344,9 @@ def resolve_contacts(cell: Cell, shape, radius, length, x, p, v, omega, dt: floa
         _per_particle("shape", shape, n, np.int32), _per_particle("radius", radius, n),
         _per_particle("length", length, n), xf, _vectors("p", p, cell.dim, n), _vectors("v", v, cell.dim, n),
         _omega("omega", omega, n), float(dt), CONTACT_MODES[mode], float(alpha), int(max_iter), ON_CAP[on_cap],
-        first + 1, last + 1)
-    vo, oo, ncorr, iters, min_gap, mgoa, left, worst, capped, stat, msg = out
+        -1.0 if skin is None else float(skin), first + 1, last + 1)
+    vo, oo, ncorr, iters, min_gap, mgoa, left, worst, capped, push, builds, npairs, stat, msg = out
     checked(stat, msg)
-    stats = ContactStats(int(ncorr), int(iters), float(min_gap), float(mgoa), int(left), float(worst), bool(capped))
+    stats = ContactStats(int(ncorr), int(iters), float(min_gap), float(mgoa), int(left), float(worst), bool(capped),
+                         float(push), int(builds), int(npairs))
     return np.ascontiguousarray(vo.T), np.ascontiguousarray(oo.T), stats
