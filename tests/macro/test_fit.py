@@ -61,6 +61,11 @@ def test_fit_with_seeded_noise_lies_within_three_standard_errors():
     assert abs(res.values["ci"] - CI_TRUE) <= 3.0 * err
     # With the right model, the residual RMS estimates the noise level.
     assert res.residual_rms == pytest.approx(sigma, rel=0.15)
+    # Uniform weights w scale the residuals by sqrt(w) and change nothing else.
+    heavy = fit_parameters(data, dataclasses.replace(model, ci=0.03), ("ci",), weights=np.full(TIMES.size, 4.0))
+    assert heavy.values["ci"] == pytest.approx(res.values["ci"], rel=1e-7)
+    assert heavy.stderr["ci"] == pytest.approx(err, rel=1e-6)
+    assert heavy.residual_rms == pytest.approx(2.0 * res.residual_rms, rel=1e-6)
 
 
 def test_fit_recovers_ci_zero_on_its_bound_from_jeffery_population_with_exact_a4():
@@ -199,3 +204,17 @@ def test_exact_closure_needs_a4_and_params_must_exist(clean_data):
         fit_parameters(clean_data, model, ("kappa",), SHEAR)
     with pytest.raises(InputError, match="outside its bounds"):
         fit_parameters(clean_data, model, ("ci",), SHEAR, initial={"ci": -0.1})
+
+
+def test_fit_recovers_two_rsc_parameters_ci_and_kappa():
+    """RSC (Wang, O'Gara & Tucker 2008): kappa slows the eigenvalue kinetics only,
+    so the transient pins it while the approach to steady state pins C_I."""
+    from pyfold.models import RSC
+
+    truth = RSC(ci=0.01, kappa=0.2, xi=XI, closure=CLOSURE)
+    data = synthetic_dataset(truth, isotropic_a2(3), SHEAR, TIMES)
+    res = fit_parameters(data, RSC(ci=0.02, kappa=0.5, xi=XI, closure=CLOSURE), ("ci", "kappa"))
+    assert res.success, res.message
+    assert res.values["ci"] == pytest.approx(0.01, rel=1e-5)
+    assert res.values["kappa"] == pytest.approx(0.2, rel=1e-5)
+    assert res.covariance.shape == (2, 2)
