@@ -390,6 +390,19 @@ def _least_squares(problem: _Problem, u0: jax.Array, rtol: float, atol: float, m
     return values, sol.result, sol.stats["num_steps"], r, J, status
 
 
+def _scalar_parameters(model) -> list[str]:
+    """Names of a model's scalar float parameters (static fields such as ``dim``
+    and the closure excluded)."""
+    names = []
+    for f in dataclasses.fields(model):
+        v = getattr(model, f.name)
+        if f.metadata.get("static", False) or isinstance(v, (bool, int, str)):
+            continue
+        if isinstance(v, float) or (hasattr(v, "shape") and hasattr(v, "dtype") and np.shape(v) == ()):
+            names.append(f.name)
+    return sorted(names)
+
+
 def _closure_label(closure) -> str:
     if isinstance(closure, TabulatedA4):
         return "exact"
@@ -479,10 +492,7 @@ def fit_parameters(
     params = tuple(params) if not isinstance(params, str) else (params,)
     if not params:
         raise InputError("params: name at least one parameter to fit")
-    scalar_fields = sorted(
-        n for n in fields if isinstance(getattr(model, n), (float, int)) and not isinstance(getattr(model, n), bool)
-        or (hasattr(getattr(model, n), "shape") and np.shape(getattr(model, n)) == ())
-    )
+    scalar_fields = _scalar_parameters(model)
     for name in params:
         if name not in scalar_fields:
             raise InputError(f"params: {name!r} is not a scalar parameter of {type(model).__name__}; allowed: {scalar_fields}")
@@ -625,13 +635,7 @@ def fit_parameters(
 
 
 def _model_description(model) -> str:
-    parts = []
-    for f in dataclasses.fields(model):
-        v = getattr(model, f.name)
-        if f.metadata.get("static", False) or isinstance(v, (bool, int, str)):
-            continue
-        if isinstance(v, float) or (hasattr(v, "shape") and np.shape(v) == ()):
-            parts.append(f"{f.name}={float(v)!r}")
+    parts = [f"{name}={float(getattr(model, name))!r}" for name in _scalar_parameters(model)]
     return f"{type(model).__name__}({', '.join(parts)}, closure={_closure_label(model.closure)!r})"
 
 
