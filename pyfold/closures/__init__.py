@@ -29,7 +29,7 @@ from pyfold.closures.implicit import siq, sihyb
 from pyfold.closures.symmetric_quadratic import sqc
 from pyfold.closures.natural import natural_2d
 from pyfold.closures.ibof import ibof
-from pyfold.closures.orthotropic import orf, orl, orw, orw3
+from pyfold.closures.orthotropic import ore, orf, orl, ors, orw, orw3
 from pyfold.closures.exact import fec
 
 __all__ = [
@@ -46,6 +46,8 @@ __all__ = [
     "sqc",
     "natural_2d",
     "ibof",
+    "ore",
+    "ors",
     "orf",
     "orl",
     "orw",
@@ -68,6 +70,8 @@ CLOSURES: dict[str, dict[int, Closure]] = {
     "sqc": {2: sqc, 3: sqc},
     "natural": {2: natural_2d},
     "ibof": {3: ibof},
+    "ore": {3: ore},
+    "ors": {3: ors},
     "orf": {3: orf},
     "orl": {3: orl},
     "orw": {3: orw},

@@ -4,6 +4,17 @@ cross-checked against two independent public implementations (fiberoripy,
 github.com/meyer-nils/fiberoripy, ``closures.py``; SFRPMicroMechanics.jl,
 github.com/barabule/SFRPMicroMechanics, ``src/closures.jl``) and, for ORL, against the
 table reprinted in Kennedy & Zheng, *Injection Molding* (Springer 2009), eq. 5.21.
+ORS and ORE were cross-checked against Tucker's MATLAB toolbox (companion to
+*Fundamentals of Fiber Orientation*, Hanser 2022; github.com/charlestucker3/
+Fiber-Orientation-Tools, ``closeA4.m``) and a second implementation each:
+SFRPMicroMechanics.jl (ORS) and fiberpy (github.com/tianyikillua/fiberpy,
+``fiberpy/closure.py``, which quotes VerWeyst's thesis, p. 47) for ORE.
+
+Not provided: the 3-D natural closures NAT1 (Verleye & Dupret 1993) and NAT2 (Dupret
+& Verleye 1999). Their fitted coefficient tables (reprinted in Chung & Kwon 2001,
+Polym. Compos. 22:636) were not found in any source available to us, and the
+closures are not reconstructed from memory; ORE below is the orthotropic fit to the
+same target (the natural/exact closure of Jeffery's equation).
 """
 from __future__ import annotations
 
@@ -44,6 +55,37 @@ ORW3 = (
      -2.5375632310, 1.9988098293, 1.4863151577, 0.5856304774, -0.0756740034),
     (0.4868019601, 0.5776328438, -2.2462007509, 0.4605743789, -1.9088154281,
      -4.8900459209, 4.0544348937, 3.8542602127, 1.1817992322, 0.9512305286),
+)
+
+#: ORS, the "smooth" orthotropic closure: Cintra & Tucker (1995), J. Rheol. 39(6):1095.
+#: Linear in (1, a1, a2): A_mm = C[m][0] + C[m][1] a1 + C[m][2] a2. Tucker's toolbox
+#: also lists A_44 = A_55 = 0.2 (1 - a1 - a2), A_66 = -0.05 + 0.05 a1 + 0.30 a2; those
+#: are exactly what the trace identity gives from these three rows (checked in the tests).
+ORS = (
+    (-0.15, 1.15, -0.10),
+    (-0.15, 0.15, 0.90),
+    (0.60, -0.60, -0.60),
+)
+
+#: ORE, orthotropic fit to the natural (exact) closure of Jeffery's equation:
+#: VerWeyst (1998), PhD thesis, University of Illinois at Urbana-Champaign, p. 47
+#: ("ORE" in VerWeyst et al. 1999 and Tucker 2022; "ORN" in Tucker's toolbox).
+#: Quartic in the two largest eigenvalues, monomial order
+#:   1, a1, a2, a1 a2, a1^2, a2^2, a1^2 a2, a1 a2^2, a1^3, a2^3, a1^2 a2^2, a1^3 a2,
+#:   a1 a2^3, a1^4, a2^4.
+ORE = (
+    (0.636256796880687, -1.872662963738140, -4.479708731937380, 11.958956233232000,
+     3.844596924200860, 11.342092427815900, -10.958262606969100, -20.727799468413200,
+     -2.116232144710040, -12.387563285561900, 9.815983897167480, 3.479015105674390,
+     11.749291117702600, 0.508041387366637, 4.883665977714890),
+    (0.636256796880687, -3.315272297421460, -3.037099398254060, 11.827328596885200,
+     6.881539520580440, 8.436777467783250, -15.912066715764100, -15.151587260630700,
+     -6.487289336419260, -8.638914192840160, 9.325203434526610, 7.746837517132950,
+     7.481468706244410, 2.284765316379580, 3.597722511342540),
+    (2.740532895602530, -9.121965097826920, -12.257058703625400, 34.319901891698700,
+     13.829469912194000, 25.868475525388400, -37.702911802938400, -50.275643192748500,
+     -10.880176113317400, -26.963691523971600, 27.334679805448800, 15.265068614865100,
+     26.113491400537500, 3.432138403347790, 10.611741806606000),
 )
 
 # IBOF: Chung & Kwon (2002), J. Rheol. 46(1):169-194, 5th-order polynomials in the

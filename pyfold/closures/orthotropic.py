@@ -1,4 +1,5 @@
-"""Orthotropic fitted closures ORF, ORL (Cintra & Tucker 1995) and ORW, ORW3 (Chung & Kwon 2001).
+"""Orthotropic fitted closures ORS, ORF, ORL (Cintra & Tucker 1995), ORE (VerWeyst 1998)
+and ORW, ORW3 (Chung & Kwon 2001).
 
 An orthotropic closure assumes the principal axes of a4 are those of a2. In that
 frame a fully symmetric a4 has six distinct components; with contracted notation
@@ -30,6 +31,21 @@ from pyfold._jax import jax, jnp
 from pyfold.closures import _coefficients as K
 from pyfold.closures._basis import from_principal
 from pyfold.tensors import eigen_frame
+
+
+def _basis3(a1, a2):
+    return jnp.stack([jnp.ones_like(a1), a1, a2], axis=-1)
+
+
+def _basis15(a1, a2):
+    # VerWeyst's monomial order (see _coefficients.ORE)
+    return jnp.stack(
+        [
+            jnp.ones_like(a1), a1, a2, a1 * a2, a1**2, a2**2, a1**2 * a2, a1 * a2**2,
+            a1**3, a2**3, a1**2 * a2**2, a1**3 * a2, a1 * a2**3, a1**4, a2**4,
+        ],
+        axis=-1,
+    )
 
 
 def _basis6(a1, a2):
@@ -75,10 +91,40 @@ def _fitted(table, basis):
     return diagonal
 
 
+_ORS = _fitted(K.ORS, _basis3)
+_ORE = _fitted(K.ORE, _basis15)
 _ORF = _fitted(K.ORF, _basis6)
 _ORL = _fitted(K.ORL, _basis6)
 _ORW = _fitted(K.ORW, _basis6)
 _ORW3 = _fitted(K.ORW3, _basis10)
+
+
+def ors(a2: jax.Array) -> jax.Array:
+    """Smooth orthotropic closure ORS (Cintra & Tucker 1995, J. Rheol. 39(6):1095-1122).
+
+    ``A_11 = -0.15 + 1.15 a1 - 0.10 a2``, ``A_22 = -0.15 + 0.15 a1 + 0.90 a2``,
+    ``A_33 = 0.60 - 0.60 a1 - 0.60 a2``: linear in the eigenvalues. Exact for aligned
+    fibres and at isotropy, and (unlike the higher-order fits) symmetric under
+    exchange of equal eigenvalues, hence continuous at repeated eigenvalues; a crude
+    approximation in between (Cintra & Tucker used it to show that the orthotropic
+    form alone removes the hybrid closure's over-prediction of alignment).
+    """
+    return orthotropic_from_diagonal(a2, _ORS)
+
+
+def ore(a2: jax.Array) -> jax.Array:
+    """Orthotropic fit to the natural (exact) closure, ORE (VerWeyst 1998, PhD thesis,
+    University of Illinois, p. 47; VerWeyst, Tucker, Foss & O'Gara 1999, Int. Polym.
+    Process. 14:409).
+
+    ``A_mm`` are quartic polynomials in ``a1, a2`` (15 coefficients each, in
+    :mod:`pyfold.closures._coefficients`), fitted to the closure that is exact for
+    Jeffery's equation from isotropy (the 3-D natural closure of Verleye & Dupret,
+    which :func:`pyfold.closures.fec` evaluates exactly). Tucker's toolbox calls it
+    ORN ("orthotropic equivalent of the natural closure") and recommends it (Tucker
+    2022, *Fundamentals of Fiber Orientation*, ch. 5).
+    """
+    return orthotropic_from_diagonal(a2, _ORE)
 
 
 def orf(a2: jax.Array) -> jax.Array:
