@@ -1,8 +1,19 @@
 !> The run driver: reads a run file, advances the particles, appends the results.
 !>
-!> One step from t to t + dt (dilute Jeffery hydrodynamics):
-!>   1. kinematics: v = u_mean(x), omega = the exact Jeffery step for constant G
-!>      (`fold_jeffery_step`), for this rank's block of particles, then gathered;
+!> One step from t to t + dt:
+!>   1. hydrodynamics, one of
+!>      * jeffery (hydrodynamics = 0): v = u_mean(x), omega = the exact Jeffery step
+!>        for constant G (`fold_jeffery_step`), for this rank's block of particles,
+!>        then gathered;
+!>      * stokes (hydrodynamics = 1): the rigid (V, omega) of every particle from the
+!>        fictitious-domain FFT Stokes solve of the configuration at t
+!>        (`fold_stokes_step::stokes_rigid_velocities`; grid distributed over the
+!>        ranks with FFTW-MPI when np > 1, serial FFTW otherwise), combined in time by
+!>        explicit Euler (v_n) or Adams-Bashforth 2 (3/2 v_n - 1/2 v_{n-1}; first
+!>        step Euler). The solve of the configuration at t + dt is made at the end
+!>        of the step, so every record holds the bulk stress of the configuration at
+!>        its own time; the AB2 history is the uncorrected (hydrodynamic) velocity,
+!>        carried across a Lees-Edwards wrap with the same velocity jump;
 !>   2. contacts: the seed's collision strategy on (v, omega) at the predicted
 !>      configuration (`fold_contacts::resolve_contacts`, corrections summed over ranks
 !>      after every sweep);
@@ -20,7 +31,8 @@
 !> the rank sum of contact corrections (round-off). Rank 0 alone writes the file and
 !> broadcasts the status of each write, so an I/O failure stops every rank.
 !>
-!> Failure (contact cap with on_cap = stop, NaN, I/O): the state at the start of the
+!> Failure (contact cap with on_cap = stop, NaN, I/O, Stokes solver not converged:
+!> the message gives the residual reached, the iterations and kappa): the state at the start of the
 !> failing step (the last good state) is restored and written as the last record,
 !> a snapshot and /checkpoint; the root attribute `status` says "failed: step N,
 !> t = T: cause" and `steps_done` = N - 1. Nothing here stops the program: the
@@ -29,7 +41,7 @@ module fold_driver
    use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
    use mpi_f08
    use fold_kinds, only: dp, ip, i8, msg_len
-   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR, FOLD_OVERLAP, FOLD_NUMERICAL
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR, FOLD_OVERLAP, FOLD_NUMERICAL, FOLD_NOT_CONVERGED
    use fold_particles, only: particle_set_t
    use fold_cell, only: cell_t, cell_init, cell_set_time, cell_wrap, cell_wall_speed
    use fold_kinematics, only: rigid_update
@@ -37,7 +49,13 @@ module fold_driver
    use fold_orientation_stats, only: orientation_moments
    use fold_jeffery_step, only: jeffery_stepper_t, jeffery_stepper_init, jeffery_step_velocities
    use fold_h5, only: h5_start, h5_stop
-   use fold_run_file, only: run_setup_t, read_run_file
+   use fold_run_file, only: run_setup_t, read_run_file, FOLD_HYDRO_STOKES
+   use fold_fft_backend, only: fft_backend_t, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE
+   use fold_fft_serial, only: fft_serial_t, fft_serial_create
+   use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
+   use fold_stokes_fft, only: stokes_settings_t
+   use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_init, stokes_context_destroy, &
+                               stokes_rigid_velocities, FOLD_AB2
    use fold_output, only: run_output_t, run_record_t, record_init, output_open, output_resume, output_record, &
                           output_snapshot, output_checkpoint, output_status, output_close
    implicit none
@@ -75,6 +93,8 @@ contains
       type(contact_config_t) :: cfg
       type(contact_stats_t) :: cstats
       type(jeffery_stepper_t) :: stepper
+      type(stokes_context_t) :: ctx
+      type(stokes_record_t) :: srec
       type(run_output_t) :: out
       type(run_record_t) :: rec
       integer :: rank, nranks, stat, s2
@@ -83,6 +103,9 @@ contains
       integer(ip) :: first, last
       integer, allocatable :: cnt_v(:), dsp_v(:), cnt_w(:), dsp_w(:)
       real(dp) :: t
+      logical :: stokes, have_prev, good_have_prev
+      !> Stokes velocities of the current configuration, of the previous one (AB2 history)
+      real(dp), allocatable :: v_hyd(:, :), w_hyd(:, :), v_prev(:, :), w_prev(:, :), good_vprev(:, :), good_wprev(:, :)
 
       call MPI_Comm_rank(MPI_COMM_WORLD, rank)
       call MPI_Comm_size(MPI_COMM_WORLD, nranks)
@@ -107,8 +130,28 @@ contains
          call finish_early(.true.)
          return
       end if
+      stokes = setup%hydrodynamics == FOLD_HYDRO_STOKES
+      have_prev = .false.
+      if (stokes) then
+         call stokes_setup(setup, nranks, ctx, stat, errmsg)
+         if (stat /= FOLD_OK) then
+            call finish_early(stat == FOLD_INPUT_ERROR)
+            return
+         end if
+         allocate (v_hyd(parts%dim, parts%n), w_hyd(3, parts%n), v_prev(parts%dim, parts%n), w_prev(3, parts%n))
+         v_prev = 0.0_dp
+         w_prev = 0.0_dp
+         good_vprev = v_prev
+         good_wprev = w_prev
+         if (rank == 0) then
+            write (m2, '(i0,2("x",i0))') setup%stokes_grid(1:parts%dim)
+            write (output_unit, '(a,a,a,i0,a,es9.2,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(m2), " on ", nranks, &
+               " rank(s), kappa ", setup%stokes_kappa, ", tol ", setup%stokes_tolerance, ", ", &
+               trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
+         end if
+      end if
       if (setup%lubrication .and. rank == 0) write (output_unit, '(a)') &
-         "fold_run: note: lubrication = 1 has no effect with Jeffery hydrodynamics (no force balance)"
+         "fold_run: note: lubrication = 1 has no effect: the rigid velocities come from the flow, not from a force balance"
 
       first = int(int(rank, i8)*parts%n/nranks + 1, ip)
       last = int(int(rank + 1, i8)*parts%n/nranks, ip)
@@ -134,9 +177,14 @@ contains
       t = 0.0_dp
       if (rank == 0) then
          if (resume) then
-            call output_resume(out, path, parts, setup%n_families, nranks, step0, t, stat, errmsg)
+            if (stokes) then
+               call output_resume(out, path, parts, setup%n_families, nranks, step0, t, stat, errmsg, stokes, &
+                                  v_prev, w_prev, have_prev)
+            else
+               call output_resume(out, path, parts, setup%n_families, nranks, step0, t, stat, errmsg)
+            end if
          else
-            call output_open(out, path, parts, setup%n_families, nranks, stat, errmsg)
+            call output_open(out, path, parts, setup%n_families, nranks, stat, errmsg, stokes)
          end if
       end if
       call share_status(stat, errmsg)
@@ -152,6 +200,11 @@ contains
          call MPI_Bcast(parts%p, size(parts%p), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
          call MPI_Bcast(parts%v, size(parts%v), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
          call MPI_Bcast(parts%omega, size(parts%omega), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
+         if (stokes) then
+            call MPI_Bcast(have_prev, 1, MPI_LOGICAL, 0, MPI_COMM_WORLD)
+            call MPI_Bcast(v_prev, size(v_prev), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
+            call MPI_Bcast(w_prev, size(w_prev), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
+         end if
          ! positions at the checkpoint time (not the initial ones) decide the first gaps
          call measure_gaps(cell, parts, cfg, cstats, stat, errmsg)
       end if
@@ -159,6 +212,20 @@ contains
       call accumulate(rec, cstats, parts)
       last_record = -1
       last_snapshot = -1
+      if (resume) then
+         last_record = step0
+         last_snapshot = step0
+      end if
+      good = parts
+      if (stokes) then
+         ! flow of the starting configuration: velocities of the first step, stress of its record
+         call cell_set_time(cell, t)
+         call stokes_solve(stat, errmsg)
+         if (stat /= FOLD_OK) then
+            call fail(step0 + 1, trim(errmsg), stat)
+            return
+         end if
+      end if
       if (.not. resume) then
          call write_outputs(0_i8, 0.0_dp, .true.)
          if (stat /= FOLD_OK) then
@@ -178,15 +245,36 @@ contains
          good%p = parts%p
          good%v = parts%v
          good%omega = parts%omega
+         if (stokes) then
+            good_vprev = v_prev
+            good_wprev = w_prev
+            good_have_prev = have_prev
+         end if
          t = real(step - 1, dp)*setup%dt
          call cell_set_time(cell, t)
 
-         call jeffery_step_velocities(stepper, cell, parts, first, last)
+         if (stokes) then
+            ! v_hyd: the solve of this configuration (made at the end of the previous step)
+            if (setup%time_scheme == FOLD_AB2 .and. have_prev) then
+               parts%v = 1.5_dp*v_hyd - 0.5_dp*v_prev
+               parts%omega = 1.5_dp*w_hyd - 0.5_dp*w_prev
+            else
+               parts%v = v_hyd
+               parts%omega = w_hyd
+            end if
+            v_prev = v_hyd
+            w_prev = w_hyd
+            have_prev = .true.
+         else
+            call jeffery_step_velocities(stepper, cell, parts, first, last)
+            if (nranks > 1) then
+               call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_DATATYPE_NULL, parts%v, cnt_v, dsp_v, MPI_DOUBLE_PRECISION, &
+                                   MPI_COMM_WORLD)
+               call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_DATATYPE_NULL, parts%omega, cnt_w, dsp_w, &
+                                   MPI_DOUBLE_PRECISION, MPI_COMM_WORLD)
+            end if
+         end if
          if (nranks > 1) then
-            call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_DATATYPE_NULL, parts%v, cnt_v, dsp_v, MPI_DOUBLE_PRECISION, &
-                                MPI_COMM_WORLD)
-            call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_DATATYPE_NULL, parts%omega, cnt_w, dsp_w, &
-                                MPI_DOUBLE_PRECISION, MPI_COMM_WORLD)
             call resolve_contacts(cell, parts, setup%dt, cfg, cstats, stat, errmsg, first, last, reduce_world)
          else
             call resolve_contacts(cell, parts, setup%dt, cfg, cstats, stat, errmsg)
@@ -220,8 +308,12 @@ contains
          call cell_set_time(cell, t)
          block
             integer(ip) :: k
+            real(dp) :: xk(3)
             do k = 1, parts%n
+               xk(1:parts%dim) = parts%x(:, k)
                call cell_wrap(cell, parts%x(:, k), parts%v(:, k))
+               ! the AB2 history crosses a sheared face with the same velocity jump
+               if (stokes) call cell_wrap(cell, xk(1:parts%dim), v_prev(:, k))
             end do
          end block
          if (.not. finite_state(parts)) then
@@ -230,6 +322,22 @@ contains
             return
          end if
          call accumulate(rec, cstats, parts)
+         if (stokes) then
+            ! flow of the new configuration: the stress of this record, the velocities of the next step
+            call stokes_solve(stat, errmsg)
+            if (stat /= FOLD_OK) then
+               ! the configuration at t is good; it is the next step that cannot be made
+               good%x = parts%x
+               good%p = parts%p
+               good%v = parts%v
+               good%omega = parts%omega
+               good_vprev = v_prev
+               good_wprev = w_prev
+               good_have_prev = have_prev
+               call fail(step + 1, trim(errmsg), stat)
+               return
+            end if
+         end if
 
          call write_outputs(step, t, step == setup%nsteps)
          if (stat /= FOLD_OK) then
@@ -251,6 +359,7 @@ contains
          end if
       end if
       call share_status(stat, errmsg)
+      if (stokes) call stokes_context_destroy(ctx)
       outcome%stat = stat
       outcome%steps_done = setup%nsteps
       outcome%time = t
@@ -278,8 +387,7 @@ contains
                   call output_snapshot(out, st, time, parts, stat, errmsg)
             end if
             if (stat == FOLD_OK .and. setup%checkpoint_every > 0) then
-               if (mod(st, setup%checkpoint_every) == 0 .or. final) &
-                  call output_checkpoint(out, st, time, parts, stat, errmsg)
+               if (mod(st, setup%checkpoint_every) == 0 .or. final) call checkpoint(st, time, stat, errmsg)
             end if
          end if
          if (mod(st, setup%output_every) == 0 .or. final) then
@@ -291,6 +399,55 @@ contains
          end if
          call share_status(stat, errmsg)
       end subroutine write_outputs
+
+      !> Write /checkpoint (with the AB2 history of a Stokes run).
+      subroutine checkpoint(st, time, cstat, cmsg)
+         integer(i8), intent(in) :: st
+         real(dp), intent(in) :: time
+         integer, intent(out) :: cstat
+         character(len=msg_len), intent(out) :: cmsg
+         if (stokes .and. have_prev) then
+            call output_checkpoint(out, st, time, parts, cstat, cmsg, v_prev, w_prev)
+         else
+            call output_checkpoint(out, st, time, parts, cstat, cmsg)
+         end if
+      end subroutine checkpoint
+
+      !> Stokes solve of the current configuration (all ranks): v_hyd, w_hyd and the
+      !> solver/stress part of the record; parts%v, parts%omega are left as they were.
+      subroutine stokes_solve(sstat, smsg)
+         integer, intent(out) :: sstat
+         character(len=msg_len), intent(out) :: smsg
+         v_hyd = parts%v
+         w_hyd = parts%omega
+         call stokes_rigid_velocities(ctx, cell, parts, srec, sstat, smsg)
+         ! swap: the fitted rigid velocities go to v_hyd, parts keeps its step velocities
+         block
+            real(dp), allocatable :: tmp(:, :)
+            tmp = parts%v
+            parts%v = v_hyd
+            v_hyd = tmp
+            tmp = parts%omega
+            parts%omega = w_hyd
+            w_hyd = tmp
+         end block
+         if (sstat == FOLD_OK .or. sstat == FOLD_NOT_CONVERGED) then
+            rec%stokes_iterations = max(rec%stokes_iterations, int(srec%iterations, i8))
+            rec%stokes_residual = max(rec%stokes_residual, srec%residual)
+            rec%rigidity_max = max(rec%rigidity_max, srec%rigidity_max)
+            rec%rigidity_mean = max(rec%rigidity_mean, srec%rigidity_mean)
+            rec%stress = srec%bulk%sigma(1:parts%dim, 1:parts%dim)
+            rec%effective_viscosity = srec%bulk%eta_eff
+         end if
+         if (sstat == FOLD_OK) then
+            if (.not. (all(abs(v_hyd) <= huge(1.0_dp)) .and. all(abs(w_hyd) <= huge(1.0_dp)))) then
+               sstat = FOLD_NUMERICAL
+               smsg = "Stokes solve gave NaN or infinite particle velocities"
+            end if
+         else
+            smsg = "Stokes solver: "//trim(smsg)
+         end if
+      end subroutine stokes_solve
 
       !> Stop at `failed_step`: restore the last good state, write it, set status.
       subroutine fail(failed_step, cause, code)
@@ -309,6 +466,11 @@ contains
             parts%p = good%p
             parts%v = good%v
             parts%omega = good%omega
+            if (stokes) then
+               v_prev = good_vprev
+               w_prev = good_wprev
+               have_prev = good_have_prev
+            end if
          end if
          write (text, '(a,i0,a,es23.16,a,a)') "failed: step ", failed_step, ", t = ", &
             real(failed_step, dp)*setup%dt, ": ", trim(cause)
@@ -320,7 +482,7 @@ contains
                call output_record(out, rec, ws, m2)
             end if
             if (last_snapshot /= good_step .and. good_step >= 0) call output_snapshot(out, good_step, good_t, parts, ws, m2)
-            if (good_step >= 0) call output_checkpoint(out, good_step, good_t, parts, ws, m2)
+            if (good_step >= 0) call checkpoint(good_step, good_t, ws, m2)
             call output_status(out, trim(text), max(good_step, 0_i8), ws, m2)
             call output_close(out, ws, m2)
          end if
@@ -328,6 +490,7 @@ contains
          outcome%errmsg = text
          outcome%steps_done = max(good_step, 0_i8)
          outcome%time = good_t
+         if (stokes) call stokes_context_destroy(ctx)
          call h5_stop()
       end subroutine fail
 
@@ -341,6 +504,45 @@ contains
       end subroutine finish_early
 
    end subroutine run_driver
+
+   !> FFT backend (FFTW-MPI slabs over MPI_COMM_WORLD when np > 1, else serial FFTW)
+   !> and Stokes context of a run, from the settings of /setup/resolved.
+   subroutine stokes_setup(setup, nranks, ctx, stat, errmsg)
+      type(run_setup_t), intent(in) :: setup
+      integer, intent(in) :: nranks
+      type(stokes_context_t), intent(inout) :: ctx
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      class(fft_backend_t), allocatable :: fft
+      type(fft_serial_t), allocatable :: serial
+      type(fft_mpi_t), allocatable :: slab
+      type(stokes_settings_t) :: set
+      integer :: effort
+
+      effort = merge(FOLD_PLAN_MEASURE, FOLD_PLAN_ESTIMATE, setup%stokes_fft_plan == 1)
+      if (nranks > 1) then
+         call fft_mpi_start()
+         allocate (slab)
+         call fft_mpi_create(slab, MPI_COMM_WORLD, setup%dim, setup%stokes_grid, effort, stat, errmsg)
+         if (stat == FOLD_OK) call move_alloc(slab, fft)
+      else
+         allocate (serial)
+         call fft_serial_create(serial, setup%dim, setup%stokes_grid, effort, stat, errmsg)
+         if (stat == FOLD_OK) call move_alloc(serial, fft)
+      end if
+      if (stat /= FOLD_OK) then
+         errmsg = "/setup/resolved/stokes_grid: "//trim(errmsg)
+         return
+      end if
+      set%eta_f = setup%viscosity
+      set%kappa = setup%stokes_kappa
+      set%tol = setup%stokes_tolerance
+      set%max_iter = setup%stokes_max_iterations
+      set%derivative = setup%stokes_derivative
+      set%plan_effort = effort
+      call stokes_context_init(ctx, fft, set, stat, errmsg)
+      if (stat /= FOLD_OK) errmsg = "/setup/resolved/stokes_*: "//trim(errmsg)
+   end subroutine stokes_setup
 
    !> Surface gaps of a configuration as it is (zero velocities over a vanishing
    !> step), through the same contact pass as the run, without corrections.
@@ -433,6 +635,10 @@ contains
       rec%min_gap_over_alpha = huge(1.0_dp)
       rec%length_drift = 0.0_dp
       rec%unit_norm_drift = 0.0_dp
+      rec%stokes_iterations = 0
+      rec%stokes_residual = 0.0_dp
+      rec%rigidity_max = 0.0_dp
+      rec%rigidity_mean = 0.0_dp
    end subroutine reset_record
 
    !> Fold one step's contact statistics and drifts into the interval aggregates.

@@ -56,6 +56,20 @@ module fold_output
       real(dp) :: length_drift = 0.0_dp
       !> max_k | |p_k| - 1 | (maximum over the interval) [-]
       real(dp) :: unit_norm_drift = 0.0_dp
+      ! ---- Stokes runs only: solver records (worst over the interval) and the bulk
+      ! stress of the configuration at the record time
+      !> CG iterations of a solve (maximum over the interval)
+      integer(i8) :: stokes_iterations = 0
+      !> Relative preconditioned residual reached (maximum over the interval) [-]
+      real(dp) :: stokes_residual = 0.0_dp
+      !> Largest per-particle rigidity residual (maximum over the interval) [-]
+      real(dp) :: rigidity_max = 0.0_dp
+      !> Mean over the particles of the rigidity residual (maximum over the interval) [-]
+      real(dp) :: rigidity_mean = 0.0_dp
+      !> Deviatoric bulk stress <2 eta eps(u)> (dim, dim) at the record time [Pa]
+      real(dp), allocatable :: stress(:, :)
+      !> Effective viscosity Sigma':E / (2 E:E) (= Sigma_xy/gamma_dot in shear) at the record time [Pa s]
+      real(dp) :: effective_viscosity = 0.0_dp
    end type run_record_t
 
    !> An open run file receiving results.
@@ -64,6 +78,8 @@ module fold_output
       integer(ip) :: dim = 3, n = 0, n_families = 1
       !> Records / snapshots written so far
       integer(hsize_t) :: n_records = 0, n_snapshots = 0
+      !> Stokes hydrodynamics: solver and stress records are written
+      logical :: stokes = .false.
    end type run_output_t
 
    public :: output_open, output_resume, output_record, output_snapshot, output_checkpoint, output_status, &
@@ -72,6 +88,9 @@ module fold_output
    character(len=*), parameter :: SCALAR_VARS(9) = [character(len=24) :: "step", "n_corrections", &
       "contact_iterations", "pairs_left", "capped_steps", "min_gap", "min_gap_over_alpha", &
       "length_drift", "unit_norm_drift"]
+   !> Time series of Stokes runs only (besides `stress`)
+   character(len=*), parameter :: STOKES_VARS(5) = [character(len=24) :: "stokes_iterations", "stokes_residual", &
+      "rigidity_max", "rigidity_mean", "effective_viscosity"]
 
 contains
 
@@ -80,7 +99,8 @@ contains
       type(run_record_t), intent(out) :: rec
       integer(ip), intent(in) :: dim, nfam
       allocate (rec%a2(dim, dim), rec%a4(dim, dim, dim, dim), rec%a2_family(dim, dim, nfam), &
-                rec%a4_family(dim, dim, dim, dim, nfam))
+                rec%a4_family(dim, dim, dim, dim, nfam), rec%stress(dim, dim))
+      rec%stress = 0.0_dp
       rec%a2 = 0.0_dp
       rec%a4 = 0.0_dp
       rec%a2_family = 0.0_dp
@@ -89,7 +109,7 @@ contains
 
    !> Open a run file for writing and lay out the (empty) result variables.
    !> Refuses a file that already holds results (use output_resume).
-   subroutine output_open(out, path, parts, n_families, mpi_ranks, stat, errmsg)
+   subroutine output_open(out, path, parts, n_families, mpi_ranks, stat, errmsg, stokes)
       type(run_output_t), intent(out) :: out
       character(len=*), intent(in) :: path
       type(particle_set_t), intent(in) :: parts
@@ -98,11 +118,14 @@ contains
       integer, intent(in) :: mpi_ranks
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> Stokes run: also lay out the solver and stress records (default .false.)
+      logical, intent(in), optional :: stokes
 
       call h5_open_file(path, .true., out%file, stat, errmsg); if (stat /= FOLD_OK) return
       out%dim = parts%dim
       out%n = parts%n
       out%n_families = n_families
+      if (present(stokes)) out%stokes = stokes
       if (h5_exists(out%file, "time")) then
          stat = FOLD_INPUT_ERROR
          errmsg = trim(path)//": /time exists, the file already holds results (run with --resume to continue)"
@@ -114,7 +137,8 @@ contains
 
    !> Reopen a run file at its checkpoint: returns the checkpoint state and step,
    !> and drops records and snapshots written after that step.
-   subroutine output_resume(out, path, parts, n_families, mpi_ranks, step, time, stat, errmsg)
+   subroutine output_resume(out, path, parts, n_families, mpi_ranks, step, time, stat, errmsg, stokes, &
+                            v_prev, omega_prev, have_prev)
       type(run_output_t), intent(out) :: out
       character(len=*), intent(in) :: path
       !> In: the initial set (sizes, shapes); out: x, p, v, omega of the checkpoint
@@ -126,6 +150,12 @@ contains
       real(dp), intent(out) :: time
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> Stokes run: its records are truncated too (default .false.)
+      logical, intent(in), optional :: stokes
+      !> Stokes velocities of the step before the checkpoint (Adams-Bashforth history),
+      !> (dim, n) [m/s] and (3, n) [1/s]; have_prev = .false. when the checkpoint has none
+      real(dp), intent(inout), optional :: v_prev(:, :), omega_prev(:, :)
+      logical, intent(out), optional :: have_prev
       real(dp), allocatable :: buf(:)
       integer(i8), allocatable :: steps(:)
       integer(hsize_t) :: d, n, nrec, keep
@@ -133,10 +163,12 @@ contains
 
       step = 0
       time = 0.0_dp
+      if (present(have_prev)) have_prev = .false.
       call h5_open_file(path, .true., out%file, stat, errmsg); if (stat /= FOLD_OK) return
       out%dim = parts%dim
       out%n = parts%n
       out%n_families = n_families
+      if (present(stokes)) out%stokes = stokes
       if (.not. h5_exists(out%file, "/checkpoint/step")) then
          stat = FOLD_INPUT_ERROR
          errmsg = "/checkpoint/step: missing, nothing to resume from (set checkpoint_every > 0)"
@@ -155,6 +187,17 @@ contains
       call h5_read_real_array(out%file, "/checkpoint/omega", [3_hsize_t, n], buf, stat, errmsg)
       if (stat /= FOLD_OK) return
       parts%omega = reshape(buf, [3, parts%n])
+      if (present(v_prev) .and. present(omega_prev) .and. present(have_prev)) then
+         if (h5_exists(out%file, "/checkpoint/v_hydro_prev")) then
+            call h5_read_real_array(out%file, "/checkpoint/v_hydro_prev", [d, n], buf, stat, errmsg)
+            if (stat /= FOLD_OK) return
+            v_prev = reshape(buf, [parts%dim, parts%n])
+            call h5_read_real_array(out%file, "/checkpoint/omega_hydro_prev", [3_hsize_t, n], buf, stat, errmsg)
+            if (stat /= FOLD_OK) return
+            omega_prev = reshape(buf, [3, parts%n])
+            have_prev = .true.
+         end if
+      end if
 
       ! Records are in step order: keep those up to the checkpoint.
       call h5_var_length(out%file, "step", nrec, stat, errmsg); if (stat /= FOLD_OK) return
@@ -168,6 +211,12 @@ contains
       call h5_var_truncate(out%file, "a4", keep, stat, errmsg); if (stat /= FOLD_OK) return
       call h5_var_truncate(out%file, "a2_family", keep, stat, errmsg); if (stat /= FOLD_OK) return
       call h5_var_truncate(out%file, "a4_family", keep, stat, errmsg); if (stat /= FOLD_OK) return
+      if (out%stokes) then
+         do k = 1, size(STOKES_VARS)
+            call h5_var_truncate(out%file, trim(STOKES_VARS(k)), keep, stat, errmsg); if (stat /= FOLD_OK) return
+         end do
+         call h5_var_truncate(out%file, "stress", keep, stat, errmsg); if (stat /= FOLD_OK) return
+      end if
       out%n_records = keep
 
       call h5_var_length(out%file, "snapshot", nrec, stat, errmsg); if (stat /= FOLD_OK) return
@@ -211,6 +260,19 @@ contains
       call h5_var_append_real(out%file, "length_drift", r, [rec%length_drift], stat, errmsg); if (stat /= FOLD_OK) return
       call h5_var_append_real(out%file, "unit_norm_drift", r, [rec%unit_norm_drift], stat, errmsg)
       if (stat /= FOLD_OK) return
+      if (out%stokes) then
+         call h5_var_append_int(out%file, "stokes_iterations", r, [rec%stokes_iterations], stat, errmsg)
+         if (stat /= FOLD_OK) return
+         call h5_var_append_real(out%file, "stokes_residual", r, [rec%stokes_residual], stat, errmsg)
+         if (stat /= FOLD_OK) return
+         call h5_var_append_real(out%file, "rigidity_max", r, [rec%rigidity_max], stat, errmsg); if (stat /= FOLD_OK) return
+         call h5_var_append_real(out%file, "rigidity_mean", r, [rec%rigidity_mean], stat, errmsg)
+         if (stat /= FOLD_OK) return
+         call h5_var_append_real(out%file, "stress", r, reshape(rec%stress, [size(rec%stress)]), stat, errmsg)
+         if (stat /= FOLD_OK) return
+         call h5_var_append_real(out%file, "effective_viscosity", r, [rec%effective_viscosity], stat, errmsg)
+         if (stat /= FOLD_OK) return
+      end if
       out%n_records = r
       call h5_flush(out%file, stat, errmsg)
    end subroutine output_record
@@ -237,13 +299,16 @@ contains
    end subroutine output_snapshot
 
    !> Replace /checkpoint with the given state.
-   subroutine output_checkpoint(out, step, time, parts, stat, errmsg)
+   subroutine output_checkpoint(out, step, time, parts, stat, errmsg, v_prev, omega_prev)
       type(run_output_t), intent(inout) :: out
       integer(i8), intent(in) :: step
       real(dp), intent(in) :: time
       type(particle_set_t), intent(in) :: parts
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> Stokes runs with a history: the Stokes velocities of the previous step
+      !> (Adams-Bashforth), (dim, n) [m/s] and (3, n) [1/s]
+      real(dp), intent(in), optional :: v_prev(:, :), omega_prev(:, :)
       integer(hsize_t) :: d, n
 
       d = int(parts%dim, hsize_t)
@@ -265,6 +330,19 @@ contains
       call h5_write_real_array(out%file, "/checkpoint/omega", reshape(parts%omega, [size(parts%omega)]), [3_hsize_t, n], &
                                "s-1", "particle angular velocities of the last step", stat, errmsg)
       if (stat /= FOLD_OK) return
+      call h5_delete(out%file, "/checkpoint/v_hydro_prev", stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_delete(out%file, "/checkpoint/omega_hydro_prev", stat, errmsg); if (stat /= FOLD_OK) return
+      if (present(v_prev) .and. present(omega_prev)) then
+         call h5_write_real_array(out%file, "/checkpoint/v_hydro_prev", reshape(v_prev, [size(v_prev)]), [d, n], &
+                                  "m s-1", "Stokes velocities of the step before the checkpoint (Adams-Bashforth history)", &
+                                  stat, errmsg)
+         if (stat /= FOLD_OK) return
+         call h5_write_real_array(out%file, "/checkpoint/omega_hydro_prev", reshape(omega_prev, [size(omega_prev)]), &
+                                  [3_hsize_t, n], "s-1", &
+                                  "Stokes angular velocities of the step before the checkpoint (Adams-Bashforth history)", &
+                                  stat, errmsg)
+         if (stat /= FOLD_OK) return
+      end if
       call h5_write_int_scalar(out%file, "/checkpoint/step", step, "step number of the checkpoint", stat, errmsg)
       if (stat /= FOLD_OK) return
       call h5_flush(out%file, stat, errmsg)
@@ -369,6 +447,28 @@ contains
       if (stat /= FOLD_OK) return
       call series("unit_norm_drift", FOLD_H5_REAL, "1", "largest deviation of |p| from 1")
       if (stat /= FOLD_OK) return
+
+      if (out%stokes) then
+         call series("stokes_iterations", FOLD_H5_INT, "1", &
+                     "largest number of Stokes CG iterations of a solve since the previous record")
+         if (stat /= FOLD_OK) return
+         call series("stokes_residual", FOLD_H5_REAL, "1", &
+                     "largest relative preconditioned CG residual reached since the previous record")
+         if (stat /= FOLD_OK) return
+         call series("rigidity_max", FOLD_H5_REAL, "1", "largest rigidity residual of a particle since the previous "// &
+                     "record (non-rigid part of the velocity over a particle / (|E| max(L/2, R)))")
+         if (stat /= FOLD_OK) return
+         call series("rigidity_mean", FOLD_H5_REAL, "1", &
+                     "particle-averaged rigidity residual, largest since the previous record")
+         if (stat /= FOLD_OK) return
+         call h5_var_create(out%file, "stress", FOLD_H5_REAL, [character(len=8) :: "j", "i", T], [d, d, 0_hsize_t], &
+                            .true., "Pa", "deviatoric bulk stress <2 eta eps(u)> of the configuration at the record time", &
+                            stat, errmsg)
+         if (stat /= FOLD_OK) return
+         call series("effective_viscosity", FOLD_H5_REAL, "Pa s", &
+                     "effective viscosity Sigma:E/(2 E:E) (= Sigma_xy/shear rate in simple shear) at the record time")
+         if (stat /= FOLD_OK) return
+      end if
 
       call h5_var_create(out%file, "snapshot_time", FOLD_H5_REAL, [character(len=8) :: "snapshot"], [0_hsize_t], .true., "s", &
                          "time of the snapshot", stat, errmsg)

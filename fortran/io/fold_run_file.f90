@@ -5,6 +5,9 @@
 !> micro contract. h5py stores C-ordered arrays, so `/initial/x` of Python shape
 !> (n, dim) is read here as the Fortran `x(dim, n)`, and the velocity gradient
 !> stored with `G[i, j] == G_ij` comes in transposed and is transposed back.
+!> The Stokes settings (`stokes_grid`, `stokes_tolerance`, `stokes_max_iterations`,
+!> `stokes_kappa`, `stokes_derivative`, `stokes_fft_plan`, `time_scheme`) are read
+!> only when `hydrodynamics` = 1, so Jeffery run files need not carry them.
 !> Any problem is returned as FOLD_INPUT_ERROR (wrong content) or FOLD_IO_ERROR
 !> (missing dataset, unreadable file) with the dataset path and the allowed range.
 module fold_run_file
@@ -63,6 +66,20 @@ module fold_run_file
       integer(ip) :: n_families = 1
       !> Number of steps, ceiling(t_end/dt) (the run ends at nsteps*dt >= t_end)
       integer(i8) :: nsteps = 0
+      ! ---- Stokes hydrodynamics only (read when hydrodynamics = 1)
+      !> Voxel counts of the Stokes grid along a1, a2, a3 (n(3) = 1 in 2-D)
+      integer(ip) :: stokes_grid(3) = 1
+      !> CG tolerance (relative preconditioned residual) and iteration cap
+      real(dp) :: stokes_tolerance = 1.0e-6_dp
+      integer(ip) :: stokes_max_iterations = 1000
+      !> Viscosity contrast kappa of the penalisation [-]
+      real(dp) :: stokes_kappa = 1.0e3_dp
+      !> Derivative scheme: 0 spectral, 1 rotated finite differences (fold_stokes_fft codes)
+      integer(ip) :: stokes_derivative = 1
+      !> FFTW planning: 0 estimate (bitwise reproducible), 1 measure (faster transforms)
+      integer :: stokes_fft_plan = 1
+      !> Time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2
+      integer(ip) :: time_scheme = 1
    end type run_setup_t
 
    public :: read_run_file
@@ -139,11 +156,6 @@ contains
       call get_int(file, R//"seed", -huge(1_i8), huge(1_i8), s%seed, stat, errmsg); if (stat /= FOLD_OK) return
       call get_int(file, R//"hydrodynamics", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
       s%hydrodynamics = int(iv)
-      if (s%hydrodynamics == FOLD_HYDRO_STOKES) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = R//"hydrodynamics: 1 (stokes) is not available in this fold_run build; allowed: 0 (jeffery)"
-         return
-      end if
       call get_int(file, R//"collisions", 0_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
       s%collisions = int(iv)
       call get_real(file, R//"alpha", 0.0_dp, big, s%alpha, stat, errmsg); if (stat /= FOLD_OK) return
@@ -164,7 +176,44 @@ contains
          return
       end if
       s%n_families = int(shape(1), ip)
+      if (s%hydrodynamics == FOLD_HYDRO_STOKES) call read_stokes(file, s, stat, errmsg)
    end subroutine read_setup
+
+   !> The Stokes settings of /setup/resolved (present when hydrodynamics = 1).
+   subroutine read_stokes(file, s, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      type(run_setup_t), intent(inout) :: s
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(i8) :: iv
+      integer(i8), allocatable :: ibuf(:)
+
+      if (s%walls) then
+         ! The FFT solver is periodic; the wall (hypre) solver is not built.
+         call range_error(R//"hydrodynamics", "1 (stokes) needs a fully periodic cell: the FFT Stokes solver "// &
+                          "cannot impose walls; /setup/resolved/walls must be 0, or use hydrodynamics 0 (jeffery)", &
+                          stat, errmsg)
+         return
+      end if
+      call h5_read_int_array(file, R//"stokes_grid", [3_hsize_t], ibuf, stat, errmsg); if (stat /= FOLD_OK) return
+      if (any(ibuf(1:s%dim) < 2 .or. ibuf(1:s%dim) > 4096) .or. (s%dim == 2 .and. ibuf(3) /= 1)) then
+         call range_error(R//"stokes_grid", "voxel counts in 2 ... 4096 along each of the dim axes, "// &
+                          "the third = 1 in 2-D", stat, errmsg)
+         return
+      end if
+      s%stokes_grid = int(ibuf, ip)
+      call get_real(file, R//"stokes_tolerance", tiny(1.0_dp), 1.0_dp - epsilon(1.0_dp), s%stokes_tolerance, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_max_iterations", 1_i8, 1000000_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes_max_iterations = int(iv, ip)
+      call get_real(file, R//"stokes_kappa", 1.0_dp, 1.0e12_dp, s%stokes_kappa, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_derivative", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes_derivative = int(iv, ip)
+      call get_int(file, R//"stokes_fft_plan", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes_fft_plan = int(iv)
+      call get_int(file, R//"time_scheme", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%time_scheme = int(iv, ip)
+   end subroutine read_stokes
 
    subroutine read_initial(file, s, parts, stat, errmsg)
       integer(hid_t), intent(in) :: file

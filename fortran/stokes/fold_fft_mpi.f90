@@ -26,9 +26,15 @@ module fold_fft_mpi
       procedure :: destroy => slab_destroy
    end type fft_mpi_t
 
-   public :: fft_mpi_create
+   public :: fft_mpi_create, fft_mpi_start
 
 contains
+
+   !> Initialise FFTW-MPI: once per process after MPI_Init, before any plan
+   !> (FFTW ignores repeated calls).
+   subroutine fft_mpi_start()
+      call fftw_mpi_init()
+   end subroutine fft_mpi_start
 
    !> Make the distributed plans once (collective over comm). fftw_mpi_init must
    !> have been called after MPI_Init.

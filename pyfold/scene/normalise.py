@@ -16,9 +16,18 @@ from pyfold.scene import shapes
 from pyfold.scene._problems import Problems
 from pyfold.scene.schema import EQUIVALENT_ASPECT_RATIO_DEFAULT, Scene
 
-__all__ = ["Family", "ResolvedScene", "normalise", "HYDRODYNAMICS_CODES", "COLLISION_CODES"]
+__all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "HYDRODYNAMICS_CODES", "COLLISION_CODES",
+           "SPHERE_INTERACTION_FRACTION"]
 
 HYDRODYNAMICS_CODES = {"jeffery": 0, "stokes": 1}
+TIME_SCHEME_CODES = {"euler": 1, "ab2": 2}
+DERIVATIVE_CODES = {"spectral": 0, "fd": 1}
+FFT_PLAN_CODES = {"estimate": 0, "measure": 1}
+#: Spheres: hydrodynamic interactions "matter" for ``auto`` from this total volume
+#: fraction on. Batchelor & Green (1972, J. Fluid Mech. 56:401):
+#: eta/eta_f = 1 + 2.5 phi + 6.2 phi^2; the pair term is 2.48 phi of the single-particle
+#: (Einstein) term, i.e. >= 12 % from phi = 0.05.
+SPHERE_INTERACTION_FRACTION = 0.05
 COLLISION_CODES = {"none": 0, "naive": 1, "strategy": 2}
 ON_CAP_CODES = {"stop": 0, "continue": 1}
 
@@ -85,6 +94,7 @@ class ResolvedScene:
     regime_measure: float  # n L^dim
     regime_threshold: float  # L/d of the longest family
     warnings: tuple[str, ...] = field(default=())
+    stokes_grid: tuple[int, int, int] | None = None  # voxel counts (n3 = 1 in 2-D), stokes only
     toml: str = ""  # the scene file verbatim, when read from TOML
 
     @property
@@ -133,6 +143,22 @@ class ResolvedScene:
             "family_xi": (np.array([f.xi for f in fams]), "1", "Jeffery shape factor"),
             "regime": (self.regime, "", "dilute, semi-dilute, concentrated (n L^dim against 1 and L/d) or spheres"),
             "regime_measure": (self.regime_measure, "1", "n L^dim: number density times longest length^dim"),
+            **(self._stokes_datasets() if self.hydrodynamics == "stokes" else {}),
+        }
+
+    def _stokes_datasets(self) -> dict[str, tuple[object, str, str]]:
+        st, num = self.scene.numerics.stokes, self.scene.numerics
+        return {
+            "stokes_grid": (np.array(self.stokes_grid, np.int32), "1",
+                            "Stokes grid voxel counts along a1, a2, a3 (1 along a3 in 2-D)"),
+            "stokes_tolerance": (float(st.tolerance), "1", "relative preconditioned CG residual of a Stokes solve"),
+            "stokes_max_iterations": (np.int32(st.max_iterations), "1", "CG iteration cap of a Stokes solve"),
+            "stokes_kappa": (float(st.kappa), "1", "viscosity contrast kappa = eta_solid / eta_fluid"),
+            "stokes_derivative": (np.int32(DERIVATIVE_CODES[st.derivative]), "1",
+                                  "0 spectral, 1 rotated finite differences (Willot 2015)"),
+            "stokes_fft_plan": (np.int32(FFT_PLAN_CODES[st.fft_plan]), "1", "FFTW planning: 0 estimate, 1 measure"),
+            "time_scheme": (np.int32(TIME_SCHEME_CODES[num.time_scheme]), "1",
+                            "time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2"),
         }
 
     def summary(self) -> str:
@@ -352,9 +378,19 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
     if alpha > min(radii):
         problems.add("model.alpha", f"must be between 0 and the smallest particle radius {min(radii):g} "
                      f"(a security zone of the order of a grid cell), got {alpha:g}")
-    if model.hydrodynamics == "stokes":
-        problems.add("model.hydrodynamics", "'stokes' is not available yet: the Stokes solver has not landed in "
-                     "pyfold; use 'jeffery' (imposed-flow kinematics) or 'auto'")
+    if model.hydrodynamics == "stokes" and walls:
+        problems.add("model.hydrodynamics", "'stokes' needs a fully periodic cell: the FFT Stokes solver cannot impose "
+                     "the no-slip walls of cell.boundary = 'couette' (a wall-bounded solver is not built); use "
+                     "cell.boundary = 'periodic' (Lees-Edwards shear) or hydrodynamics = 'jeffery'")
+    st = scene.numerics.stokes
+    grid = stokes_grid(lengths[:dim], 2.0 * min(radii), st.cells_per_diameter)
+    grid_points = int(np.prod(grid))
+    if model.hydrodynamics == "stokes" and grid_points > st.max_grid_points:
+        problems.add("numerics.stokes.max_grid_points",
+                     f"the Stokes grid {' x '.join(map(str, grid))} = {grid_points} points (cells_per_diameter = "
+                     f"{st.cells_per_diameter} across the thinnest diameter {2.0 * min(radii):g}) exceeds "
+                     f"max_grid_points = {st.max_grid_points}; raise it (memory ~ {_grid_megabytes(grid, dim):.0f} MB), "
+                     f"lower numerics.stokes.cells_per_diameter or the cell size")
     if model.lubrication and not any(f.shape == "sphere" for f in good):
         problems.add("model.lubrication", "the lubrication force (physics.md section 3) is defined between spheres; "
                      "this scene has no sphere family")
@@ -457,13 +493,31 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
     else:
         reasons.append(f"collisions = {collisions} (requested)")
     hydrodynamics = model.hydrodynamics
+    grid_text = f"Stokes grid {' x '.join(map(str, grid))} = {grid_points} points"
     if hydrodynamics == "auto":
         hydrodynamics = "jeffery"
-        caveat = ("" if regime == "dilute" else
-                  "; hydrodynamic interactions between particles are neglected, an approximation in this regime")
-        reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}; the Stokes solver is not available yet{caveat}")
+        phi = sum(f.volume_fraction for f in good)
+        interacting = (phi >= SPHERE_INTERACTION_FRACTION) if regime == "spheres" else regime != "dilute"
+        if not interacting:
+            why = (f"{regime_text}: below phi = {SPHERE_INTERACTION_FRACTION:g} the pair term of the suspension "
+                   "viscosity is under 12 % of Einstein's (Batchelor & Green 1972)" if regime == "spheres" else
+                   f"{regime_text}: hydrodynamic interactions between particles are negligible")
+            reasons.insert(0, f"hydrodynamics = jeffery (auto): {why}")
+        elif walls:
+            reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but the FFT "
+                           "Stokes solver is periodic and this cell has Couette walls; hydrodynamic interactions "
+                           "are neglected, an approximation in this regime")
+        elif grid_points > st.max_grid_points:
+            reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but the "
+                           f"{grid_text} exceeds numerics.stokes.max_grid_points = {st.max_grid_points}; "
+                           "hydrodynamic interactions are neglected, an approximation in this regime")
+        else:
+            hydrodynamics = "stokes"
+            reasons.insert(0, f"hydrodynamics = stokes (auto): {regime_text}, hydrodynamic interactions matter and "
+                           f"the {grid_text} is within numerics.stokes.max_grid_points = {st.max_grid_points}")
     else:
-        reasons.insert(0, f"hydrodynamics = {hydrodynamics} (requested)")
+        extra = f" ({grid_text})" if hydrodynamics == "stokes" else ""
+        reasons.insert(0, f"hydrodynamics = {hydrodynamics} (requested){extra}")
     G3 = np.zeros((3, 3))
     G3[:dim, :dim] = G
     from pyfold.kinematics import shear_rate
@@ -507,4 +561,44 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
         output_every=every["interval"], snapshot_every=every["snapshot_interval"],
         checkpoint_every=every["checkpoint_interval"], families=tuple(good), regime=regime,
         regime_measure=measure, regime_threshold=longest.aspect_ratio, warnings=tuple(warnings),
+        stokes_grid=grid if hydrodynamics == "stokes" else None,
     )
+
+
+#: FFT sizes FFTW handles with its fastest codelets: 2^a 3^b 5^c 7^d.
+def _fft_size(n: int) -> int:
+    m = max(2, n)
+    while True:
+        r = m
+        for q in (2, 3, 5, 7):
+            while r % q == 0:
+                r //= q
+        if r == 1:
+            return m
+        m += 1
+
+
+def stokes_grid(lengths, diameter: float, cells_per_diameter: int) -> tuple[int, int, int]:
+    """Voxel counts of the Stokes grid: at least ``cells_per_diameter`` voxels across
+    ``diameter`` along every axis, each count rounded up to an FFT-friendly size
+    (``2^a 3^b 5^c 7^d``); ``(nx, ny, 1)`` in 2-D.
+
+    Parameters
+    ----------
+    lengths : sequence of float
+        Cell side lengths, one per dimension [m].
+    diameter : float
+        Thinnest particle diameter 2R [m].
+    cells_per_diameter : int
+        Target resolution (physics.md section 5: 4-8 for quantitative results).
+    """
+    h = diameter / cells_per_diameter
+    counts = [_fft_size(int(np.ceil(float(L) / h * (1.0 - 1e-12)))) for L in lengths]
+    return tuple(counts + [1] * (3 - len(counts)))
+
+
+def _grid_megabytes(grid, dim: int) -> float:
+    """Memory of the Stokes solver: about 34 doubles per voxel in 3-D (6 strain fields,
+    viscosity, 4 CG vectors of 3 complex half-spectrum components, tables), 20 in 2-D."""
+    per = 34 if dim == 3 else 20
+    return float(np.prod(grid)) * per * 8 / 1e6

@@ -127,15 +127,26 @@ class Model(_Table):
 
 
 class StokesSettings(_Table):
-    """Settings of the Stokes solver: validated now, used once the solver exists."""
+    """Settings of the fictitious-domain FFT Stokes solver (``fortran/stokes``)."""
 
-    #: relative residual tolerance of the iterative solver [-]
+    #: relative (preconditioned) residual at which the conjugate-gradient solve stops [-]
     tolerance: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] = 1e-6
+    #: CG iteration cap per solve; reaching it stops the run (exit 1, residual reported)
     max_iterations: Annotated[int, Field(ge=1, le=1_000_000)] = 1000
-    #: viscosity contrast of the penalisation eta_solid / eta_fluid (seed: 1e3) [-]
-    kappa: Annotated[float, Field(gt=1), AfterValidator(_finite)] = 1e3
-    #: grid cells per particle diameter (physics.md section 5: 4-8) [-]
+    #: viscosity contrast of the penalisation eta_solid / eta_fluid (seed: 1e3); rigidity
+    #: error ~ 1/kappa, CG iterations ~ sqrt(kappa) (physics.md sections 3, 5) [-]
+    kappa: Annotated[float, Field(gt=1, le=1e12), AfterValidator(_finite)] = 1e3
+    #: grid cells per diameter of the thinnest particle (physics.md section 5: 4-8) [-]
     cells_per_diameter: Annotated[int, Field(ge=1, le=64)] = 4
+    #: largest Stokes grid (voxel count) allowed: "auto" falls back to jeffery above it,
+    #: an explicit "stokes" is rejected (default 64^3; memory ~ 0.25 kB per point in 3-D)
+    max_grid_points: Annotated[int, Field(ge=8, le=2**31 - 1)] = 64**3
+    #: derivative scheme: "fd" (rotated finite differences, Willot 2015; no Gibbs ringing)
+    #: or "spectral" (i k, Nyquist modes removed)
+    derivative: Literal["fd", "spectral"] = "fd"
+    #: FFTW planning: "measure" (faster transforms, plans timed at start-up; repeated runs
+    #: agree to the solver tolerance) or "estimate" (bitwise reproducible)
+    fft_plan: Literal["measure", "estimate"] = "measure"
 
 
 class Numerics(_Table):
@@ -147,6 +158,10 @@ class Numerics(_Table):
     t_end: PositiveReal
     #: seed of every random draw (placement, orientations)
     seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
+    #: time scheme of the Stokes rigid velocities: "ab2" (Adams-Bashforth 2, first step
+    #: Euler; second order) or "euler" (explicit Euler, the seed's). Rotations are exact
+    #: either way. Jeffery hydrodynamics ignores it (exact propagator for constant G).
+    time_scheme: Literal["ab2", "euler"] = "ab2"
     stokes: StokesSettings = StokesSettings()
 
 

@@ -21,7 +21,9 @@ BAD_FILES = [
     ({"override": {"/setup/resolved/collisions": np.int64(5)}}, "/setup/resolved/collisions"),
     ({"override": {"/setup/resolved/velocity_gradient": np.ones((3, 3))}}, "/setup/resolved/velocity_gradient"),
     ({"override": {"/setup/resolved/shear_rate": 2.0}}, "/setup/resolved/shear_rate"),
-    ({"override": {"/setup/resolved/hydrodynamics": np.int64(1)}}, "/setup/resolved/hydrodynamics"),
+    ({"override": {"/setup/resolved/hydrodynamics": np.int64(2)}}, "/setup/resolved/hydrodynamics"),
+    # stokes (1) needs its settings: the first one missing is named
+    ({"override": {"/setup/resolved/hydrodynamics": np.int64(1)}}, "/setup/resolved/stokes_grid"),
     ({"override": {"/initial/family": np.full(8, 3)}}, "/initial/family"),
     ({"override": {"/initial/p": np.full((8, 3), 1.0)}}, "/initial/p"),
     ({"override": {"/initial/x": np.zeros((8, 2))}}, "/initial/x"),
