@@ -64,6 +64,18 @@ def shear(rate: float) -> np.ndarray:
     return g
 
 
+#: Stokes settings of /setup/resolved (what the scene layer writes for hydrodynamics = stokes)
+STOKES_DEFAULTS = {
+    "stokes_grid": (32, 32, 32),
+    "stokes_tolerance": 1e-6,
+    "stokes_max_iterations": np.int64(1000),
+    "stokes_kappa": 1e3,
+    "stokes_derivative": np.int64(1),
+    "stokes_fft_plan": np.int64(0),
+    "time_scheme": np.int64(2),
+}
+
+
 def write_run_file(
     path,
     *,
@@ -92,9 +104,12 @@ def write_run_file(
     seed=1,
     drop=(),
     override=None,
+    stokes=None,
 ):
     """Write a run file. ``drop`` lists /setup/resolved or /initial datasets to leave
-    out, ``override`` maps dataset paths to replacement values (to make bad files)."""
+    out, ``override`` maps dataset paths to replacement values (to make bad files).
+    ``stokes``: a dict of Stokes settings (keys of STOKES_DEFAULTS) switches
+    hydrodynamics to 1 (stokes) and writes them."""
     x = np.asarray(x, dtype=float)
     n = x.shape[0]
     shape = np.full(n, 1) if shape is None else np.asarray(shape)
@@ -123,6 +138,11 @@ def write_run_file(
         "checkpoint_every": np.int64(checkpoint_every),
         "family_names": np.array(list(family_names), dtype=object),
     }
+    if stokes is not None:
+        resolved["hydrodynamics"] = np.int64(1)
+        resolved["hydrodynamics_reason"] = "test: stokes requested"
+        for key, val in {**STOKES_DEFAULTS, **stokes}.items():
+            resolved[key] = np.asarray(val, dtype=np.int64) if key == "stokes_grid" else val
     initial = {
         "x": x,
         "p": np.asarray(p, dtype=float),
