@@ -19,6 +19,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "main": ("main_job", "run the bundled default job: simulate, fit C_I, compare closures, write figures"),
     "validate": ("validate", "check a scene file completely and print it normalised"),
     "run": ("run", "run the direct simulation of a scene into an HDF5 run file"),
+    "analyse": ("analyse", "fit C_I per closure and judge closures against a finished run's a4"),
+    "demo": ("demo", "macro layer only: Folgar-Tucker per closure and a C_I fit on synthetic data"),
 }
 
 EXIT_OK, EXIT_FAILURE, EXIT_INPUT = 0, 1, 2

@@ -84,8 +84,8 @@ def closure_errors(
     time = data["time"].values if "time" in data.coords or "time" in data else np.arange(len(a2))
     out = xr.Dataset(
         {
-            "error_full": (("closure", "time"), np.array(full)),
-            "error_contracted": (("closure", "time"), np.array(contracted)),
+            "error_full": (("closure", "time"), np.array(full).reshape(len(names), len(a2))),
+            "error_contracted": (("closure", "time"), np.array(contracted).reshape(len(names), len(a2))),
         },
         coords={"closure": names, "time": time},
     )

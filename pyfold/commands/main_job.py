@@ -15,14 +15,34 @@ import tempfile
 import time
 from pathlib import Path
 
+
 from pyfold.errors import InputError
+from pyfold.pipeline import DEFAULT_CLOSURES
+
+#: Scenes bundled with pyfold (data/scenes in the source tree).
+SCENES = Path(__file__).resolve().parents[2] / "data" / "scenes"
+DEFAULT_SCENE = SCENES / "default.toml"
+STOKES_SCENE = SCENES / "stokes_small.toml"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/main", help="parent folder of the results (default: out/main)")
+    parser.add_argument("--scene", default=None,
+                        help=f"scene to simulate (default: the bundled {DEFAULT_SCENE.name})")
+    parser.add_argument("--np", type=int, default=1, metavar="N", help="MPI ranks of the simulation (default 1)")
+    parser.add_argument("--closures", default=",".join(DEFAULT_CLOSURES),
+                        help="comma-separated closures to fit C_I with and to judge (default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
+    scene = Path(args.scene) if args.scene else DEFAULT_SCENE
+    if not scene.is_file():
+        raise InputError(f"--scene: no such scene file: {scene}")
+    if args.np < 1:
+        raise InputError(f"--np: must be >= 1, got {args.np}")
+    closures = tuple(c.strip() for c in args.closures.split(",") if c.strip())
+    if not closures:
+        raise InputError("--closures: give at least one closure name")
     parent = Path(args.out)
     if parent.exists() and not parent.is_dir():
         raise InputError(f"--out: must be a folder (or not exist yet), got the file {parent}")
@@ -35,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         final = parent / f"{stamp}-{suffix}"
     work = Path(tempfile.mkdtemp(prefix=".partial-", dir=parent))
     try:
-        _job(work)
+        _job(work, scene, args.np, closures)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
@@ -50,8 +70,22 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _job(outdir: Path) -> None:
-    """The job itself: until the direct simulation lands, the macro demo."""
-    from pyfold import demo
+def _job(outdir: Path, scene: Path, ranks: int, closures: tuple[str, ...]) -> None:
+    """Simulate the scene, fit C_I per closure, judge closures, write figures and data."""
+    from pyfold import pipeline
 
-    demo.main(outdir)
+    print(f"pyfold main: 1/3 direct simulation of {scene}")
+    run_path = pipeline.run_scene(scene, outdir / "run.h5", ranks=ranks)
+    print("pyfold main: 2/3 fitting C_I of Folgar-Tucker per closure and judging closures against the run's a4")
+    chain = pipeline.fit_and_compare(run_path, outdir, closures=closures)
+    results = pipeline.results_dataset(chain)
+    results.attrs["scene"] = str(scene)
+    results.to_netcdf(outdir / "results.nc", engine="h5netcdf")
+    summary = [f"scene: {scene}", f"run: {run_path.name}", "", pipeline.summary_table(chain.fits, chain.closure_errors)]
+    if STOKES_SCENE.is_file() and scene == DEFAULT_SCENE:
+        print(f"pyfold main: 3/3 small Stokes scene {STOKES_SCENE.name} (fibres coupled through the fluid)")
+        stokes_path = pipeline.run_scene(STOKES_SCENE, outdir / "stokes_run.h5", ranks=ranks)
+        summary += ["", pipeline.stokes_summary(stokes_path)]
+    else:
+        print("pyfold main: 3/3 skipped (no Stokes scene with a custom --scene)")
+    (outdir / "summary.txt").write_text("\n".join(summary) + "\n")

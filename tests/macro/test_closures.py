@@ -223,7 +223,7 @@ def test_resolve_gives_uniform_two_argument_callables():
 def test_tabulated_a4_interpolates_linearly_and_holds_end_values():
     times = jnp.array([0.0, 1.0, 3.0])
     series = jnp.stack([T.isotropic_a4(3), T.aligned_a4(jnp.array([1.0, 0, 0])), T.aligned_a4(jnp.array([0, 1.0, 0]))])
-    tab = C.TabulatedA4(times, series)
+    tab = C.TabulatedA4(times, series, method="linear")
     assert C.resolve(tab) is tab
     a2 = T.isotropic_a2(3)
     np.testing.assert_allclose(tab(a2, 0.25), 0.75 * series[0] + 0.25 * series[1], atol=1e-15)
@@ -240,3 +240,28 @@ def test_tabulated_a4_interpolates_linearly_and_holds_end_values():
         C.TabulatedA4(jnp.array([0.0, 0.0, 1.0]), series)
     with pytest.raises(InputError, match="a4_series"):
         C.TabulatedA4(times, series[:2])
+    with pytest.raises(InputError, match="method"):
+        C.TabulatedA4(times, series, method="spline")
+
+
+def test_tabulated_a4_cubic_is_exact_for_quadratics_and_third_order():
+    """Cubic Hermite with three-point slopes reproduces any quadratic in time exactly
+    on a non-uniform grid, and converges at order 3 for a smooth history."""
+    base = [T.isotropic_a4(3), T.aligned_a4(jnp.array([1.0, 0, 0])), T.aligned_a4(jnp.array([0.6, 0.8, 0]))]
+    times = jnp.array([0.0, 0.3, 1.0, 1.2, 2.0])
+    series = jnp.stack([base[0] + t * base[1] + t**2 * base[2] for t in times])
+    tab = C.TabulatedA4(times, series)
+    a2 = T.isotropic_a2(3)
+    for t in (0.1, 0.65, 1.1, 1.9):
+        np.testing.assert_allclose(tab(a2, t), base[0] + t * base[1] + t**2 * base[2], atol=1e-13)
+
+    def max_error(n):
+        grid = jnp.linspace(0.0, 2.0, n)
+        tab = C.TabulatedA4(grid, jnp.stack([jnp.sin(3 * t) * base[1] for t in grid]))
+        probe = jnp.linspace(0.0, 2.0, 397)
+        approx = jax.vmap(lambda t: tab(a2, t)[0, 0, 0, 0])(probe)
+        return float(jnp.max(jnp.abs(approx - jnp.sin(3 * probe))))
+
+    errors = [max_error(n) for n in (21, 41, 81)]
+    orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+    assert np.all(orders > 2.7), (errors, orders)

@@ -1,0 +1,225 @@
+"""The multi-scale chain of the README's main job, as one function.
+
+    scene ─► direct simulation (fold_run) ─► a2(t), a4(t)
+          ─► fit C_I of Folgar–Tucker per closure (and with the simulation's own a4)
+          ─► closures judged against the simulation's a4
+          ─► figures, a NetCDF of the results, a text summary
+
+Why fit with several closures: the fitted ``C_I`` depends on the closure used
+(physics.md §6), so the table reports one value per closure, plus the value
+obtained with the "exact" closure (the simulation's own ``a4``), which isolates
+what the fibre–fibre interactions do from what a closure approximation does.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import xarray as xr
+
+from pyfold.errors import InputError, PyfoldError
+
+#: Closures fitted and judged by default (a representative spread: the classic
+#: hybrid, the two best orthotropic fits, the exact closure for Jeffery flows).
+DEFAULT_CLOSURES: tuple[str, ...] = ("exact", "fec", "ibof", "orw3", "hybrid", "quadratic")
+
+#: Folgar–Tucker starting guess of C_I for every fit (order of the published
+#: values, physics.md §6); bounds C_I >= 0 come from pyfold.fit.
+CI_START = 1e-3
+
+
+@dataclass
+class ChainResult:
+    """What :func:`fit_and_compare` produced."""
+
+    run_path: Path
+    fits: xr.Dataset
+    closure_errors: xr.Dataset
+    figures: list[Path] = field(default_factory=list)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def run_scene(scene: Path, out: Path, ranks: int = 1) -> Path:
+    """Run a scene with the direct simulation (``pyfold run``); returns the result file."""
+    from pyfold.cli import main as cli_main
+
+    argv = ["run", str(scene), "-o", str(out), "--np", str(ranks)]
+    status = cli_main(argv)
+    if status == 2:
+        raise InputError(f"scene {scene} was rejected (see the message above)")
+    if status != 0:
+        raise PyfoldError(f"the direct simulation of {scene} failed (status {status}); partial results in {out}")
+    return out
+
+
+def velocity_gradient_of(run_path: Path) -> np.ndarray:
+    """The imposed velocity gradient ``L_ij = ∂u_i/∂x_j`` [1/s] stored in a run file."""
+    from pyfold.run_file import read_setup
+
+    G = np.asarray(read_setup(run_path).resolved["velocity_gradient"], dtype=np.float64)
+    return G
+
+
+def shape_factor_of(ds: xr.Dataset) -> float:
+    """The single Jeffery shape factor ξ of the run's fibres (one family required)."""
+    xi = np.unique(np.round(np.asarray(ds["particle_xi"].values), 12))
+    if xi.size != 1:
+        raise InputError(
+            f"particle_xi: the C_I fit needs one fibre shape (one value of xi), the run has {xi.size}: {xi}"
+        )
+    return float(xi[0])
+
+
+def fit_ci_per_closure(ds: xr.Dataset, L: np.ndarray, closures: Sequence[str], xi: float) -> xr.Dataset:
+    """Fit Folgar–Tucker's ``C_I`` to the run's ``a2(t)`` once per closure.
+
+    Returns a Dataset over ``closure`` with ``ci``, ``ci_stderr``, ``residual_rms``,
+    ``success`` and the fitted ``a2_fit(closure, time, i, j)``.
+    """
+    from pyfold.fit import fit_parameters
+    from pyfold.models import FolgarTucker, solve_orientation
+
+    dim = ds.sizes["i"]
+    data = xr.Dataset(
+        {"a2": (("time", "i", "j"), np.asarray(ds["a2"].values)),
+         "a4": (("time", "i", "j", "k", "l"), np.asarray(ds["a4"].values))},
+        coords={"time": np.asarray(ds["time"].values)},
+    )
+    data["time"].attrs["units"] = "s"
+    L = np.asarray(L)[:dim, :dim]
+    rows = []
+    for name in closures:
+        model = FolgarTucker(ci=CI_START, xi=xi, closure="quadratic" if name == "exact" else name, dim=dim)
+        t0 = time.perf_counter()
+        result = fit_parameters(data, model, params=("ci",), L=L, closure=name)
+        solution = solve_orientation(result.model, data["a2"].values[0], L, data["time"].values, throw=False)
+        rows.append(dict(closure=name, ci=result.values["ci"], ci_stderr=result.stderr["ci"],
+                         residual_rms=result.residual_rms, success=result.success,
+                         a2_fit=np.asarray(solution.a2), seconds=time.perf_counter() - t0))
+    out = xr.Dataset(
+        {
+            "ci": ("closure", [r["ci"] for r in rows], {"units": "1", "long_name": "fitted Folgar-Tucker C_I"}),
+            "ci_stderr": ("closure", [r["ci_stderr"] for r in rows], {"units": "1", "long_name": "standard error of C_I"}),
+            "residual_rms": ("closure", [r["residual_rms"] for r in rows],
+                             {"units": "1", "long_name": "RMS of a2 residuals at the optimum"}),
+            "success": ("closure", np.array([r["success"] for r in rows], dtype=np.int8),
+                        {"long_name": "fit converged (1) or not (0)"}),
+            "a2_fit": (("closure", "time", "i", "j"), np.stack([r["a2_fit"] for r in rows]),
+                       {"units": "1", "long_name": "a2 of Folgar-Tucker at the fitted C_I"}),
+        },
+        coords={"closure": list(closures), "time": data["time"].values},
+    )
+    out.attrs["xi"] = xi
+    out.attrs["model"] = "Folgar-Tucker (Folgar & Tucker 1984), C_I fitted, xi from the run's fibres"
+    return out
+
+
+def fit_and_compare(run_path: Path, outdir: Path, closures: Sequence[str] = DEFAULT_CLOSURES,
+                    quiet: bool = False) -> ChainResult:
+    """The macro half of the chain on a finished run: fits, closure test, figures."""
+    from pyfold.closure_check import closure_errors
+    from pyfold.runs import open_run
+
+    ds = open_run(run_path)
+    L = velocity_gradient_of(run_path)
+    xi = shape_factor_of(ds)
+    seconds = {}
+    t0 = time.perf_counter()
+    fits = fit_ci_per_closure(ds, L, closures, xi)
+    seconds["fit"] = time.perf_counter() - t0
+    judged = [c for c in closures if c != "exact"]
+    errors = closure_errors(ds, judged, velocity_gradient=L)
+    result = ChainResult(run_path=run_path, fits=fits, closure_errors=errors, seconds=seconds)
+    result.figures = _figures(ds, fits, errors, L, outdir)
+    if not quiet:
+        print(summary_table(fits, errors))
+    return result
+
+
+def summary_table(fits: xr.Dataset, errors: xr.Dataset) -> str:
+    """Plain-text table: C_I per closure and the closure's a4:D error against the run."""
+    lines = [f"{'closure':<10} {'C_I':>11} {'± s.e.':>10} {'a2 RMS':>9} {'a4:D error':>11}"]
+    for name in fits["closure"].values:
+        ci = float(fits["ci"].sel(closure=name))
+        se = float(fits["ci_stderr"].sel(closure=name))
+        rms = float(fits["residual_rms"].sel(closure=name))
+        err = (float(errors["mean_error_contracted"].sel(closure=name))
+               if name in errors["closure"].values else 0.0)
+        flag = "" if int(fits["success"].sel(closure=name)) else "  (fit did not converge)"
+        lines.append(f"{name:<10} {ci:11.3e} {se:10.1e} {rms:9.1e} {err:11.2e}{flag}")
+    lines.append("a4:D error: time mean of ||(closure(a2) - a4):D|| / ||a4:D|| against the simulation's own a4")
+    return "\n".join(lines)
+
+
+def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray, outdir: Path) -> list[Path]:
+    from matplotlib.figure import Figure
+
+    outdir.mkdir(parents=True, exist_ok=True)
+    rate = float(np.sqrt(2.0 * np.sum((0.5 * (L + L.T)) ** 2))) or 1.0
+    strain = np.asarray(ds["time"].values) * rate
+    a2 = np.asarray(ds["a2"].values)
+    paths = []
+
+    fig = Figure(figsize=(10, 3.6), layout="constrained")
+    axes = fig.subplots(1, 3)
+    for ax, (i, j) in zip(axes, [(0, 0), (1, 1), (0, 1)]):
+        ax.plot(strain, a2[:, i, j], "k.", ms=3, label="direct simulation")
+        for name in fits["closure"].values:
+            ax.plot(strain, fits["a2_fit"].sel(closure=name).values[:, i, j], lw=1.2,
+                    label=f"FT {name}, C_I={float(fits['ci'].sel(closure=name)):.2g}")
+        ax.set_xlabel("shear strain γ̇t")
+        ax.set_ylabel(f"a{i + 1}{j + 1}")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, frameon=False)
+    fig.suptitle("Direct simulation vs Folgar–Tucker with the fitted C_I, per closure", fontsize=10)
+    paths.append(outdir / "a2_dns_vs_fitted_ft.png")
+    fig.savefig(paths[-1], dpi=130)
+
+    fig = Figure(figsize=(10, 3.8), layout="constrained")
+    left, right = fig.subplots(1, 2)
+    for name in errors["closure"].values:
+        left.semilogy(strain, np.maximum(errors["error_contracted"].sel(closure=name).values, 1e-16), lw=1.2, label=name)
+    left.set_xlabel("shear strain γ̇t")
+    left.set_ylabel("||(closure(a2) − a4):D|| / ||a4:D||")
+    left.grid(alpha=0.3, which="both")
+    if len(errors["closure"]):
+        left.legend(fontsize=7, frameon=False)
+    names = list(fits["closure"].values)
+    right.bar(range(len(names)), fits["ci"].values, yerr=fits["ci_stderr"].values, capsize=3, color="C0")
+    right.set_xticks(range(len(names)), names, rotation=30)
+    right.set_ylabel("fitted C_I")
+    right.grid(alpha=0.3, axis="y")
+    fig.suptitle("Closures against the simulation's own a4 (left); fitted C_I per closure (right)", fontsize=10)
+    paths.append(outdir / "closures_vs_dns.png")
+    fig.savefig(paths[-1], dpi=130)
+    return paths
+
+
+def stokes_summary(run_path: Path) -> str:
+    """Summary lines of a Stokes run: effective viscosity and solver records."""
+    from pyfold.runs import open_run
+
+    ds = open_run(run_path)
+    lines = [f"Stokes run {run_path.name}: status {ds.attrs.get('status', '?')}"]
+    if "effective_viscosity" in ds:
+        eta = np.asarray(ds["effective_viscosity"].values)
+        eta_f = float(ds.attrs.get("viscosity", 1.0))
+        lines.append(f"  effective viscosity / fluid viscosity: mean {np.nanmean(eta) / eta_f:.4f} "
+                     f"(min {np.nanmin(eta) / eta_f:.4f}, max {np.nanmax(eta) / eta_f:.4f})")
+    for name in ("stokes_iterations", "stokes_residual", "rigidity_residual_max"):
+        if name in ds:
+            values = np.asarray(ds[name].values)
+            lines.append(f"  {name}: median {np.nanmedian(values):.3g}, max {np.nanmax(values):.3g}")
+    return "\n".join(lines)
+
+
+def results_dataset(chain: ChainResult) -> xr.Dataset:
+    """One Dataset with the fits (over ``closure``) and the closure errors (over
+    ``judged_closure``: the data-driven "exact" closure is fitted, not judged)."""
+    errors = chain.closure_errors.rename(closure="judged_closure")
+    out = xr.merge([chain.fits, errors], join="outer", compat="override")
+    out.attrs.update(format="pyfold.chain", format_version="1.0", run=chain.run_path.name)
+    return out
