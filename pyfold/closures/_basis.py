@@ -20,15 +20,19 @@ def sym_product(A: jax.Array, B: jax.Array) -> jax.Array:
 
     Either argument may be the identity of shape ``(d, d)``; leading axes broadcast.
     """
-    terms = (
-        jnp.einsum("...ij,...kl->...ijkl", A, B)
-        + jnp.einsum("...ik,...jl->...ijkl", A, B)
-        + jnp.einsum("...il,...jk->...ijkl", A, B)
-        + jnp.einsum("...kl,...ij->...ijkl", A, B)
-        + jnp.einsum("...jl,...ik->...ijkl", A, B)
-        + jnp.einsum("...jk,...il->...ijkl", A, B)
-    )
-    return terms / 6.0
+    # The six pairings are index permutations of the single outer product
+    # T_ijkl = A_ij B_kl: A_ik B_jl = T_ikjl, A_il B_jk = T_iljk, A_kl B_ij = T_klij,
+    # A_jl B_ik = T_jlik, A_jk B_il = T_jkil. One product and five transposes compile
+    # and run far cheaper than six products.
+    t = jnp.einsum("...ij,...kl->...ijkl", A, B)
+    n = t.ndim - 4
+    lead = tuple(range(n))
+
+    def perm(*axes):  # out[i, j, k, l] = t[axes applied to (i, j, k, l)]
+        return jnp.transpose(t, lead + tuple(n + a for a in axes))
+
+    # out_ijkl = t_ikjl -> input axes (i, k, j, l) come from output axes (0, 2, 1, 3), etc.
+    return (t + perm(0, 2, 1, 3) + perm(0, 2, 3, 1) + perm(2, 3, 0, 1) + perm(2, 0, 3, 1) + perm(2, 0, 1, 3)) / 6.0
 
 
 def from_principal(principal: jax.Array, vectors: jax.Array) -> jax.Array:
@@ -57,10 +61,13 @@ def from_principal(principal: jax.Array, vectors: jax.Array) -> jax.Array:
     d = principal.shape[-1]
     eye = jnp.eye(d, dtype=principal.dtype)
     weight = principal * (1.0 - eye) + principal * eye / 3.0
-    t1 = jnp.einsum("...mn,...im,...jm,...kn,...ln->...ijkl", weight, e, e, e, e)
-    t2 = jnp.einsum("...mn,...im,...jn,...km,...ln->...ijkl", weight, e, e, e, e)
-    t3 = jnp.einsum("...mn,...im,...jn,...kn,...lm->...ijkl", weight, e, e, e, e)
-    return t1 + t2 + t3
+    # t1 = sum_mn weight_mn (e_m e_m)(e_n e_n); the other two arrangements are its
+    # index permutations t1_ikjl and t1_iljk (one product, two transposes).
+    proj = jnp.einsum("...im,...jm->...mij", e, e)
+    t1 = jnp.einsum("...mn,...mij,...nkl->...ijkl", weight, proj, proj)
+    n = t1.ndim - 4
+    lead = tuple(range(n))
+    return t1 + jnp.transpose(t1, lead + (n, n + 2, n + 1, n + 3)) + jnp.transpose(t1, lead + (n, n + 2, n + 3, n + 1))
 
 
 def principal_from_offdiagonal(values: jax.Array, off: jax.Array) -> jax.Array:

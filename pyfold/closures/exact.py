@@ -26,13 +26,22 @@ where ``S`` is the full symmetrisation. These are the matrix forms of the Carlso
 ``A_iijj = (c_i a_j - c_j a_i) / (2 (c_i - c_j))``); they are evaluated by a
 double-exponential (sinh) quadrature in ``log s`` (129 nodes), accurate to ~1e-14 for
 valid a2 and exact for singular ``C`` (aligned or planar states). The inverse
-problem a2 -> C is solved with ``C = M^2`` (``M`` coaxial with a2, ``tr M = 1``; in
-2-D ``M = a2`` exactly, in 3-D ``M ~ a2``) by a fixed number of Gauss-Newton steps on
+problem a2 -> C is solved with ``C = M^2`` (``M`` coaxial with a2, ``tr M = 1``). In
+2-D ``M = a2`` exactly (planar ACG: ``a_i = sqrt(c_i) / (sqrt(c_1) + sqrt(c_2))``) and
+is used directly; in 3-D ``M ~ a2`` starts a fixed number of Gauss-Newton steps on
 the principal values in the (derivative-free) principal frame of a2, followed by
 one implicit-function step on all components that carries the exact derivative
 (rotation equivariance makes the fixed frame harmless, also at repeated
 eigenvalues). The same formulas hold in 2-D, where the result reduces to the planar
 natural closure (``A_1122 = a1 a2 / 2``).
+
+Derivative on the boundary. Where a2 has a zero eigenvalue (aligned fibres, planar
+states in 3-D) only one-sided derivatives exist, ``a2`` being ~ ``sqrt(c)`` there. The
+values stay exact, and the derivative finite, but it is *not* that one-sided
+derivative: in 3-D it comes out of the damped normal equations below, in 2-D out of
+the quadrature at singular ``C``, and in both it changes by O(1) under round-off
+perturbations of a2 (measured). Elsewhere it is exact (checked against central
+differences in the tests).
 """
 from __future__ import annotations
 
@@ -52,8 +61,8 @@ _W = _H * _A * np.cosh(_t) * _S
 NEWTON_STEPS = 10
 #: Relative Levenberg-Marquardt damping of the Gauss-Newton normal matrix. It only
 #: matters where J^T J is singular (a zero eigenvalue of a2): there the value of the
-#: closure is still exact, but its derivative along that eigenvalue is set to zero
-#: (only a one-sided derivative exists on that boundary of the admissible set).
+#: closure is still exact, but its derivative is finite and not meaningful (see the
+#: module notes on the boundary).
 DAMPING = 1e-12
 
 
@@ -99,6 +108,15 @@ def acg_a4(c: jax.Array) -> jax.Array:
     return 3.0 * jnp.einsum("n,nijkl->ijkl", jnp.asarray(_W * _S) * g, sym_product(k, k))
 
 
+def _acg_a2_principal(c: jax.Array) -> jax.Array:
+    """Principal values of :func:`acg_a2` for a *diagonal* covariance ``diag(c)``:
+    ``a_i = int g(s) c_i / (1 + 2 s c_i) ds``, ``g = prod_j (1 + 2 s c_j)^(-1/2)``.
+    Elementwise, so the Gauss-Newton iteration below is cheap to compile and run."""
+    q = 1.0 + 2.0 * jnp.asarray(_S)[:, None] * c[None, :]
+    g = jnp.prod(q, axis=-1) ** -0.5
+    return jnp.einsum("n,nd->d", jnp.asarray(_W) * g, c / q)
+
+
 def _unpack(x: jax.Array, d: int) -> jax.Array:
     iu = np.triu_indices(d)
     m = jnp.zeros((d, d), dtype=x.dtype).at[iu].set(x)
@@ -125,9 +143,33 @@ def _normal_matrix(j: jax.Array) -> jax.Array:
     return jtj + DAMPING * jnp.trace(jtj) / jtj.shape[0] * jnp.eye(jtj.shape[0])
 
 
+def _solve_m(target: jax.Array, diag_t: jax.Array) -> jax.Array:
+    """``M`` (C = M^2, tr M = 1) with ``acg_a2(M^2) = target``, in the principal frame of
+    ``target`` (forward value diagonal); its derivative is the implicit-function one."""
+    d = target.shape[-1]
+    iu = np.triu_indices(d)
+    # Gauss-Newton for the principal values m of M, sum(m) = 1.
+    fixed = jax.lax.stop_gradient(diag_t)
+
+    def residual_diag(m):
+        return jnp.concatenate([_acg_a2_principal(m * m) - fixed, jnp.sum(m)[None] - 1.0])
+
+    def step(_, m):
+        j = jax.jacfwd(residual_diag)(m)
+        return m - jnp.linalg.solve(_normal_matrix(j), j.T @ residual_diag(m))
+
+    m = jax.lax.stop_gradient(jax.lax.fori_loop(0, NEWTON_STEPS, step, fixed))
+    # Implicit-function step on the full symmetric system: zero at the root, derivative
+    # -(J^T J)^-1 J^T dR/d(target).
+    x = jnp.diag(m)[iu]
+    j = jax.lax.stop_gradient(jax.jacfwd(_residual)(x, jax.lax.stop_gradient(target)))
+    corr = _unpack(jnp.linalg.solve(_normal_matrix(j), j.T @ _residual(x, target)), d)
+    corr_diag = jnp.diagonal(corr)
+    return jnp.diag(m - corr_diag) - _zero_value(corr - jnp.diag(corr_diag))
+
+
 def _fec_single(a2: jax.Array) -> jax.Array:
     d = a2.shape[-1]
-    iu = np.triu_indices(d)
     a2 = 0.5 * (a2 + a2.T)
     # Work in the principal frame of a2, held fixed (no derivative): the map is
     # rotation-equivariant, a4(a2) = R . F(R^T a2 R) for *any* fixed rotation R, so the
@@ -141,24 +183,13 @@ def _fec_single(a2: jax.Array) -> jax.Array:
     diag_t = jnp.diagonal(target)
     target = jnp.diag(diag_t) + _zero_value(target - jnp.diag(diag_t))
 
-    # Gauss-Newton for the principal values m of M (C = M^2), sum(m) = 1.
-    fixed = jax.lax.stop_gradient(diag_t)
-
-    def residual_diag(m):
-        return jnp.concatenate([jnp.diagonal(acg_a2(jnp.diag(m * m))) - fixed, jnp.sum(m)[None] - 1.0])
-
-    def step(_, m):
-        j = jax.jacfwd(residual_diag)(m)
-        return m - jnp.linalg.solve(_normal_matrix(j), j.T @ residual_diag(m))
-
-    m = jax.lax.stop_gradient(jax.lax.fori_loop(0, NEWTON_STEPS, step, fixed))
-    # Implicit-function step on the full symmetric system: zero at the root, derivative
-    # -(J^T J)^-1 J^T dR/d(target).
-    x = jnp.diag(m)[iu]
-    j = jax.lax.stop_gradient(jax.jacfwd(_residual)(x, jax.lax.stop_gradient(target)))
-    corr = _unpack(jnp.linalg.solve(_normal_matrix(j), j.T @ _residual(x, target)), d)
-    corr_diag = jnp.diagonal(corr)
-    m_final = jnp.diag(m - corr_diag) - _zero_value(corr - jnp.diag(corr_diag))
+    if d == 2:
+        # In 2-D the angular central Gaussian has a_i = sqrt(c_i) / (sqrt(c_1) + sqrt(c_2))
+        # in its principal frame, so M = a2 exactly (C = a2^2): no inversion needed, and
+        # the derivative of every component is carried by ``target`` itself.
+        m_final = target
+    else:
+        m_final = _solve_m(target, diag_t)
     a4_frame = acg_a4(m_final @ m_final)
     return jnp.einsum("ia,jb,kc,ld,abcd->ijkl", v, v, v, v, a4_frame)
 
