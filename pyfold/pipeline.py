@@ -146,10 +146,10 @@ def summary_table(fits: xr.Dataset, errors: xr.Dataset) -> str:
         ci = float(fits["ci"].sel(closure=name))
         se = float(fits["ci_stderr"].sel(closure=name))
         rms = float(fits["residual_rms"].sel(closure=name))
-        err = (float(errors["mean_error_contracted"].sel(closure=name))
-               if name in errors["closure"].values else 0.0)
+        err = (f"{float(errors['mean_error_contracted'].sel(closure=name)):11.2e}"
+               if name in errors["closure"].values else f"{'(data)':>11}")
         flag = "" if int(fits["success"].sel(closure=name)) else "  (fit did not converge)"
-        lines.append(f"{name:<10} {ci:11.3e} {se:10.1e} {rms:9.1e} {err:11.2e}{flag}")
+        lines.append(f"{name:<10} {ci:11.3e} {se:10.1e} {rms:9.1e} {err}{flag}")
     lines.append("a4:D error: time mean of ||(closure(a2) - a4):D|| / ||a4:D|| against the simulation's own a4")
     return "\n".join(lines)
 
