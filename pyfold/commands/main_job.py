@@ -19,8 +19,14 @@ from pathlib import Path
 from pyfold.errors import InputError
 from pyfold.pipeline import DEFAULT_CLOSURES
 
-#: Scenes bundled with pyfold (data/scenes in the source tree).
-SCENES = Path(__file__).resolve().parents[2] / "data" / "scenes"
+def _bundled_scenes() -> Path:
+    """data/scenes of the source tree (editable install), or pyfold/scenes of a wheel."""
+    installed = Path(__file__).resolve().parents[1] / "scenes"
+    return installed if installed.is_dir() else Path(__file__).resolve().parents[2] / "data" / "scenes"
+
+
+#: Scenes bundled with pyfold.
+SCENES = _bundled_scenes()
 DEFAULT_SCENE = SCENES / "default.toml"
 STOKES_SCENE = SCENES / "stokes_small.toml"
 
