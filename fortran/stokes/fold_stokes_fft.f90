@@ -16,8 +16,12 @@
 !> M^-1 r = P r / (eta0 |k|^2), exact for a uniform eta (Green operator of
 !> Moulinec & Suquet 1998, Comput. Methods Appl. Mech. Eng. 157:69; CG variant of
 !> Zeman, Vondrejc, Novak & Marek 2010, J. Comput. Phys. 229:8065). One
-!> iteration = B (nc c2r FFTs), 2 eta (pointwise), B^H (nc r2c FFTs): 12 real
-!> 3-D FFTs in 3-D, 6 in 2-D.
+!> iteration = B (c2r FFTs), 2 eta (pointwise), B^H (r2c FFTs). The CG iterates
+!> are divergence-free (kv . p = 0 on every kept mode), so the strain is traceless
+!> and so is the stress 2 eta eps (eta is a scalar field): eps_33 = -eps_11 - eps_22
+!> and sigma_33 = -sigma_11 - sigma_22 pointwise. Only the 5 (2-D: 2) independent
+!> components are transformed: 10 real 3-D FFTs per iteration in 3-D (4 in 2-D)
+!> instead of 12 (6).
 !> Wavevectors of the skewed lattice are k = 2 pi A^-T m. Derivative schemes:
 !>  * FOLD_DERIV_SPECTRAL: d = i k; velocity and strain at voxel centres. Every
 !>    mode with a Nyquist index is removed from the unknowns (on even grids its
@@ -30,6 +34,11 @@
 !>    operator keeps the closed form with the real vector q = A^-T rho. No
 !>    Gibbs ringing at the particle surface; the zero-energy (hourglass) modes
 !>    with >= 2 Nyquist indices are removed.
+!> Both schemes have d = i phase kv with a real vector kv and a unit phase (1 for the
+!> spectral one). The solver works with the staggered variable u' = i phase u^
+!> (a unitary, mode-wise change of variable that commutes with P): then
+!> B u = sym(kv (x) u'), (B^H sigma)' = kv . sigma, and every per-mode operation is
+!> real x complex. The velocity at the voxel centres is u^ avg = -i cosprod u'.
 !> Reference viscosity: PCG iterates are invariant under a scalar rescaling of
 !> the preconditioner, so eta0 does not change the iteration count (unlike the
 !> fixed-point scheme, whose optimum is (eta_min + eta_max)/2). We take the
@@ -86,20 +95,22 @@ module fold_stokes_fft
       integer(ip) :: dim = 3, nc = 6
       !> Component pairs (11, 22, 33, 12, 13, 23) or (11, 22, 12)
       integer(ip) :: ci(6) = 0, cj(6) = 0
+      !> Strain components transformed in a CG iteration (traceless: 33 or 22 dropped)
+      integer(ip) :: ncg = 5, cg_comp(5) = 0
       !> Strain/stress work fields (nc); after a solve: strain of u~ if requested
       type(fft_field_t), allocatable :: work(:)
       !> Viscosity at voxel centres [Pa s]
       type(fft_field_t) :: eta
       !> Velocity u~ at voxel centres after stokes_fft_velocity (dim fields) [m/s]
       type(fft_field_t), allocatable :: vel(:)
-      !> Fourier coefficients (unnormalised FFT) of u~ and the CG vectors (nxh, n2l, n3l, dim)
+      !> Staggered Fourier coefficients i phase u^ (unnormalised FFT) of u~ and the CG vectors (nxh, n2l, n3l, dim)
       complex(dp), allocatable :: x(:, :, :, :), r(:, :, :, :), p(:, :, :, :), q(:, :, :, :)
       !> Real derivative vector q of each mode (dim, nxh, n2l, n3l) [1/m]
       real(dp), allocatable :: kv(:, :, :, :)
       !> 1/|q|^2, zero on removed modes (mean, Nyquist/hourglass) [m^2]
       real(dp), allocatable :: ik2(:, :, :)
-      !> Common phase of the derivative and corner-to-centre average (FD scheme)
-      complex(dp), allocatable :: phase(:, :, :), avg(:, :, :)
+      !> Modulus of the corner-to-centre average (FD scheme; 1 for the spectral one)
+      real(dp), allocatable :: cosprod(:, :, :)
       !> Hermitian weight of each x wavenumber in the half spectrum (1 or 2)
       real(dp), allocatable :: wx(:)
       !> Residual after each iteration of the last solve (history(0) = initial)
@@ -180,10 +191,14 @@ contains
          s%nc = 6
          s%ci = [1, 2, 3, 1, 1, 2]
          s%cj = [1, 2, 3, 2, 3, 3]
+         s%ncg = 5
+         s%cg_comp = [1, 2, 4, 5, 6]
       else
          s%nc = 3
          s%ci = [1, 2, 1, 0, 0, 0]
          s%cj = [1, 2, 2, 0, 0, 0]
+         s%ncg = 2
+         s%cg_comp = [1, 3, 0, 0, 0]
       end if
       allocate (s%work(s%nc), s%vel(s%dim))
       do c = 1, s%nc
@@ -197,7 +212,7 @@ contains
       n2 = s%grid%nl(2)
       n3 = s%grid%nl(3)
       allocate (s%x(nxh, n2, n3, s%dim), s%r(nxh, n2, n3, s%dim), s%p(nxh, n2, n3, s%dim), s%q(nxh, n2, n3, s%dim))
-      allocate (s%kv(s%dim, nxh, n2, n3), s%ik2(nxh, n2, n3), s%phase(nxh, n2, n3), s%avg(nxh, n2, n3))
+      allocate (s%kv(s%dim, nxh, n2, n3), s%ik2(nxh, n2, n3), s%cosprod(nxh, n2, n3))
       allocate (s%wx(nxh), s%history(0:set%max_iter))
       s%x = 0.0_dp
       s%wx = 2.0_dp
@@ -234,8 +249,7 @@ contains
                   do l = 1, dim
                      lat(l) = 2.0_dp*pi*real(merge(m(l) - s%grid%n(l), m(l), 2*m(l) > s%grid%n(l)), dp)
                   end do
-                  s%phase(i, j, k) = 1.0_dp
-                  s%avg(i, j, k) = 1.0_dp
+                  s%cosprod(i, j, k) = 1.0_dp
                   removed = nnyq >= 1
                else
                   cosprod = 1.0_dp
@@ -246,8 +260,7 @@ contains
                         if (l2 /= l) lat(l) = lat(l)*cos(0.5_dp*th(l2))
                      end do
                   end do
-                  s%phase(i, j, k) = exp(iu*0.5_dp*sum(th(1:dim)))
-                  s%avg(i, j, k) = s%phase(i, j, k)*cosprod
+                  s%cosprod(i, j, k) = cosprod
                   removed = nnyq >= 2
                end if
                removed = removed .or. all(m(1:dim) == 0)
@@ -328,9 +341,8 @@ contains
                   s%r(i, j, k, :) = 0.0_dp
                   cycle
                end if
-               ! -conj(d)_j E_ij (2eta)^ with conj(d) = -i conj(phase) kv
-               dc(1:dim) = -iu*conjg(s%phase(i, j, k))*s%kv(:, i, j, k)
-               f(1:dim) = -matmul(s%E(1:dim, 1:dim), dc(1:dim))*s%work(1)%c(i, j, k)
+               ! staggered: i phase (-conj(d)_j E_ij (2eta)^) = -kv_j E_ij (2eta)^
+               f(1:dim) = -matmul(s%E(1:dim, 1:dim), s%kv(:, i, j, k))*s%work(1)%c(i, j, k)
                f(1:dim) = f(1:dim) - s%kv(:, i, j, k)*sum(s%kv(:, i, j, k)*f(1:dim))*s%ik2(i, j, k)
                s%r(i, j, k, :) = f(1:dim)
             end do
@@ -358,15 +370,32 @@ contains
       else
          s%x = 0.0_dp
       end if
-      call precondition(s, s%r, s%p)
-      rz = dot(s, s%r, s%p)
+      ! Preconditioned CG (Hestenes-Stiefel form) with z = M^-1 r never stored. Each
+      ! iteration makes three passes over the spectrum (see cg_direction_strain,
+      ! cg_apply, cg_update_r) around the 2 nc real FFTs: the direction update
+      ! p = z + beta p and the deferred x += alpha p of the previous iteration ride
+      ! on the strain pass, <p, A p> on the operator pass, <r, M^-1 r> on the r update.
+      red = [precond_dot(s, s%r), 0.0_dp]
+      call s%fft%sum_all(red)
+      rz = red(1)
       s%residual = sqrt(max(rz, 0.0_dp)/bb)
       s%history(0) = s%residual
       it = 0
+      alpha = 0.0_dp
+      beta = 0.0_dp
       do while (s%residual > s%set%tol .and. it < s%set%max_iter)
          it = it + 1
-         call apply(s, s%p, s%q)
-         pq = dot(s, s%p, s%q)
+         call cg_direction_strain(s, alpha, beta)
+         do c = 1, s%ncg
+            call s%fft%c2r(s%work(s%cg_comp(c)))
+            ! strain of the unnormalised c2r: 1/N folds into the viscosity
+            call scale_by_field(nx, s%fft%nxp, s%grid%nl(2)*s%grid%nl(3), 2.0_dp/real(grid_total(s%grid), dp), &
+                                s%eta%r, s%work(s%cg_comp(c))%r)
+            call s%fft%r2c(s%work(s%cg_comp(c)))
+         end do
+         red = [cg_apply(s), 0.0_dp]
+         call s%fft%sum_all(red)
+         pq = red(1)
          if (.not. (pq > 0.0_dp)) then
             stat = FOLD_NUMERICAL
             write (errmsg, '(a,i0,a,es10.3)') "stokes_fft_solve: CG breakdown at iteration ", it, ", <p, A p> = ", pq
@@ -374,19 +403,16 @@ contains
             return
          end if
          alpha = rz/pq
-         ! one fused pass: x += alpha p, r -= alpha q, local <r, M^-1 r>
-         rz_new = update_xr(s, alpha)
-         red = [rz_new, 0.0_dp]
+         red = [cg_update_r(s, alpha), 0.0_dp]
          call s%fft%sum_all(red)
          rz_new = red(1)
          beta = rz_new/rz
          rz = rz_new
-         do c = 1, dim
-            s%p(:, :, :, c) = s%r(:, :, :, c)*(s%ik2/s%eta0) + beta*s%p(:, :, :, c)
-         end do
          s%residual = sqrt(max(rz, 0.0_dp)/bb)
          s%history(it) = s%residual
       end do
+      ! the last step along p (deferred to the next direction update)
+      if (it > 0) s%x = s%x + alpha*s%p
       s%iterations = it
       s%have_guess = .true.
       if (.not. (s%residual <= s%set%tol)) then
@@ -408,8 +434,8 @@ contains
       real(dp) :: scale
       scale = 1.0_dp/real(grid_total(s%grid), dp)
       do c = 1, s%dim
-         ! FD: corner velocities averaged to the centre = multiplier avg
-         s%vel(c)%c = s%x(:, :, :, c)*s%avg
+         ! corner velocities averaged to the centre: u^ avg = -i cosprod u' (staggered x)
+         s%vel(c)%c = s%x(:, :, :, c)*((0.0_dp, -1.0_dp)*s%cosprod)
          call s%fft%c2r(s%vel(c))
          s%vel(c)%r = s%vel(c)%r*scale
       end do
@@ -450,7 +476,7 @@ contains
          deallocate (s%fft)
       end if
       if (allocated(s%x)) deallocate (s%x, s%r, s%p, s%q)
-      if (allocated(s%kv)) deallocate (s%kv, s%ik2, s%phase, s%avg)
+      if (allocated(s%kv)) deallocate (s%kv, s%ik2, s%cosprod)
       if (allocated(s%wx)) deallocate (s%wx)
       if (allocated(s%history)) deallocate (s%history)
       s%have_guess = .false.
@@ -464,15 +490,16 @@ contains
       type(stokes_fft_t), intent(inout) :: s
       complex(dp), intent(in) :: u(:, :, :, :)
       integer(ip) :: i, j, k, c
-      complex(dp) :: d(3), uu(3), ph
+      real(dp) :: d(3)
+      complex(dp) :: uu(3)
+      ! staggered variable: B u = sym(kv (x) u')
       if (s%dim == 3) then
          do k = 1, s%grid%nl(3)
             do j = 1, s%grid%nl(2)
                do i = 1, s%fft%nxh
-                  ph = iu*s%phase(i, j, k)
-                  d(1) = ph*s%kv(1, i, j, k)
-                  d(2) = ph*s%kv(2, i, j, k)
-                  d(3) = ph*s%kv(3, i, j, k)
+                  d(1) = s%kv(1, i, j, k)
+                  d(2) = s%kv(2, i, j, k)
+                  d(3) = s%kv(3, i, j, k)
                   uu(1) = u(i, j, k, 1)
                   uu(2) = u(i, j, k, 2)
                   uu(3) = u(i, j, k, 3)
@@ -489,9 +516,8 @@ contains
          do k = 1, s%grid%nl(3)
             do j = 1, s%grid%nl(2)
                do i = 1, s%fft%nxh
-                  ph = iu*s%phase(i, j, k)
-                  d(1) = ph*s%kv(1, i, j, k)
-                  d(2) = ph*s%kv(2, i, j, k)
+                  d(1) = s%kv(1, i, j, k)
+                  d(2) = s%kv(2, i, j, k)
                   uu(1) = u(i, j, k, 1)
                   uu(2) = u(i, j, k, 2)
                   s%work(1)%c(i, j, k) = d(1)*uu(1)
@@ -512,7 +538,8 @@ contains
       complex(dp), intent(in) :: u(:, :, :, :)
       complex(dp), intent(out) :: au(:, :, :, :)
       integer(ip) :: i, j, k, c, nx
-      complex(dp) :: dc(3), f(3)
+      real(dp) :: dc(3)
+      complex(dp) :: f(3)
       real(dp) :: two_over_n
       call strain(s, u)
       nx = s%grid%n(1)
@@ -529,7 +556,8 @@ contains
                   au(i, j, k, :) = 0.0_dp
                   cycle
                end if
-               dc(1:s%dim) = (-iu*conjg(s%phase(i, j, k)))*s%kv(:, i, j, k)
+               ! staggered: (B^H sigma)' = kv . sigma
+               dc(1:s%dim) = s%kv(:, i, j, k)
                if (s%dim == 3) then
                   f(1) = dc(1)*s%work(1)%c(i, j, k) + dc(2)*s%work(4)%c(i, j, k) + dc(3)*s%work(5)%c(i, j, k)
                   f(2) = dc(1)*s%work(4)%c(i, j, k) + dc(2)*s%work(2)%c(i, j, k) + dc(3)*s%work(6)%c(i, j, k)
@@ -566,62 +594,6 @@ contains
       end do
    end subroutine project
 
-   !> z = M^-1 r = r / (eta0 |q|^2) on divergence-free r.
-   subroutine precondition(s, r, z)
-      type(stokes_fft_t), intent(in) :: s
-      complex(dp), intent(in) :: r(:, :, :, :)
-      complex(dp), intent(out) :: z(:, :, :, :)
-      integer(ip) :: c
-      do c = 1, s%dim
-         z(:, :, :, c) = r(:, :, :, c)*(s%ik2/s%eta0)
-      end do
-   end subroutine precondition
-
-   !> Global real inner product of two half-spectrum fields (Hermitian weights).
-   function dot(s, a, b) result(v)
-      type(stokes_fft_t), intent(in) :: s
-      complex(dp), intent(in) :: a(:, :, :, :), b(:, :, :, :)
-      real(dp) :: v
-      real(dp) :: red(2)
-      integer(ip) :: i, j, k, c
-      v = 0.0_dp
-      do c = 1, s%dim
-         do k = 1, size(a, 3)
-            do j = 1, size(a, 2)
-               do i = 1, size(a, 1)
-                  v = v + s%wx(i)*(real(a(i, j, k, c))*real(b(i, j, k, c)) + aimag(a(i, j, k, c))*aimag(b(i, j, k, c)))
-               end do
-            end do
-         end do
-      end do
-      red = [v, 0.0_dp]
-      call s%fft%sum_all(red)
-      v = red(1)
-   end function dot
-
-   !> x += alpha p, r -= alpha q and the local <r, M^-1 r> in one pass.
-   function update_xr(s, alpha) result(v)
-      type(stokes_fft_t), intent(inout) :: s
-      real(dp), intent(in) :: alpha
-      real(dp) :: v
-      integer(ip) :: i, j, k, c
-      complex(dp) :: rr
-      v = 0.0_dp
-      do c = 1, s%dim
-         do k = 1, size(s%r, 3)
-            do j = 1, size(s%r, 2)
-               do i = 1, size(s%r, 1)
-                  s%x(i, j, k, c) = s%x(i, j, k, c) + alpha*s%p(i, j, k, c)
-                  rr = s%r(i, j, k, c) - alpha*s%q(i, j, k, c)
-                  s%r(i, j, k, c) = rr
-                  v = v + s%wx(i)*s%ik2(i, j, k)*(real(rr)**2 + aimag(rr)**2)
-               end do
-            end do
-         end do
-      end do
-      v = v/s%eta0
-   end function update_xr
-
    !> Local <r, M^-1 r> (not yet summed over ranks).
    function precond_dot(s, r) result(v)
       type(stokes_fft_t), intent(in) :: s
@@ -640,5 +612,204 @@ contains
       end do
       v = v/s%eta0
    end function precond_dot
+
+   ! ------------------------------------------------------------------ CG kernels
+   ! Explicit-shape dummies: the compiler sees contiguous, non-aliased arrays and
+   ! vectorises; the 3-D spectral arrays (nxh, n2l, n3l) are passed as (nxh, njk).
+
+   !> x += a_prev p_old; p = M^-1 r + beta p_old; strain of p into work(1:nc)%c.
+   subroutine cg_direction_strain(s, a_prev, beta)
+      type(stokes_fft_t), intent(inout), target :: s
+      real(dp), intent(in) :: a_prev, beta
+      integer(ip) :: nxh, njk
+      nxh = s%fft%nxh
+      njk = s%grid%nl(2)*s%grid%nl(3)
+      if (s%dim == 3) then
+         call direction_strain3(nxh*njk, s%r, s%p, s%x, s%kv, s%ik2, 1.0_dp/s%eta0, a_prev, beta, &
+                                s%work(1)%c, s%work(2)%c, s%work(4)%c, s%work(5)%c, s%work(6)%c)
+      else
+         call direction_strain2(nxh*njk, s%r, s%p, s%x, s%kv, s%ik2, 1.0_dp/s%eta0, a_prev, beta, &
+                                s%work(1)%c, s%work(3)%c)
+      end if
+   end subroutine cg_direction_strain
+
+   !> Traceless strain (11, 22, 12, 13, 23; eps_33 = -eps_11 - eps_22 is not formed).
+   subroutine direction_strain3(n, r, p, x, kv, ik2, inv_eta0, a_prev, beta, w1, w2, w4, w5, w6)
+      integer(ip), intent(in) :: n
+      complex(dp), intent(in) :: r(n, 3)
+      complex(dp), intent(inout) :: p(n, 3), x(n, 3)
+      real(dp), intent(in) :: kv(3, n), ik2(n), inv_eta0, a_prev, beta
+      complex(dp), intent(out) :: w1(n), w2(n), w4(n), w5(n), w6(n)
+      integer(ip) :: m
+      complex(dp) :: p1, p2, p3
+      real(dp) :: z, d1, d2, d3
+      do m = 1, n
+         z = ik2(m)*inv_eta0
+         x(m, 1) = x(m, 1) + a_prev*p(m, 1)
+         x(m, 2) = x(m, 2) + a_prev*p(m, 2)
+         x(m, 3) = x(m, 3) + a_prev*p(m, 3)
+         p1 = z*r(m, 1) + beta*p(m, 1)
+         p2 = z*r(m, 2) + beta*p(m, 2)
+         p3 = z*r(m, 3) + beta*p(m, 3)
+         p(m, 1) = p1
+         p(m, 2) = p2
+         p(m, 3) = p3
+         d1 = kv(1, m)
+         d2 = kv(2, m)
+         d3 = kv(3, m)
+         w1(m) = d1*p1
+         w2(m) = d2*p2
+         w4(m) = 0.5_dp*(d1*p2 + d2*p1)
+         w5(m) = 0.5_dp*(d1*p3 + d3*p1)
+         w6(m) = 0.5_dp*(d2*p3 + d3*p2)
+      end do
+   end subroutine direction_strain3
+
+   !> Traceless strain (11, 12; eps_22 = -eps_11 is not formed).
+   subroutine direction_strain2(n, r, p, x, kv, ik2, inv_eta0, a_prev, beta, w1, w3)
+      integer(ip), intent(in) :: n
+      complex(dp), intent(in) :: r(n, 2)
+      complex(dp), intent(inout) :: p(n, 2), x(n, 2)
+      real(dp), intent(in) :: kv(2, n), ik2(n), inv_eta0, a_prev, beta
+      complex(dp), intent(out) :: w1(n), w3(n)
+      integer(ip) :: m
+      complex(dp) :: p1, p2
+      real(dp) :: z, d1, d2
+      do m = 1, n
+         z = ik2(m)*inv_eta0
+         x(m, 1) = x(m, 1) + a_prev*p(m, 1)
+         x(m, 2) = x(m, 2) + a_prev*p(m, 2)
+         p1 = z*r(m, 1) + beta*p(m, 1)
+         p2 = z*r(m, 2) + beta*p(m, 2)
+         p(m, 1) = p1
+         p(m, 2) = p2
+         d1 = kv(1, m)
+         d2 = kv(2, m)
+         w1(m) = d1*p1
+         w3(m) = 0.5_dp*(d1*p2 + d2*p1)
+      end do
+   end subroutine direction_strain2
+
+   !> w(1:nx, :) = c eta(1:nx, :) w(1:nx, :) on padded real fields (nxp, nyz).
+   subroutine scale_by_field(nx, nxp, nyz, c, eta, w)
+      integer(ip), intent(in) :: nx, nxp, nyz
+      real(dp), intent(in) :: c, eta(nxp, nyz)
+      real(dp), intent(inout) :: w(nxp, nyz)
+      integer(ip) :: i, jk
+      do jk = 1, nyz
+         do i = 1, nx
+            w(i, jk) = (c*eta(i, jk))*w(i, jk)
+         end do
+      end do
+   end subroutine scale_by_field
+
+   !> q = P B^H (stress in work(1:nc)%c), zero on removed modes; returns the local <p, q>.
+   function cg_apply(s) result(pq)
+      type(stokes_fft_t), intent(inout), target :: s
+      real(dp) :: pq
+      integer(ip) :: nxh, njk
+      nxh = s%fft%nxh
+      njk = s%grid%nl(2)*s%grid%nl(3)
+      if (s%dim == 3) then
+         pq = apply3(nxh, njk, s%work(1)%c, s%work(2)%c, s%work(4)%c, s%work(5)%c, s%work(6)%c, &
+                     s%kv, s%ik2, s%wx, s%p, s%q)
+      else
+         pq = apply2(nxh, njk, s%work(1)%c, s%work(3)%c, s%kv, s%ik2, s%wx, s%p, s%q)
+      end if
+   end function cg_apply
+
+   !> Traceless stress: sigma_33 = -sigma_11 - sigma_22.
+   function apply3(nxh, njk, w1, w2, w4, w5, w6, kv, ik2, wx, p, q) result(pq)
+      integer(ip), intent(in) :: nxh, njk
+      complex(dp), intent(in) :: w1(nxh, njk), w2(nxh, njk), w4(nxh, njk), w5(nxh, njk), w6(nxh, njk)
+      real(dp), intent(in) :: kv(3, nxh, njk), ik2(nxh, njk), wx(nxh)
+      complex(dp), intent(in) :: p(nxh, njk, 3)
+      complex(dp), intent(out) :: q(nxh, njk, 3)
+      real(dp) :: pq
+      integer(ip) :: i, jk
+      complex(dp) :: f1, f2, f3, t
+      real(dp) :: k1, k2, k3, keep
+      pq = 0.0_dp
+      do jk = 1, njk
+         do i = 1, nxh
+            ! staggered (B^H sigma)' = kv . sigma; removed modes (ik2 = 0) give q = 0
+            keep = merge(1.0_dp, 0.0_dp, ik2(i, jk) > 0.0_dp)
+            k1 = kv(1, i, jk)
+            k2 = kv(2, i, jk)
+            k3 = kv(3, i, jk)
+            f1 = k1*w1(i, jk) + k2*w4(i, jk) + k3*w5(i, jk)
+            f2 = k1*w4(i, jk) + k2*w2(i, jk) + k3*w6(i, jk)
+            f3 = k1*w5(i, jk) + k2*w6(i, jk) - k3*(w1(i, jk) + w2(i, jk))
+            t = (k1*f1 + k2*f2 + k3*f3)*ik2(i, jk)
+            f1 = keep*(f1 - k1*t)
+            f2 = keep*(f2 - k2*t)
+            f3 = keep*(f3 - k3*t)
+            q(i, jk, 1) = f1
+            q(i, jk, 2) = f2
+            q(i, jk, 3) = f3
+            pq = pq + wx(i)*(real(p(i, jk, 1))*real(f1) + aimag(p(i, jk, 1))*aimag(f1) &
+                             + real(p(i, jk, 2))*real(f2) + aimag(p(i, jk, 2))*aimag(f2) &
+                             + real(p(i, jk, 3))*real(f3) + aimag(p(i, jk, 3))*aimag(f3))
+         end do
+      end do
+   end function apply3
+
+   !> Traceless stress: sigma_22 = -sigma_11.
+   function apply2(nxh, njk, w1, w3, kv, ik2, wx, p, q) result(pq)
+      integer(ip), intent(in) :: nxh, njk
+      complex(dp), intent(in) :: w1(nxh, njk), w3(nxh, njk)
+      real(dp), intent(in) :: kv(2, nxh, njk), ik2(nxh, njk), wx(nxh)
+      complex(dp), intent(in) :: p(nxh, njk, 2)
+      complex(dp), intent(out) :: q(nxh, njk, 2)
+      real(dp) :: pq
+      integer(ip) :: i, jk
+      complex(dp) :: f1, f2, t
+      real(dp) :: k1, k2, keep
+      pq = 0.0_dp
+      do jk = 1, njk
+         do i = 1, nxh
+            keep = merge(1.0_dp, 0.0_dp, ik2(i, jk) > 0.0_dp)
+            k1 = kv(1, i, jk)
+            k2 = kv(2, i, jk)
+            f1 = k1*w1(i, jk) + k2*w3(i, jk)
+            f2 = k1*w3(i, jk) - k2*w1(i, jk)
+            t = (k1*f1 + k2*f2)*ik2(i, jk)
+            f1 = keep*(f1 - k1*t)
+            f2 = keep*(f2 - k2*t)
+            q(i, jk, 1) = f1
+            q(i, jk, 2) = f2
+            pq = pq + wx(i)*(real(p(i, jk, 1))*real(f1) + aimag(p(i, jk, 1))*aimag(f1) &
+                             + real(p(i, jk, 2))*real(f2) + aimag(p(i, jk, 2))*aimag(f2))
+         end do
+      end do
+   end function apply2
+
+   !> r -= alpha q; returns the local <r, M^-1 r>.
+   function cg_update_r(s, alpha) result(rz)
+      type(stokes_fft_t), intent(inout) :: s
+      real(dp), intent(in) :: alpha
+      real(dp) :: rz
+      rz = update_r(s%fft%nxh, s%grid%nl(2)*s%grid%nl(3), s%dim, alpha, s%q, s%ik2, s%wx, s%r)/s%eta0
+   end function cg_update_r
+
+   function update_r(nxh, njk, dim, alpha, q, ik2, wx, r) result(v)
+      integer(ip), intent(in) :: nxh, njk, dim
+      real(dp), intent(in) :: alpha, ik2(nxh, njk), wx(nxh)
+      complex(dp), intent(in) :: q(nxh, njk, dim)
+      complex(dp), intent(inout) :: r(nxh, njk, dim)
+      real(dp) :: v
+      integer(ip) :: i, jk, c
+      complex(dp) :: rr
+      v = 0.0_dp
+      do c = 1, dim
+         do jk = 1, njk
+            do i = 1, nxh
+               rr = r(i, jk, c) - alpha*q(i, jk, c)
+               r(i, jk, c) = rr
+               v = v + wx(i)*ik2(i, jk)*(real(rr)**2 + aimag(rr)**2)
+            end do
+         end do
+      end do
+   end function update_r
 
 end module fold_stokes_fft
