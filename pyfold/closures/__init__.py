@@ -85,6 +85,18 @@ _EXACT_HINT = (
 )
 
 
+#: Published closures deliberately not provided, with the reason and the alternative.
+NOT_PROVIDED: dict[str, str] = {
+    name: (
+        f"the 3-D natural closure {name.upper()} (Verleye & Dupret 1993; Dupret & Verleye 1999) "
+        "is not provided: its fitted coefficient table could not be verified from any available "
+        "source. Use 'fec' (the exact closure it approximates) or 'ore' (VerWeyst's orthotropic "
+        "fit to it); in 2-D, 'natural' is the closed form"
+    )
+    for name in ("nat1", "nat2")
+}
+
+
 def available(dim: int = 3) -> tuple[str, ...]:
     """Names of the closures ``f(a2)`` defined in dimension ``dim`` (2 or 3).
 
@@ -109,6 +121,8 @@ def get_closure(name: str, dim: int = 3) -> Closure:
     key = str(name).strip().lower()
     if key == "exact":
         raise InputError(f"closure {name!r}: {_EXACT_HINT}")
+    if key in NOT_PROVIDED:
+        raise InputError(f"closure {name!r}: {NOT_PROVIDED[key]}")
     if key not in CLOSURES:
         raise InputError(
             f"closure: unknown name {name!r}; allowed: {', '.join(sorted(CLOSURES))}, "

@@ -22,7 +22,9 @@ def natural_2d(a2: jax.Array) -> jax.Array:
     Hence it is exact there, at isotropy and for aligned fibres, and satisfies the
     trace identity exactly (``a.a = a - det(a) I`` in 2-D with ``tr a = 1``).
     The 3-D natural closures (NAT1/NAT2, polynomial coefficients in II and III) are not
-    implemented: no verifiable source of their coefficients was available.
+    implemented: no verifiable source of their coefficients was available (asking for
+    them raises an InputError that points to ``fec``, the exact closure they fit, and
+    ``ore``, VerWeyst's orthotropic fit to it).
     """
     if a2.shape[-1] != 2:
         raise ValueError("natural_2d is the planar closure; a2 must be (..., 2, 2)")

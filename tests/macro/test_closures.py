@@ -201,6 +201,11 @@ def test_registry_names_errors_and_dimensions():
         C.get_closure("linear", dim=4)
     with pytest.raises(InputError, match="not defined for dim=2"):
         C.get_closure("ore", dim=2)
+    for name in ("nat1", "NAT2"):
+        with pytest.raises(InputError, match="not provided.*'fec'.*'ore'"):
+            C.get_closure(name)
+        with pytest.raises(InputError, match="not provided"):
+            C.resolve(name)
     assert C.get_closure("QUADRATIC") is C.get_closure("quadratic")
 
 
