@@ -152,7 +152,7 @@ def test_closure_at_repeated_eigenvalues_is_continuous_or_jumps_as_documented(na
     R = rotation(3)
     jump = max(np.abs(rotate4(R, deg[i]) - deg[i + 2]).max() for i in (0, 1))
     if name in REPEATED_EIGENVALUE_JUMP:
-        assert 1e-6 < jump < REPEATED_EIGENVALUE_JUMP[name], f"{name}: jump {jump:.1e}"
+        assert 1e-5 < jump < REPEATED_EIGENVALUE_JUMP[name], f"{name}: jump {jump:.1e}"
     else:
         assert jump < 1e-12, f"{name}: discontinuous at repeated eigenvalues ({jump:.1e})"
 
