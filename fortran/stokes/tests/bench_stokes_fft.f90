@@ -1,13 +1,26 @@
-!> Benchmark: cost of one CG iteration of the Stokes solver in units of one real
-!> 3-D FFT of the same grid (the floor is 12: 6 c2r + 6 r2c per iteration), and
-!> the wall time per iteration, serial or on MPI slabs (mpirun -np N).
-!> Usage: bench_stokes_fft N [kappa] [repeats]; prints one line per measurement.
+!> Benchmark of the Stokes solver (run through benchmarks/bench_stokes_fft.py).
+!>
+!> Usage: bench_stokes_fft N [kappa] [repeats] [mode] [shape]
+!>   mode "cost" (default): wall time of one CG iteration in units of one real 3-D
+!>     FFT of the same grid, two ways: against a "hot" FFT (r2c + c2r of one field,
+!>     repeated; K's original unit) and against the FFTs as the iteration sees them
+!>     (c2r then r2c over the ncg strain fields in turn). The floor is the number of
+!>     FFTs per iteration (10 in 3-D: 5 traceless strain components back, 5 stress
+!>     components forward). One line per repeat:
+!>       BENCH n= ranks= t_fft= t_fft_seq= t_iter= ratio= ratio_seq= ffts=
+!>   mode "iters": CG iterations from a zero guess to tol 1e-6 (relative
+!>     preconditioned residual); one line: ITERS n= kappa= iterations= residual=
+!> Geometry (shape): "sphere" (default), radius N/8 voxels, or "spheroid", a prolate
+!> spheroid of semi-axes 1/4 and 1/32 (aspect ratio 8; 4 voxels per diameter at
+!> N = 64) along (1, 1, 1)/sqrt(3); binary chi, in a unit cell on a sheared
+!> (Lees-Edwards, offset 0.2) lattice, simple shear, FFTW_MEASURE plans, FFTW-MPI
+!> slabs (mpirun -np P for P ranks).
 program bench_stokes_fft
    use, intrinsic :: iso_c_binding
    use mpi_f08
    use fold_kinds, only: dp, ip, msg_len
-   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, FOLD_PLAN_MEASURE
-   use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create
+   use fold_fft_backend, only: fft_backend_t, FOLD_PLAN_MEASURE
+   use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
    use fold_stokes_fft
    use fold_grid, only: shear_lattice
    implicit none
@@ -16,21 +29,22 @@ program bench_stokes_fft
    type(fft_mpi_t), allocatable :: slab
    type(stokes_fft_t) :: s
    type(stokes_settings_t) :: set
-   type(fft_field_t) :: f
    real(dp), allocatable :: chi(:, :, :)
-   real(dp) :: G(3, 3), t0, t_fft, t_it, x(3)
-   integer :: stat, rank, nranks, rep, nrep, i, j, k, niter
+   real(dp) :: G(3, 3), t0, t_fft, t_seq, t_it, x(3)
+   integer :: stat, rank, nranks, rep, nrep, i, j, k, c
    integer(ip) :: n
    character(len=msg_len) :: msg
-   character(len=32) :: arg
+   character(len=32) :: arg, mode, shape
+   real(dp) :: ax(3), along
 
    call MPI_Init()
-   call fftw_mpi_init()
+   call fft_mpi_start()
    call MPI_Comm_rank(MPI_COMM_WORLD, rank)
    call MPI_Comm_size(MPI_COMM_WORLD, nranks)
    n = 64
    set%kappa = 1.0e3_dp
    nrep = 5
+   mode = "cost"
    if (command_argument_count() >= 1) then
       call get_command_argument(1, arg)
       read (arg, *) n
@@ -43,50 +57,89 @@ program bench_stokes_fft
       call get_command_argument(3, arg)
       read (arg, *) nrep
    end if
+   if (command_argument_count() >= 4) call get_command_argument(4, mode)
+   shape = "sphere"
+   if (command_argument_count() >= 5) call get_command_argument(5, shape)
+   ax = 1.0_dp/sqrt(3.0_dp)
    set%plan_effort = FOLD_PLAN_MEASURE
-   set%tol = 1.0e-14_dp
-   niter = 20
-   set%max_iter = niter
    set%warm_start = .false.
+   if (trim(mode) == "iters") then
+      set%tol = 1.0e-6_dp
+      set%max_iter = 20000
+   else
+      set%tol = 1.0e-14_dp
+      set%max_iter = 20
+   end if
    allocate (slab)
    call fft_mpi_create(slab, MPI_COMM_WORLD, 3, [n, n, n], FOLD_PLAN_MEASURE, stat, msg)
+   call check("fft_mpi_create")
    call move_alloc(slab, fft)
-   call fft%alloc_field(f)
-   f%r = 1.0_dp
    call stokes_fft_init(s, fft, set, stat, msg)
+   call check("stokes_fft_init")
    call stokes_fft_set_lattice(s, shear_lattice([1.0_dp, 1.0_dp, 1.0_dp], 0.2_dp), stat, msg)
-   ! a sphere of radius n/8 voxels
+   call check("stokes_fft_set_lattice")
    allocate (chi(n, s%grid%nl(2), s%grid%nl(3)))
    do k = 1, s%grid%nl(3)
       do j = 1, s%grid%nl(2)
          do i = 1, n
             x = ([i, j, k + s%grid%off(3)] - 0.5_dp)/n - 0.5_dp
-            chi(i, j, k) = merge(1.0_dp, 0.0_dp, norm2(x) < 0.125_dp)
+            if (trim(shape) == "spheroid") then
+               along = dot_product(x, ax)
+               chi(i, j, k) = merge(1.0_dp, 0.0_dp, (along/0.25_dp)**2 + sum((x - along*ax)**2)/0.03125_dp**2 < 1.0_dp)
+            else
+               chi(i, j, k) = merge(1.0_dp, 0.0_dp, norm2(x) < 0.125_dp)
+            end if
          end do
       end do
    end do
    G = 0.0_dp
    G(1, 2) = 1.0_dp
-   do rep = 1, nrep
-      ! one real 3-D FFT: the mean of r2c and c2r of one field, 10 of each
-      call MPI_Barrier(MPI_COMM_WORLD)
-      t0 = MPI_Wtime()
-      do i = 1, 10
-         call s%fft%r2c(s%work(1))
-         call s%fft%c2r(s%work(1))
-      end do
-      call MPI_Barrier(MPI_COMM_WORLD)
-      t_fft = (MPI_Wtime() - t0)/20
-      t0 = MPI_Wtime()
+
+   if (trim(mode) == "iters") then
       call stokes_fft_solve(s, chi, G, stat, msg)
-      call MPI_Barrier(MPI_COMM_WORLD)
-      ! the solve also makes the rhs (1 FFT) and runs s%iterations iterations
-      t_it = (MPI_Wtime() - t0 - t_fft)/max(s%iterations, 1)
-      if (rank == 0) print '(a,i0,a,i0,a,es10.3,a,es10.3,a,f6.2)', "BENCH n=", n, " ranks=", nranks, &
-         " t_fft=", t_fft, " t_iter=", t_it, " ratio=", t_it/t_fft
-   end do
-   call field_free(f)
+      if (rank == 0) print '(a,i0,a,es9.2,a,a,a,i0,a,es10.3)', "ITERS n=", n, " kappa=", set%kappa, " shape=", &
+         trim(shape), " iterations=", s%iterations, " residual=", s%residual
+   else
+      do rep = 1, nrep
+         ! hot: one field forth and back, 10 times
+         call MPI_Barrier(MPI_COMM_WORLD)
+         t0 = MPI_Wtime()
+         do i = 1, 10
+            call s%fft%r2c(s%work(1))
+            call s%fft%c2r(s%work(1))
+         end do
+         call MPI_Barrier(MPI_COMM_WORLD)
+         t_fft = (MPI_Wtime() - t0)/20
+         ! as in an iteration: c2r then r2c of each CG strain field in turn
+         t0 = MPI_Wtime()
+         do c = 1, s%ncg
+            call s%fft%c2r(s%work(s%cg_comp(c)))
+            call s%fft%r2c(s%work(s%cg_comp(c)))
+         end do
+         call MPI_Barrier(MPI_COMM_WORLD)
+         t_seq = (MPI_Wtime() - t0)/(2*s%ncg)
+         t0 = MPI_Wtime()
+         call stokes_fft_solve(s, chi, G, stat, msg)
+         call MPI_Barrier(MPI_COMM_WORLD)
+         ! the solve also makes the viscosity, the rhs (1 FFT) and runs s%iterations iterations
+         t_it = (MPI_Wtime() - t0 - t_fft)/max(s%iterations, 1)
+         if (rank == 0) print '(a,i0,a,i0,a,es10.3,a,es10.3,a,es10.3,a,f6.2,a,f6.2,a,i0)', "BENCH n=", n, &
+            " ranks=", nranks, " t_fft=", t_fft, " t_fft_seq=", t_seq, " t_iter=", t_it, " ratio=", t_it/t_fft, &
+            " ratio_seq=", t_it/t_seq, " ffts=", 2*s%ncg
+      end do
+   end if
    call stokes_fft_destroy(s)
    call fftw_mpi_cleanup()
    call MPI_Finalize()
+
+contains
+
+   subroutine check(what)
+      character(len=*), intent(in) :: what
+      if (stat /= 0 .and. stat /= 2) then
+         if (rank == 0) print '(a)', "bench_stokes_fft: "//what//": "//trim(msg)
+         call MPI_Abort(MPI_COMM_WORLD, 1)
+      end if
+   end subroutine check
+
 end program bench_stokes_fft
