@@ -64,7 +64,10 @@ def open_run(path: str | Path) -> xr.Dataset:
     -------
     xarray.Dataset
         Results over ``time`` (``a2(time, i, j)``, ``a4(time, i, j, k, l)``,
-        ``a2_family(time, family, i, j)``, contact and drift records),
+        ``a2_family(time, family, i, j)``, contact and drift records; Stokes runs
+        also ``stokes_iterations``, ``stokes_residual``, ``rigidity_max``,
+        ``rigidity_mean``, ``stress(time, i, j)`` [Pa] (deviatoric bulk stress) and
+        ``effective_viscosity(time)`` [Pa s]),
         snapshots ``x, p (snapshot, particle, xyz)`` with ``snapshot_time``,
         and the initial state ``initial_x, initial_p (particle, xyz)``,
         ``particle_shape, particle_family, particle_radius, particle_length,
@@ -206,6 +209,12 @@ def run_summary(path: str | Path) -> str:
             gap = gap[np.isfinite(gap) & (np.abs(gap) < 1e300)]
             lines.append(f"smallest gap / alpha over the run: {gap.min():.4g}" if gap.size else
                          "smallest gap / alpha: no particle pairs within range")
+        if "effective_viscosity" in ds and ds.sizes.get("time", 0) > 0:
+            eta = ds["effective_viscosity"].values
+            lines.append(f"Stokes: effective viscosity {eta.mean():.6g} Pa s (mean over the records, "
+                         f"{eta.min():.6g} ... {eta.max():.6g}); CG iterations <= {int(ds['stokes_iterations'].max())}, "
+                         f"residual <= {float(ds['stokes_residual'].max()):.3g}, rigidity <= "
+                         f"{float(ds['rigidity_max'].max()):.3g}")
         if "a2" in ds and ds.sizes.get("time", 0) > 0:
             a2 = ds["a2"].isel(time=-1).values
             t = float(ds["time"].values[-1])

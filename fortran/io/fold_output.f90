@@ -12,7 +12,12 @@
 !> A record summarises the steps since the previous record: minima of gaps,
 !>   maxima of iteration counts, pairs left and drifts, sums of corrections, so
 !>   "min gap >= 0 at every step" can be checked from any output interval.
-!> `/checkpoint`: latest full state (`step`, `time`, `x`, `p`, `v`, `omega`) for
+!> Stokes runs (output_open(..., stokes=.true.)) add `stokes_iterations(time)`,
+!>   `stokes_residual(time)`, `rigidity_max(time)`, `rigidity_mean(time)` (worst over
+!>   the interval), `stress(time,i,j)` [Pa] and `effective_viscosity(time)` [Pa s] (the
+!>   configuration at the record time).
+!> `/checkpoint`: latest full state (`step`, `time`, `x`, `p`, `v`, `omega`; Stokes
+!>   runs: the Adams-Bashforth history `v_hydro_prev`, `omega_hydro_prev`) for
 !>   `fold_run --resume`.
 !> Root attributes written here: `mpi_ranks`, `fortran_creator`, `status`
 !>   ("running", "ok" or "failed: step ..., t = ...: cause"), `steps_done`.

@@ -139,7 +139,7 @@ class StokesSettings(_Table):
     #: grid cells per diameter of the thinnest particle (physics.md section 5: 4-8) [-]
     cells_per_diameter: Annotated[int, Field(ge=1, le=64)] = 4
     #: largest Stokes grid (voxel count) allowed: "auto" falls back to jeffery above it,
-    #: an explicit "stokes" is rejected (default 64^3; memory ~ 0.25 kB per point in 3-D)
+    #: an explicit "stokes" is rejected (default 64^3; memory ~ 0.27 kB per point in 3-D)
     max_grid_points: Annotated[int, Field(ge=8, le=2**31 - 1)] = 64**3
     #: derivative scheme: "fd" (rotated finite differences, Willot 2015; no Gibbs ringing)
     #: or "spectral" (i k, Nyquist modes removed)
