@@ -7,21 +7,26 @@
 module fold_geometry_bind_util
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
-   use fold_cell, only: cell_t, cell_init
+   use fold_cell, only: cell_t, cell_init, cell_set_time, cell_deforming
    use fold_particles, only: particle_set_t, particles_init
    implicit none
    private
    public :: make_cell, make_parts
 contains
-   subroutine make_cell(dim, lengths, walls, G, shear_offset, cell, stat, errmsg)
+   !> Shear cells take the Lees-Edwards offset as given; deforming cells are set to time t.
+   subroutine make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
       integer(ip), intent(in) :: dim, walls
-      real(dp), intent(in) :: lengths(3), G(3, 3), shear_offset
+      real(dp), intent(in) :: lengths(3), G(3, 3), shear_offset, t
       type(cell_t), intent(out) :: cell
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       call cell_init(cell, dim, lengths, walls /= 0, G, stat, errmsg)
       if (stat /= FOLD_OK) return
-      if (.not. cell%walls) cell%shear_offset = shear_offset
+      if (cell_deforming(cell)) then
+         call cell_set_time(cell, t)
+      else if (.not. cell%walls) then
+         cell%shear_offset = shear_offset
+      end if
    end subroutine make_cell
 
    subroutine make_parts(dim, n, shape, radius, length, x, p, parts, stat, errmsg)
@@ -40,48 +45,43 @@ contains
    end subroutine make_parts
 end module fold_geometry_bind_util
 
-subroutine fold_geo_min_image(dim, n, lengths, walls, shear_offset, dx, dxo, stat, errmsg)
+subroutine fold_geo_min_image(dim, n, lengths, walls, shear_offset, G, t, dx, dxo, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
    use fold_cell, only: cell_t, cell_min_image
    use fold_geometry_bind_util, only: make_cell
    implicit none
    integer(ip), intent(in) :: dim, n, walls
-   real(dp), intent(in) :: lengths(3), shear_offset, dx(dim, n)
+   real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), t, dx(dim, n)
    real(dp), intent(out) :: dxo(dim, n)
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
    type(cell_t) :: cell
-   real(dp) :: G(3, 3)
    integer(ip) :: k
-   G = 0.0_dp
    dxo = dx
-   call make_cell(dim, lengths, walls, G, shear_offset, cell, stat, errmsg)
+   call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
    if (stat /= FOLD_OK) return
    do k = 1, n
       call cell_min_image(cell, dxo(:, k))
    end do
 end subroutine fold_geo_min_image
 
-subroutine fold_geo_wrap(dim, n, lengths, walls, shear_offset, shear_rate, x, v, xo, vo, stat, errmsg)
+subroutine fold_geo_wrap(dim, n, lengths, walls, shear_offset, G, t, x, v, xo, vo, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
    use fold_cell, only: cell_t, cell_wrap
    use fold_geometry_bind_util, only: make_cell
    implicit none
    integer(ip), intent(in) :: dim, n, walls
-   real(dp), intent(in) :: lengths(3), shear_offset, shear_rate, x(dim, n), v(dim, n)
+   real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), t, x(dim, n), v(dim, n)
    real(dp), intent(out) :: xo(dim, n), vo(dim, n)
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
    type(cell_t) :: cell
-   real(dp) :: G(3, 3)
    integer(ip) :: k
-   G = 0.0_dp
-   G(1, 2) = shear_rate
    xo = x
    vo = v
-   call make_cell(dim, lengths, walls, G, shear_offset, cell, stat, errmsg)
+   call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
    if (stat /= FOLD_OK) return
    do k = 1, n
       call cell_wrap(cell, xo(:, k), vo(:, k))
@@ -102,7 +102,8 @@ subroutine fold_geo_capsule_contact(dim, n, r, p1, h1, rad1, p2, h2, rad2, s, t,
    end do
 end subroutine fold_geo_capsule_contact
 
-subroutine fold_geo_pairs(dim, n, maxpairs, lengths, walls, shear_offset, x, rc, use_cells, pairs, npairs, stat, errmsg)
+subroutine fold_geo_pairs(dim, n, maxpairs, lengths, walls, shear_offset, G, t, x, rc, use_cells, pairs, npairs, &
+                          stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
    use fold_cell, only: cell_t
@@ -110,21 +111,19 @@ subroutine fold_geo_pairs(dim, n, maxpairs, lengths, walls, shear_offset, x, rc,
    use fold_geometry_bind_util, only: make_cell
    implicit none
    integer(ip), intent(in) :: dim, n, maxpairs, walls, use_cells
-   real(dp), intent(in) :: lengths(3), shear_offset, x(dim, n), rc
+   real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), t, x(dim, n), rc
    integer(ip), intent(out) :: pairs(2, maxpairs), npairs
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
    type(cell_t) :: cell
-   real(dp) :: G(3, 3)
-   G = 0.0_dp
    pairs = 0
    npairs = 0
-   call make_cell(dim, lengths, walls, G, shear_offset, cell, stat, errmsg)
+   call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
    if (stat /= FOLD_OK) return
    call neighbour_pairs(cell, x, rc, use_cells /= 0, pairs, npairs, stat, errmsg)
 end subroutine fold_geo_pairs
 
-subroutine fold_geo_place(dim, n, lengths, walls, shear_offset, shape, radius, length, orient_mode, axis, &
+subroutine fold_geo_place(dim, n, lengths, walls, shear_offset, G, t, shape, radius, length, orient_mode, axis, &
                           alpha, seed, max_attempts, relax_sweeps, x, p, n_rsa, sweeps_used, stat, errmsg)
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK
@@ -134,7 +133,7 @@ subroutine fold_geo_place(dim, n, lengths, walls, shear_offset, shape, radius, l
    use fold_geometry_bind_util, only: make_cell, make_parts
    implicit none
    integer(ip), intent(in) :: dim, n, walls, shape(n), orient_mode(n), max_attempts, relax_sweeps
-   real(dp), intent(in) :: lengths(3), shear_offset, radius(n), length(n), axis(dim, n), alpha
+   real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), t, radius(n), length(n), axis(dim, n), alpha
    integer(i8), intent(in) :: seed
    real(dp), intent(out) :: x(dim, n), p(dim, n)
    integer(ip), intent(out) :: n_rsa, sweeps_used
@@ -142,13 +141,11 @@ subroutine fold_geo_place(dim, n, lengths, walls, shear_offset, shape, radius, l
    character(len=msg_len), intent(out) :: errmsg
    type(cell_t) :: cell
    type(particle_set_t) :: parts
-   real(dp) :: G(3, 3)
-   G = 0.0_dp
    x = 0.0_dp
    p = 0.0_dp
    n_rsa = 0
    sweeps_used = 0
-   call make_cell(dim, lengths, walls, G, shear_offset, cell, stat, errmsg)
+   call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
    if (stat /= FOLD_OK) return
    call make_parts(dim, n, shape, radius, length, x, p, parts, stat, errmsg)
    if (stat /= FOLD_OK) return
@@ -175,7 +172,7 @@ subroutine fold_geo_jeffery(dim, n, lengths, walls, G, x, p, xi, v, omega, stat,
    type(particle_set_t) :: parts
    v = 0.0_dp
    omega = 0.0_dp
-   call make_cell(dim, lengths, walls, G, 0.0_dp, cell, stat, errmsg)
+   call make_cell(dim, lengths, walls, G, 0.0_dp, 0.0_dp, cell, stat, errmsg)
    if (stat /= FOLD_OK) return
    call particles_init(parts, dim, n, stat, errmsg)
    if (stat /= FOLD_OK) return
@@ -225,7 +222,7 @@ subroutine fold_geo_jeffery_advance(dim, n, nout, lengths, walls, G, x, p, xi, d
       errmsg = "jeffery_advance: need every >= 1, nout >= 1, dt > 0"
       return
    end if
-   call make_cell(dim, lengths, walls, G, 0.0_dp, cell, stat, errmsg)
+   call make_cell(dim, lengths, walls, G, 0.0_dp, 0.0_dp, cell, stat, errmsg)
    if (stat /= FOLD_OK) return
    call particles_init(parts, dim, n, stat, errmsg)
    if (stat /= FOLD_OK) return
@@ -249,7 +246,7 @@ subroutine fold_geo_jeffery_advance(dim, n, nout, lengths, walls, G, x, p, xi, d
    end do
 end subroutine fold_geo_jeffery_advance
 
-subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, shape, radius, length, x, p, v, omega, &
+subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, t, shape, radius, length, x, p, v, omega, &
                                      dt, mode, alpha, max_iter, on_cap, skin, first, last, vo, omegao, &
                                      n_corrections, iterations, min_gap, min_gap_over_alpha, pairs_left, &
                                      worst_gap, capped, push, list_builds, list_pairs, stat, errmsg)
@@ -261,7 +258,7 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, sh
    use fold_geometry_bind_util, only: make_cell, make_parts
    implicit none
    integer(ip), intent(in) :: dim, n, walls, shape(n), mode, max_iter, on_cap, first, last
-   real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), radius(n), length(n), x(dim, n), p(dim, n)
+   real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), t, radius(n), length(n), x(dim, n), p(dim, n)
    real(dp), intent(in) :: v(dim, n), omega(3, n), dt, alpha, skin
    real(dp), intent(out) :: vo(dim, n), omegao(3, n), min_gap, min_gap_over_alpha, worst_gap, push
    integer(i8), intent(out) :: n_corrections, pairs_left, list_pairs
@@ -284,7 +281,7 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, sh
    push = 0.0_dp
    list_builds = 0
    list_pairs = 0
-   call make_cell(dim, lengths, walls, G, shear_offset, cell, stat, errmsg)
+   call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
    if (stat /= FOLD_OK) return
    call make_parts(dim, n, shape, radius, length, x, p, parts, stat, errmsg)
    if (stat /= FOLD_OK) return
@@ -309,3 +306,61 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, sh
    list_builds = stats%list_builds
    list_pairs = stats%list_pairs
 end subroutine fold_geo_resolve_contacts
+
+subroutine fold_geo_cell_info(dim, lengths, walls, G, t, basis, thickness, origin, flow, period, stat, errmsg)
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK
+   use fold_cell, only: cell_t, cell_lattice, cell_min_thickness, cell_set_time, cell_deforming
+   use fold_geometry_bind_util, only: make_cell
+   implicit none
+   integer(ip), intent(in) :: dim, walls
+   real(dp), intent(in) :: lengths(3), G(3, 3), t
+   real(dp), intent(out) :: basis(3, 3), thickness(3), origin(3), period
+   integer(ip), intent(out) :: flow
+   integer, intent(out) :: stat
+   character(len=msg_len), intent(out) :: errmsg
+   type(cell_t) :: cell
+   basis = 0.0_dp
+   thickness = 0.0_dp
+   origin = 0.0_dp
+   period = 0.0_dp
+   flow = 0
+   call make_cell(dim, lengths, walls, G, 0.0_dp, 0.0_dp, cell, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   ! shear cells too: the Lees-Edwards offset of time t
+   call cell_set_time(cell, t)
+   basis = cell_lattice(cell)
+   thickness = cell%thickness
+   if (.not. cell_deforming(cell)) thickness = cell_min_thickness(cell)
+   origin = cell%origin
+   flow = cell%flow
+   period = cell%period
+end subroutine fold_geo_cell_info
+
+subroutine fold_geo_admissible_time(dim, lengths, walls, G, rc, dt, t_end, t_ok, stat, errmsg)
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK
+   use fold_cell, only: cell_t, cell_admissible_time
+   use fold_geometry_bind_util, only: make_cell
+   implicit none
+   integer(ip), intent(in) :: dim, walls
+   real(dp), intent(in) :: lengths(3), G(3, 3), rc, dt, t_end
+   real(dp), intent(out) :: t_ok
+   integer, intent(out) :: stat
+   character(len=msg_len), intent(out) :: errmsg
+   type(cell_t) :: cell
+   t_ok = -1.0_dp
+   call make_cell(dim, lengths, walls, G, 0.0_dp, 0.0_dp, cell, stat, errmsg)
+   if (stat /= FOLD_OK) return
+   t_ok = cell_admissible_time(cell, rc, dt, t_end)
+end subroutine fold_geo_admissible_time
+
+subroutine fold_geo_contact_range(n, shape, radius, length, alpha, skin, rc)
+   use fold_kinds, only: dp, ip
+   use fold_contacts, only: contact_search_range
+   implicit none
+   integer(ip), intent(in) :: n, shape(n)
+   real(dp), intent(in) :: radius(n), length(n), alpha, skin
+   real(dp), intent(out) :: rc
+   rc = contact_search_range(shape, radius, length, alpha, skin)
+end subroutine fold_geo_contact_range

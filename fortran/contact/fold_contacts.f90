@@ -55,13 +55,18 @@
 !> (round-off of a distance between coordinates of size L; the seed's exact
 !> criterion min d_ij >= 0 could loop forever on -1e-17), or after max_iter sweeps.
 !>
-!> Candidate pairs (Verlet list; Allen & Tildesley 2017, Computer Simulation of
-!> Liquids, 2nd ed., section 5.2). ONE list is built per pass, of the pairs whose
-!> surface distance at the predicted configuration is below
-!>     cutoff = alpha + skin,   skin = alpha + R_max (default),
-!> by the cell lists (strategy) or the O(N^2) double loop (naive); the sweeps visit
-!> only the list and re-evaluate only the pairs with a particle corrected in the
-!> previous sweep. Exactness: moving every point of a capsule by at most delta changes
+!> Naive (the reference, physics.md section 3): the seed's literal loop. EVERY sweep
+!> rescans all N(N-1)/2 pairs by the O(N^2) double loop at the current prediction
+!> (minimum image of each pair, then the segment distance of those whose centre
+!> distance minus both extents is below the cutoff) to find each D_i. Nothing is
+!> kept from one sweep to the next, so its cost is O(N^2) per sweep.
+!>
+!> Strategy: candidate pairs (Verlet list; Allen & Tildesley 2017, Computer Simulation
+!> of Liquids, 2nd ed., section 5.2). ONE list is built per pass with the cell lists,
+!> of the pairs whose surface distance at the predicted configuration is below
+!>     cutoff = alpha + skin,   skin = alpha + R_max (default);
+!> the sweeps visit only the list and re-evaluate only the pairs with a particle
+!> corrected in the previous sweep. Exactness: moving every point of a capsule by at most delta changes
 !> its distance to any other set by at most delta (a distance between sets is
 !> 1-Lipschitz in each set's displacement). Since the list was built, corrections
 !> have moved every axis point s pp_k + xp_k (|s| <= h_k) of particle k by at most
@@ -70,7 +75,10 @@
 !> as soon as max_k delta_k > skin/2, so an unlisted pair always has dist >= alpha: it
 !> can neither violate nor be the worst partner of a violating particle, and the
 !> corrections do not depend on the skin. Gap statistics are exact below
-!> cutoff - 2 max delta_k (>= alpha) and clipped there.
+!> cutoff - 2 max delta_k (>= alpha) and clipped there. The worst partner of a
+!> violating particle is therefore the same pair in both modes (ties -> smaller
+!> index), so naive and strategy give bit-identical corrections; only the list
+!> statistics (builds, size) and the clipping of the gap statistics differ.
 !>
 !> MPI: resolve_contacts(..., first, last, reduce) issues only corrections originating
 !> from particles first..last; the optional callback `reduce` (supplied by the driver,
@@ -161,7 +169,7 @@ module fold_contacts
    end interface
    public :: contact_reduce_i
 
-   public :: resolve_contacts, lubrication_force, transverse_inertia
+   public :: resolve_contacts, lubrication_force, transverse_inertia, contact_search_range
 
    !> Index of the bottom / top wall as a "partner"
    integer(ip), parameter :: WALL_BOTTOM = -1, WALL_TOP = -2
@@ -245,6 +253,25 @@ contains
       n = dx/dist
       f = -1.5_dp*pi*radius**2*eta*dot_product(du, n)/max(dist - 2.0_dp*radius, gap_min)*n
    end function lubrication_force
+
+   !> Centre-distance range of the contact search, 2 max_k (h_k + R_k) + alpha + skin
+   !> (h_k the half segment; skin < 0: the default alpha + R_max): every pair whose
+   !> surface distance is below the cutoff alpha + skin has centres closer than this.
+   !> The periodic cell must be thicker than twice it (unique minimum image) [m].
+   pure function contact_search_range(shape, radius, length, alpha, skin) result(rc)
+      integer(ip), intent(in) :: shape(:)
+      real(dp), intent(in) :: radius(:), length(:)
+      !> Security zone [m]
+      real(dp), intent(in) :: alpha
+      !> Verlet skin (< 0: default) [m]
+      real(dp), intent(in) :: skin
+      real(dp) :: rc, s
+      rc = 0.0_dp
+      if (size(shape) == 0) return
+      s = skin
+      if (s < 0.0_dp) s = alpha + maxval(radius)
+      rc = 2.0_dp*maxval(particle_half_segment(shape, radius, length) + radius) + (alpha + s)
+   end function contact_search_range
 
    !> Predicted configuration at t + dt of every particle.
    pure subroutine predict(parts, dt, xp, pp)
@@ -575,7 +602,7 @@ contains
       skin = cfg%skin
       if (skin < 0.0_dp) skin = cfg%alpha + maxval(parts%radius)
       cutoff = cfg%alpha + skin
-      rc = 2.0_dp*maxval(hseg + parts%radius) + cutoff
+      rc = contact_search_range(parts%shape, parts%radius, parts%length, cfg%alpha, cfg%skin)
       tol = 64.0_dp*epsilon(1.0_dp)*maxval(cell%lengths(1:cell%dim))
       push = max(PUSH_ALPHA*cfg%alpha, PUSH_TOL*tol)
       stats%push = push
@@ -631,8 +658,9 @@ contains
          end do
          stats%iterations = stats%iterations + 1
          stats%n_corrections = stats%n_corrections + counts(1)
-         ! Verlet criterion: rebuild before an unlisted pair could come within alpha
-         rebuild = maxval(delta) > 0.5_dp*skin
+         ! Verlet criterion: rebuild before an unlisted pair could come within alpha;
+         ! naive: the seed's loop rescans every pair at every sweep
+         rebuild = maxval(delta) > 0.5_dp*skin .or. .not. use_cells
          if (.not. rebuild) then
             do k = 1, list%n
                a = list%ab(1, k)

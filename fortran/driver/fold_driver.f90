@@ -43,7 +43,7 @@ module fold_driver
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR, FOLD_OVERLAP, FOLD_NUMERICAL, FOLD_NOT_CONVERGED
    use fold_particles, only: particle_set_t
-   use fold_cell, only: cell_t, cell_init, cell_set_time, cell_wrap, cell_wall_speed
+   use fold_cell, only: cell_t, cell_init, cell_set_time, cell_wrap, cell_wall_speed, cell_deforming
    use fold_kinematics, only: rigid_update
    use fold_contacts, only: contact_config_t, contact_stats_t, resolve_contacts, FOLD_CONTACT_NONE
    use fold_orientation_stats, only: orientation_moments
@@ -598,11 +598,19 @@ contains
          errmsg = "/setup/resolved/velocity_gradient or cell_lengths: "//trim(errmsg)
          return
       end if
-      gd = setup%velocity_gradient(1, 2)
-      if (abs(setup%shear_rate - gd) > rel*max(abs(gd), tiny(1.0_dp))) then
+      ! shear_rate is the scalar deformation rate sqrt(2 D:D) (|G_xy| in simple shear)
+      gd = sqrt(0.5_dp*sum((setup%velocity_gradient(1:setup%dim, 1:setup%dim) + &
+                            transpose(setup%velocity_gradient(1:setup%dim, 1:setup%dim)))**2))
+      if (abs(abs(setup%shear_rate) - gd) > rel*max(gd, tiny(1.0_dp))) then
          stat = FOLD_INPUT_ERROR
          write (errmsg, '(a,es12.5,a,es12.5,a)') "/setup/resolved/shear_rate = ", setup%shear_rate, &
-            " disagrees with velocity_gradient[0, 1] = ", gd, " (must be equal)"
+            " disagrees with sqrt(2 D:D) of velocity_gradient = ", gd, " (must be equal)"
+         return
+      end if
+      if (setup%hydrodynamics == FOLD_HYDRO_STOKES .and. cell_deforming(cell)) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "/setup/resolved/hydrodynamics = 1 (stokes) needs a simple shear velocity_gradient: the FFT "// &
+                  "Stokes solver has no deforming (elongational) lattice yet"
          return
       end if
       if (setup%walls) then

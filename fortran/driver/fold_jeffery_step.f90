@@ -24,12 +24,13 @@
 !> once per distinct xi (scaling and squaring of the Taylor series, Moler & Van Loan
 !> 2003, SIAM Rev. 45:3, method 3), so the per-step cost is one matrix-vector product.
 module fold_jeffery_step
-   use, intrinsic :: ieee_arithmetic, only: ieee_value, ieee_quiet_nan
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_cell, only: cell_t, cell_mean_velocity
    use fold_particles, only: particle_set_t
    use fold_kinematics, only: jeffery_omega
+   ! expm3 lives in fold_matrix_exp (also used by fold_cell); re-exported here
+   use fold_matrix_exp, only: expm3
    implicit none
    private
 
@@ -132,38 +133,5 @@ contains
          end if
       end do
    end subroutine jeffery_step_velocities
-
-   !> Matrix exponential of a 3x3 matrix: Taylor series of A/2^s to 20 terms
-   !> (remainder < 0.5^21/21! relative) followed by s squarings. A matrix of norm
-   !> > 1e100 (a step of more than 1e100 strain units, never a sensible time step)
-   !> or with a NaN gives NaN, so the run's blow-up check stops the run.
-   pure function expm3(A) result(E)
-      real(dp), intent(in) :: A(3, 3)
-      real(dp) :: E(3, 3)
-      real(dp) :: B(3, 3), term(3, 3), nrm
-      integer :: s, k
-
-      nrm = maxval(sum(abs(A), dim=1))
-      if (.not. (nrm <= 1.0e100_dp)) then
-         E = ieee_value(1.0_dp, ieee_quiet_nan)
-         return
-      end if
-      s = 0
-      if (nrm > 0.5_dp) s = ceiling(log(nrm/0.5_dp)/log(2.0_dp))
-      B = A/2.0_dp**s
-      E = 0.0_dp
-      term = 0.0_dp
-      do k = 1, 3
-         E(k, k) = 1.0_dp
-         term(k, k) = 1.0_dp
-      end do
-      do k = 1, 20
-         term = matmul(term, B)/real(k, dp)
-         E = E + term
-      end do
-      do k = 1, s
-         E = matmul(E, E)
-      end do
-   end function expm3
 
 end module fold_jeffery_step

@@ -11,10 +11,20 @@
 !> Directions with fewer than three bins are scanned whole. The candidates are a
 !> superset of the neighbours; callers test the minimum-image distance, which is
 !> unique when every periodic edge exceeds 2 rc (checked in cell_list_setup).
+!>
+!> Deforming lattice (elongational and general flows, `fold_cell`): the bins are
+!> taken in the fractional coordinates f = B^-1 (x - origin) mod 1 of the reduced
+!> basis B, nb(k) = floor(h_k / rc) bins along b_k (h_k the cell thickness along
+!> b_k). Two points closer than rc differ in f_k by at most rc/h_k <= 1/nb(k) (the
+!> fractional coordinate is the distance to the lattice plane over h_k), so their bins
+!> differ by at most one in every direction (mod nb): the usual 3^dim stencil of a
+!> triclinic cell list. Every non-zero lattice vector is at least min h_k long, so
+!> h_k > 2 rc keeps the image within rc unique; a thinner cell is refused with the
+!> time it was reached (the run driver then stops cleanly).
 module fold_cell_list
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_cell, only: cell_t, cell_min_image
+   use fold_cell, only: cell_t, cell_min_image, cell_deforming, FOLD_FLOW_PLANAR_KR
    implicit none
    private
 
@@ -56,6 +66,33 @@ contains
          write (errmsg, '(a,es10.3)') "cell_list: interaction range must be > 0, got ", rc
          return
       end if
+      if (cell_deforming(cell)) then
+         ! bins along the reduced lattice vectors; the 1e-9 margin keeps a pair at
+         ! distance exactly rc within the stencil despite round-off in f
+         do d = 1, cell%dim
+            if (.not. (cell%thickness(d) > 2.0_dp*rc)) then
+               write (errmsg, '(a,es10.3,a,i0,a,es10.3,a,es12.5,a)') "cell_list: the deformed periodic cell is only ", &
+                  cell%thickness(d), " thick along reduced lattice vector ", d, &
+                  ", it must exceed twice the interaction range (2*", rc, ") at t = ", cell%time, &
+                  trim(merge(": enlarge the cell or shrink the particles"//repeat(" ", 36), &
+                             ": without a reproducible remap (uniaxial or general flow) the run cannot go on", &
+                             cell%flow == FOLD_FLOW_PLANAR_KR))
+               return
+            end if
+         end do
+         cl%rc = rc
+         cl%nb = 1
+         cl%w = 1.0_dp
+         do d = 1, cell%dim
+            cl%nb(d) = max(1, int(cell%thickness(d)/(rc*(1.0_dp + 1.0e-9_dp))))
+            cl%w(d) = 1.0_dp/cl%nb(d)
+         end do
+         allocate (cl%head(product(cl%nb)), cl%next(max(nmax, 0)))
+         cl%head = 0
+         cl%next = 0
+         stat = FOLD_OK
+         return
+      end if
       do d = 1, cell%dim
          if (d == 2 .and. cell%walls) cycle
          if (.not. (cell%lengths(d) > 2.0_dp*rc)) then
@@ -89,6 +126,16 @@ contains
       integer :: d
 
       xw = 0.0_dp
+      if (cell_deforming(cell)) then
+         ! xw: fractional coordinates in [0, 1) of the reduced basis
+         xw(1:cell%dim) = matmul(cell%dual(1:cell%dim, 1:cell%dim), x(1:cell%dim) - cell%origin(1:cell%dim))
+         xw(1:cell%dim) = xw(1:cell%dim) - floor(xw(1:cell%dim))
+         ib = 0
+         do d = 1, cell%dim
+            ib(d) = min(max(int(floor(xw(d)*cl%nb(d))), 0), cl%nb(d) - 1)
+         end do
+         return
+      end if
       xw(1:cell%dim) = x(1:cell%dim)
       if (.not. cell%walls) then
          ny = floor(xw(2)/cell%lengths(2))
@@ -148,11 +195,38 @@ contains
       real(dp), intent(in) :: xq(:)
       integer(ip), intent(inout) :: cand(:)
       integer(ip), intent(out) :: nc
-      integer :: ib(3), jy, jz, jx, jxlo, jxhi, b, k, iy_lo, iy_hi, iz_lo, iz_hi, jyw, jzw, jxw
+      integer :: ib(3), jy, jz, jx, jxlo, jxhi, b, k, iy_lo, iy_hi, iz_lo, iz_hi, jyw, jzw, jxw, lo(3), hi(3), d
       real(dp) :: xw(3), shift
 
       nc = 0
       call bin_of(cl, cell, xq, ib, xw)
+      if (cell_deforming(cell)) then
+         ! triclinic 3^dim stencil (whole rows where fewer than three bins)
+         lo = 0
+         hi = 0
+         do d = 1, cell%dim
+            if (cl%nb(d) >= 3) then
+               lo(d) = ib(d) - 1
+               hi(d) = ib(d) + 1
+            else
+               hi(d) = cl%nb(d) - 1
+            end if
+         end do
+         do jz = lo(3), hi(3)
+            do jy = lo(2), hi(2)
+               do jx = lo(1), hi(1)
+                  b = bin_index(cl, [modulo(jx, cl%nb(1)), modulo(jy, cl%nb(2)), modulo(jz, cl%nb(3))])
+                  k = cl%head(b)
+                  do while (k > 0)
+                     nc = nc + 1
+                     cand(nc) = k
+                     k = cl%next(k)
+                  end do
+               end do
+            end do
+         end do
+         return
+      end if
       if (cl%nb(2) >= 3 .or. cell%walls) then
          iy_lo = ib(2) - 1
          iy_hi = ib(2) + 1

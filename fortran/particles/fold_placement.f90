@@ -22,7 +22,7 @@
 module fold_placement
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_cell, only: cell_t, cell_min_image, cell_wrap, cell_volume
+   use fold_cell, only: cell_t, cell_min_image, cell_wrap, cell_volume, cell_from_fractional
    use fold_cell_list, only: cell_list_t, cell_list_setup, cell_list_insert, cell_list_build, cell_list_candidates
    use fold_particles, only: particle_set_t, particle_half_segment, particle_volume, FOLD_FIBRE, FOLD_SPHEROID
    use fold_segment, only: capsule_contact
@@ -184,8 +184,10 @@ contains
             xtry = 0.0_dp
             do c = 1, dim
                call rng_uniform(rng, u)
-               xtry(c) = u*cell%lengths(c)
+               xtry(c) = u
             end do
+            ! uniform in the primary cell (u L in the shear box, origin + B u on a deformed lattice)
+            xtry(1:dim) = cell_from_fractional(cell, xtry(1:dim))
             parts%x(:, k) = xtry(1:dim)
             dmin = worst_clearance(k)
             if (dmin > best) then

@@ -8,9 +8,14 @@ capsule gaps), ``fold_cell_list`` (O(N) neighbour search under sheared images),
 collision strategy, Laure, Megally & Coupez). Arrays are ``(N, dim)`` here and
 ``(dim, N)`` in Fortran; indices returned to Python are 0-based.
 
-Frame rule (``fold_cell``): the primary cell is ``[0, L)``, the imposed mean velocity
-is ``u = G·(x − L/2)`` (cell centre at rest, walls at ∓U), and only simple shear
-``G[0, 1] = γ̇`` is accepted. Every particle is treated, for overlap and contact, as a
+Frame rule (``fold_cell``): the imposed mean velocity is ``u = G·(x − L/2)`` (cell
+centre at rest, walls at ∓U). Simple shear ``G[0, 1] = γ̇`` uses the Lees–Edwards
+cell with primary cell ``[0, L)``; any other traceless ``G`` (planar or uniaxial
+elongation, a general gradient) a lattice carried by the flow, ``A(t) = exp(G t) A0``,
+reduced at every time (Minkowski-type reduction), with Kraynik–Reinelt remapping for
+planar elongation in a cell with ``Lx = Ly`` (its lattice is then the square rotated
+by the magic angle) and a limited admissible duration otherwise
+(:func:`admissible_t_end`). Walls host simple shear only. Every particle is treated, for overlap and contact, as a
 capsule (points within ``radius`` of an axis segment): exact for spheres, containing
 the cylinder for fibres, and a *bounding* capsule (half-segment ``L/2 − R``) for
 spheroids.
@@ -48,18 +53,36 @@ class Cell:
     shear_offset
         Lees–Edwards offset ``s`` of the lattice vector ``a2 = (s, Ly, 0)`` [m]
         (``s = γ̇ t Ly`` wrapped to ``[−Lx/2, Lx/2)``; ignored with walls).
+    velocity_gradient
+        Full velocity gradient G[i, j] = du_i/dx_j, (dim, dim) or (3, 3) [1/s]; when
+        given it replaces ``shear_rate``. A non-shear gradient makes the lattice deform
+        with the flow (``fold_cell``).
+    time
+        Time of a deforming lattice (``A(t) = exp(G t) A0``, reduced) [s]; ignored in
+        simple shear, whose state is ``shear_offset``.
     """
 
     lengths: tuple[float, ...]
     walls: bool = False
     shear_rate: float = 0.0
     shear_offset: float = 0.0
+    velocity_gradient: tuple | None = None
+    time: float = 0.0
 
     def __post_init__(self) -> None:
         lengths = tuple(float(v) for v in self.lengths)
         if len(lengths) not in (2, 3) or not all(np.isfinite(lengths)) or min(lengths) <= 0:
             raise InputError(f"cell lengths: expected 2 or 3 finite values > 0, got {self.lengths}")
         object.__setattr__(self, "lengths", lengths)
+        if self.velocity_gradient is not None:
+            g = np.asarray(self.velocity_gradient, dtype=np.float64)
+            if g.shape not in ((len(lengths),) * 2, (3, 3)) or not np.all(np.isfinite(g)):
+                raise InputError(f"velocity_gradient: expected a finite ({len(lengths)}, {len(lengths)}) or (3, 3) "
+                                 f"array, got shape {g.shape}")
+            g3 = np.zeros((3, 3))
+            g3[: g.shape[0], : g.shape[1]] = g
+            object.__setattr__(self, "velocity_gradient", tuple(map(tuple, g3.tolist())))
+            object.__setattr__(self, "shear_rate", float(g3[0, 1]))
 
     @property
     def dim(self) -> int:
@@ -72,17 +95,63 @@ class Cell:
 
     def gradient(self) -> np.ndarray:
         """Velocity gradient G (3, 3), G[i, j] = du_i/dx_j."""
+        if self.velocity_gradient is not None:
+            return np.array(self.velocity_gradient, dtype=np.float64)
         g = np.zeros((3, 3))
         g[0, 1] = self.shear_rate
         return g
 
+    @property
+    def is_shear(self) -> bool:
+        """Simple shear (or no flow): the Lees–Edwards cell of ``shear_offset``."""
+        g = self.gradient()
+        g[0, 1] = 0.0
+        return not np.any(g)
+
     def at_time(self, t: float) -> "Cell":
-        """The same cell with the Lees–Edwards offset of time ``t`` (s = γ̇ t Ly, wrapped)."""
+        """The same cell at time ``t``: the Lees–Edwards offset s = γ̇ t Ly (wrapped) in
+        simple shear, the deformed lattice of time ``t`` otherwise."""
+        if not self.is_shear:
+            return Cell(self.lengths, self.walls, self.shear_rate, 0.0, self.velocity_gradient, float(t))
         if self.walls:
             return self
         lx, ly = self.lengths[0], self.lengths[1]
         s = (self.shear_rate * t * ly + 0.5 * lx) % lx - 0.5 * lx
-        return Cell(self.lengths, self.walls, self.shear_rate, s)
+        return Cell(self.lengths, self.walls, self.shear_rate, s, self.velocity_gradient, float(t))
+
+    def lattice(self) -> "Lattice":
+        """The current periodic lattice (``fold_cell``), see :class:`Lattice`."""
+        basis, thick, origin, flow, period, stat, msg = _ext().fold_geo_cell_info(
+            self.dim, self.lengths3(), int(self.walls), self.gradient(), float(self.time))
+        checked(stat, msg)
+        d = self.dim
+        if self.is_shear:
+            basis = basis.copy()
+            basis[0, 1] = self.shear_offset  # the offset as given (at_time or explicit)
+        return Lattice(np.ascontiguousarray(basis[:d, :d].T), thick[:d].copy(), origin[:d].copy(),
+                       FLOWS[int(flow)], float(period))
+
+
+FLOWS = {0: "shear", 1: "planar_kraynik_reinelt", 2: "general"}
+"""Lattice kinds of ``fold_cell`` (``FOLD_FLOW_*``)."""
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """Periodic lattice of a :class:`Cell` at its time."""
+
+    vectors: np.ndarray
+    """(dim, dim): row k is lattice vector k (the reduced basis of a deforming cell) [m]."""
+    thickness: np.ndarray
+    """(dim,): distance between the primary cell's faces along each vector's dual; a
+    range r has a unique periodic image within r while ``2 r < thickness.min()`` [m]."""
+    origin: np.ndarray
+    """(dim,): corner of the primary cell ``origin + vectors.T @ [0, 1)^dim``
+    (deforming cells; 0 for the shear box ``[0, L)``) [m]."""
+    flow: str
+    """``"shear"``, ``"planar_kraynik_reinelt"`` or ``"general"``."""
+    period: float
+    """Kraynik–Reinelt time period ln((3 + √5)/2)/|ε| (0 otherwise) [s]."""
 
 
 @dataclass(frozen=True)
@@ -137,20 +206,25 @@ def _ext():
     return load("_fold_geometry")
 
 
+def _cell_args(cell: Cell) -> tuple:
+    return cell.lengths3(), int(cell.walls), float(cell.shear_offset), cell.gradient(), float(cell.time)
+
+
 def min_image(dx, cell: Cell) -> np.ndarray:
-    """Shortest image (N, dim) of displacements ``dx`` under the sheared periodic lattice."""
+    """Shortest image (N, dim) of displacements ``dx`` under the periodic (sheared or
+    deformed) lattice."""
     d = _vectors("dx", dx, cell.dim)
-    out, stat, msg = _ext().fold_geo_min_image(cell.lengths3(), int(cell.walls), cell.shear_offset, d)
+    out, stat, msg = _ext().fold_geo_min_image(*_cell_args(cell), d)
     checked(stat, msg)
     return np.ascontiguousarray(out.T)
 
 
 def wrap(x, v, cell: Cell) -> tuple[np.ndarray, np.ndarray]:
-    """Positions wrapped into ``[0, L)`` and velocities with the Lees–Edwards jump ∓γ̇Ly."""
+    """Positions wrapped into the primary cell (``[0, L)`` in shear) and velocities with
+    the jump ``−G·(lattice shift)`` (Lees–Edwards: ∓γ̇Ly)."""
     xf = _vectors("x", x, cell.dim)
     vf = _vectors("v", v, cell.dim, xf.shape[1])
-    xo, vo, stat, msg = _ext().fold_geo_wrap(cell.lengths3(), int(cell.walls), cell.shear_offset,
-                                              cell.shear_rate, xf, vf)
+    xo, vo, stat, msg = _ext().fold_geo_wrap(*_cell_args(cell), xf, vf)
     checked(stat, msg)
     return np.ascontiguousarray(xo.T), np.ascontiguousarray(vo.T)
 
@@ -186,8 +260,7 @@ def neighbour_pairs(x, cell: Cell, rc: float, method: str = "cells") -> np.ndarr
     n = xf.shape[1]
     room = max(16, 8 * n)
     for _ in range(2):
-        pairs, npairs, stat, msg = _ext().fold_geo_pairs(room, cell.lengths3(), int(cell.walls),
-                                                         cell.shear_offset, xf, float(rc),
+        pairs, npairs, stat, msg = _ext().fold_geo_pairs(room, *_cell_args(cell), xf, float(rc),
                                                          int(method == "cells"))
         if npairs <= room:
             break
@@ -264,7 +337,7 @@ def place_particles(cell: Cell, shape, radius, length, *, alpha: float, seed: in
     if max_attempts < 1 or relax_sweeps < 0:
         raise InputError("max_attempts must be >= 1 and relax_sweeps >= 0")
     x, p, n_rsa, sweeps, stat, msg = _ext().fold_geo_place(
-        cell.lengths3(), int(cell.walls), cell.shear_offset, shape_a,
+        *_cell_args(cell), shape_a,
         _per_particle("radius", radius, n), _per_particle("length", length, n), modes,
         _vectors("axis", axis_a, dim, n), float(alpha), int(seed), int(max_attempts), int(relax_sweeps))
     checked(stat, msg)
@@ -340,7 +413,7 @@ def resolve_contacts(cell: Cell, shape, radius, length, x, p, v, omega, dt: floa
     n = xf.shape[1]
     first, last = (0, n - 1) if owned is None else (int(owned[0]), int(owned[1]))
     out = _ext().fold_geo_resolve_contacts(
-        cell.lengths3(), int(cell.walls), cell.shear_offset, cell.gradient(),
+        *_cell_args(cell),
         _per_particle("shape", shape, n, np.int32), _per_particle("radius", radius, n),
         _per_particle("length", length, n), xf, _vectors("p", p, cell.dim, n), _vectors("v", v, cell.dim, n),
         _omega("omega", omega, n), float(dt), CONTACT_MODES[mode], float(alpha), int(max_iter), ON_CAP[on_cap],
@@ -350,3 +423,28 @@ def resolve_contacts(cell: Cell, shape, radius, length, x, p, v, omega, dt: floa
     stats = ContactStats(int(ncorr), int(iters), float(min_gap), float(mgoa), int(left), float(worst), bool(capped),
                          float(push), int(builds), int(npairs))
     return np.ascontiguousarray(vo.T), np.ascontiguousarray(oo.T), stats
+
+
+def contact_search_range(shape, radius, length, *, alpha: float, skin: float | None = None) -> float:
+    """Centre-distance range of the contact search (``fold_contacts.contact_search_range``):
+    ``2 max(h + R) + alpha + skin`` (h the half segment, default skin ``alpha + max R``).
+    The periodic cell must stay thicker than twice this [m]."""
+    shape_a = np.asarray(shape, dtype=np.int32)
+    n = shape_a.shape[0]
+    return float(_ext().fold_geo_contact_range(shape_a, _per_particle("radius", radius, n),
+                                               _per_particle("length", length, n), float(alpha),
+                                               -1.0 if skin is None else float(skin)))
+
+
+def admissible_t_end(cell: Cell, rc: float, dt: float, t_end: float) -> float:
+    """Largest multiple of ``dt`` up to ``t_end`` for which the lattice of ``cell``
+    (taken at t = 0) stays thicker than ``2 rc`` at every step, so a search of range
+    ``rc`` has a unique minimum image (``fold_cell.cell_admissible_time``). Returns
+    ``t_end`` for simple shear and Kraynik–Reinelt planar elongation (when the cell is
+    thick enough at t = 0), ``-1`` when even t = 0 fails."""
+    if not (dt > 0 and t_end >= 0 and rc > 0):
+        raise InputError(f"need dt > 0, t_end >= 0 and rc > 0, got {dt}, {t_end}, {rc}")
+    t_ok, stat, msg = _ext().fold_geo_admissible_time(cell.dim, cell.lengths3(), int(cell.walls), cell.gradient(),
+                                                      float(rc), float(dt), float(t_end))
+    checked(stat, msg)
+    return float(t_ok)

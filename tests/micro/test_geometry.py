@@ -70,13 +70,190 @@ def test_wrap_applies_the_lees_edwards_velocity_jump():
     np.testing.assert_allclose(vw - u(xw), v - u(x), atol=1e-13)
 
 
-def test_cell_rejects_a_non_shear_gradient():
-    # a non-deforming periodic cell cannot host an elongational mean flow
-    v, om, stat, msg = geo._ext().fold_geo_jeffery(np.ones(3), 0, np.diag([1.0, -1.0, 0.0]),
-                                                   np.asfortranarray([[0.5], [0.5]]),
-                                                   np.asfortranarray([[1.0], [0.0]]), np.array([0.5]))
-    with pytest.raises(InputError, match="simple shear"):
+def test_cell_rejects_walls_with_elongation_and_a_compressible_gradient():
+    x, p = np.asfortranarray([[0.5], [0.5]]), np.asfortranarray([[1.0], [0.0]])
+    # Couette walls drive a simple shear only
+    *_, stat, msg = geo._ext().fold_geo_jeffery(np.ones(3), 1, np.diag([1.0, -1.0, 0.0]), x, p, np.array([0.5]))
+    with pytest.raises(InputError, match="walls .* simple shear only"):
         checked(stat, msg)
+    # a periodic lattice carried by the flow keeps its volume only if tr G = 0
+    *_, stat, msg = geo._ext().fold_geo_jeffery(np.ones(3), 0, np.diag([1.0, -0.5, 0.0]), x, p, np.array([0.5]))
+    with pytest.raises(InputError, match="traceless"):
+        checked(stat, msg)
+
+
+# ------------------------------------------------------------ deforming lattices
+KR_TAN = (np.sqrt(5.0) - 1.0) / 2.0
+KR_PERIOD_STRAIN = np.log((3.0 + np.sqrt(5.0)) / 2.0)
+
+
+def kr_lattice0(L, dim, Lz=2.5):
+    """Kraynik & Reinelt (1992): the square rotated by the magic angle, z neutral (rows = vectors)."""
+    c = 1.0 / np.sqrt(1.0 + KR_TAN**2)
+    s = KR_TAN * c
+    a = np.eye(dim) * Lz
+    a[0, :2] = L * np.array([c, -s])
+    a[1, :2] = L * np.array([s, c])
+    return a
+
+
+GENERAL_G = np.array([[0.3, 0.8, 0.1], [-0.5, -0.1, 0.4], [0.2, -0.3, -0.2]])
+
+
+def deformed_cases():
+    """(cell, unreduced lattice rows exp(G t) A0 computed here with SciPy)."""
+    out = []
+    for dim in (2, 3):
+        lengths = (3.0, 3.0, 2.5)[:dim]
+        G = np.diag([1.0, -1.0, 0.0])[:dim, :dim]
+        for t in (0.37, 0.9, 2.3):  # 2.3: past two Kraynik-Reinelt periods
+            out.append((geo.Cell(lengths, velocity_gradient=G, time=t), (expm(G * t) @ kr_lattice0(3.0, dim).T).T))
+        G = GENERAL_G[:dim, :dim] - np.trace(GENERAL_G[:dim, :dim]) / dim * np.eye(dim)
+        lengths = (3.0, 2.0, 2.5)[:dim]
+        for t in (0.8, 1.7):
+            out.append((geo.Cell(lengths, velocity_gradient=G, time=t), (expm(G * t) @ np.diag(lengths)).T))
+    G = np.diag([1.0, -0.5, -0.5])
+    out.append((geo.Cell((3.0, 2.0, 2.5), velocity_gradient=G, time=0.6), (expm(G * 0.6) @ np.diag([3.0, 2.0, 2.5])).T))
+    return out
+
+
+DEFORMED = deformed_cases()
+DEFORMED_IDS = [f"{c.dim}d-{c.lattice().flow}-t{c.time}" for c, _ in DEFORMED]
+# brute-force enumeration over the unreduced exp(G t) A0 is affordable while it is not
+# too skewed (t = 2.3 of Kraynik-Reinelt is checked through the lattice identity above)
+BRUTE = [c for c in DEFORMED if c[0].time < 2.0]
+BRUTE_IDS = [i for c, i in zip(DEFORMED, DEFORMED_IDS) if c[0].time < 2.0]
+
+
+def brute_lattice_min_image(dx, rows):
+    """Shortest image of each dx over an integer box of images of the UNREDUCED lattice
+    that provably contains it: |n_k - f_k| <= |r|/h_k for any image r at least as short."""
+    A = rows.T
+    f = np.linalg.solve(A, dx.T).T
+    base = dx - np.round(f) @ rows
+    h = 1.0 / np.linalg.norm(np.linalg.inv(A), axis=1)
+    K = np.ceil(np.linalg.norm(base, axis=1).max() / h).astype(int) + 1
+    grids = np.meshgrid(*[np.arange(-k, k + 1) for k in K], indexing="ij")
+    shifts = np.stack([g.ravel() for g in grids], axis=1) @ rows
+    best = base.copy()
+    for chunk in np.array_split(np.arange(len(shifts)), max(1, len(shifts) // 256)):
+        cand = base[:, None, :] - shifts[None, chunk, :]
+        d = np.linalg.norm(cand, axis=2)
+        k = d.argmin(axis=1)
+        pick = cand[np.arange(len(dx)), k]
+        closer = np.linalg.norm(pick, axis=1) < np.linalg.norm(best, axis=1)
+        best[closer] = pick[closer]
+    return best
+
+
+def integer_relation(rows_a, rows_b):
+    """M with rows_b = M rows_a (must be an integer matrix of determinant +-1 for the same lattice)."""
+    return np.linalg.solve(rows_a.T, rows_b.T).T
+
+
+@pytest.mark.parametrize("case", DEFORMED, ids=DEFORMED_IDS)
+def test_deformed_lattice_is_exp_gt_a0_reduced(case):
+    cell, rows = case
+    lat = cell.lattice()
+    # the reduced basis spans exactly the lattice exp(G t) A0 (unimodular integer change)
+    m = integer_relation(rows, lat.vectors)
+    np.testing.assert_allclose(m, np.round(m), atol=1e-9)
+    assert abs(abs(np.linalg.det(np.round(m))) - 1.0) < 1e-12
+    # reduced: no vector shortened by adding or subtracting another
+    v = lat.vectors
+    for i, j in itertools.permutations(range(cell.dim), 2):
+        for sgn in (-1, 1):
+            assert np.linalg.norm(v[i] + sgn * v[j]) >= np.linalg.norm(v[i]) * (1 - 1e-12)
+    # thickness = 1/|dual vector| and the volume is conserved (tr G = 0)
+    np.testing.assert_allclose(lat.thickness, 1.0 / np.linalg.norm(np.linalg.inv(v.T), axis=1), rtol=1e-12)
+    np.testing.assert_allclose(abs(np.linalg.det(v)), np.prod(cell.lengths), rtol=1e-12)
+
+
+@pytest.mark.parametrize("case", BRUTE, ids=BRUTE_IDS)
+def test_min_image_on_deformed_lattices_matches_brute_force_enumeration(case):
+    cell, rows = case
+    rng = np.random.default_rng(11 + cell.dim)
+    dx = rng.uniform(-8.0, 8.0, size=(1500, cell.dim))
+    dx[:300] *= 0.05  # short displacements: the fast path
+    got = geo.min_image(dx, cell)
+    ref = brute_lattice_min_image(dx, rows)
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), np.linalg.norm(ref, axis=1), rtol=0, atol=1e-11)
+    # and the result is dx moved by a lattice vector
+    n = np.linalg.solve(rows.T, (dx - got).T).T
+    np.testing.assert_allclose(n, np.round(n), atol=1e-9)
+
+
+def test_kraynik_reinelt_lattice_repeats_after_the_hencky_strain_period():
+    # lambda = (3 + sqrt 5)/2: after e t = ln lambda the lattice is the initial one
+    rate = 0.7
+    G = np.diag([rate, -rate, 0.0])
+    cell = geo.Cell((2.0, 2.0, 1.5), velocity_gradient=G)
+    lat = cell.lattice()
+    assert lat.flow == "planar_kraynik_reinelt"
+    assert lat.period == pytest.approx(KR_PERIOD_STRAIN / rate, rel=1e-15)
+    for t in (0.0, 0.3, 1.1):
+        a, b = cell.at_time(t).lattice(), cell.at_time(t + lat.period).lattice()
+        m = integer_relation(a.vectors, b.vectors)
+        np.testing.assert_allclose(m, np.round(m), atol=1e-9)
+        assert abs(abs(np.linalg.det(np.round(m))) - 1.0) < 1e-12
+        # the thickness never degrades: the cell list works at any time
+        assert b.thickness.min() > 0.5 * 1.5
+    # the underlying map over one period is Arnold's cat map [[2,1],[1,1]] (or its inverse)
+    A0 = kr_lattice0(2.0, 2)
+    cat = np.linalg.solve(A0.T, expm(np.diag([rate, -rate]) * lat.period) @ A0.T)
+    np.testing.assert_allclose(cat, [[2, 1], [1, 1]], atol=1e-12)
+
+
+@pytest.mark.parametrize("case", BRUTE[::2], ids=BRUTE_IDS[::2])
+def test_wrap_on_a_deformed_lattice_keeps_the_velocity_relative_to_the_mean_flow(case):
+    cell, rows = case
+    lat = cell.lattice()
+    rng = np.random.default_rng(5)
+    x = rng.uniform(-10, 10, size=(400, cell.dim))
+    v = rng.normal(size=(400, cell.dim))
+    xw, vw = geo.wrap(x, v, cell)
+    f = np.linalg.solve(lat.vectors.T, (xw - lat.origin).T).T
+    assert np.all(f >= -1e-12) and np.all(f < 1 + 1e-12)
+    n = np.linalg.solve(rows.T, (x - xw).T).T
+    np.testing.assert_allclose(n, np.round(n), atol=1e-9)
+    G = cell.gradient()[: cell.dim, : cell.dim]
+    u = lambda pos: (pos - 0.5 * np.array(cell.lengths)) @ G.T
+    np.testing.assert_allclose(vw - u(xw), v - u(x), atol=1e-11)
+
+
+@pytest.mark.parametrize("case", BRUTE[1::2], ids=BRUTE_IDS[1::2])
+def test_cell_list_on_a_deformed_lattice_finds_exactly_the_n2_pairs(case):
+    cell, rows = case
+    rc = 0.45 * cell.lattice().thickness.min()
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-4, 7, size=(160 if cell.dim == 3 else 200, cell.dim))
+    cells = geo.neighbour_pairs(x, cell, rc, method="cells")
+    naive = geo.neighbour_pairs(x, cell, rc, method="naive")
+    i, j = np.triu_indices(len(x), 1)
+    d = np.linalg.norm(brute_lattice_min_image(x[i] - x[j], rows), axis=1)
+    assert (d < rc).sum() > 20
+    np.testing.assert_array_equal(cells, naive)
+    np.testing.assert_array_equal(naive, np.stack([i[d < rc], j[d < rc]], axis=1))
+    with pytest.raises(InputError, match="deformed periodic cell is only"):
+        geo.neighbour_pairs(x, cell, 0.51 * cell.lattice().thickness.min())
+
+
+def test_admissible_end_time_of_elongations_without_remap():
+    # uniaxial elongation of a cube: the lattice stays orthogonal (already reduced),
+    # thickness L e^{-e t/2} along y and z, so 2 rc < L e^{-e t/2} until t = 2 ln(L/2rc)/e
+    L, rc, rate, dt = 6.0, 1.0, 1.0, 0.01
+    cell = geo.Cell((L, L, L), velocity_gradient=np.diag([rate, -rate / 2, -rate / 2]))
+    t_ok = geo.admissible_t_end(cell, rc, dt, 10.0)
+    assert t_ok == pytest.approx(np.floor(2 * np.log(L / (2 * rc)) / rate / dt) * dt, abs=1e-12)
+    assert geo.admissible_t_end(cell, rc, dt, 1.0) == 1.0
+    # planar elongation with Lx != Ly: no Kraynik-Reinelt lattice, thickness Ly e^{-e t}
+    cell = geo.Cell((8.0, 5.0), velocity_gradient=np.diag([rate, -rate]))
+    assert cell.lattice().flow == "general"
+    assert geo.admissible_t_end(cell, rc, dt, 10.0) == pytest.approx(np.floor(np.log(5.0 / 2) / dt) * dt, abs=1e-12)
+    # with Lx = Ly the remapped lattice never thins: any t_end is admissible
+    cell = geo.Cell((5.0, 5.0), velocity_gradient=np.diag([rate, -rate]))
+    assert geo.admissible_t_end(cell, rc, dt, 50.0) == 50.0
+    assert geo.admissible_t_end(cell, 3.0, dt, 50.0) == -1.0  # too thin from the start
 
 
 # ------------------------------------------------------------------ segment distance
