@@ -56,6 +56,9 @@ module fold_fft_backend
       procedure(destroy_iface), deferred :: destroy
       !> Allocate an aligned field of this grid
       procedure :: alloc_field => backend_alloc_field
+      !> f <- r2c(c eta c2r(f)): back to real space, pointwise product, forward again
+      !> (the viscosity step of the Stokes operator); backends may fuse the passes
+      procedure :: c2r_scale_r2c => backend_c2r_scale_r2c
    end type fft_backend_t
 
    abstract interface
@@ -75,7 +78,7 @@ module fold_fft_backend
       end subroutine destroy_iface
    end interface
 
-   public :: field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag
+   public :: field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows
 
    !> FFTW planning effort: FFTW_ESTIMATE (instant) or FFTW_MEASURE (seconds, faster transforms)
    integer, parameter :: FOLD_PLAN_ESTIMATE = 0, FOLD_PLAN_MEASURE = 1
@@ -93,6 +96,31 @@ contains
       call c_f_pointer(f%mem, f%c, [self%nxh, self%nl(2), self%nl(3)])
       f%r = 0.0_dp
    end subroutine backend_alloc_field
+
+   !> Unfused reference: c2r, w = c eta w on the nx data columns, r2c.
+   subroutine backend_c2r_scale_r2c(self, f, c, eta)
+      class(fft_backend_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      !> Constant factor [-] and field (padded real layout) of the product
+      real(dp), intent(in) :: c
+      type(fft_field_t), intent(in) :: eta
+      call self%c2r(f)
+      call scale_rows(self%n(1), self%nxp, self%nl(2)*self%nl(3), c, eta%r, f%r)
+      call self%r2c(f)
+   end subroutine backend_c2r_scale_r2c
+
+   !> w(1:nx, :) = c eta(1:nx, :) w(1:nx, :) on padded real rows (nxp, nrows).
+   subroutine scale_rows(nx, nxp, nrows, c, eta, w)
+      integer(ip), intent(in) :: nx, nxp, nrows
+      real(dp), intent(in) :: c, eta(nxp, nrows)
+      real(dp), intent(inout) :: w(nxp, nrows)
+      integer(ip) :: i, r
+      do r = 1, nrows
+         do i = 1, nx
+            w(i, r) = (c*eta(i, r))*w(i, r)
+         end do
+      end do
+   end subroutine scale_rows
 
    !> Free a field (no-op when not allocated).
    subroutine field_free(f)

@@ -215,6 +215,9 @@ contains
       allocate (s%kv(s%dim, nxh, n2, n3), s%ik2(nxh, n2, n3), s%cosprod(nxh, n2, n3))
       allocate (s%wx(nxh), s%history(0:set%max_iter))
       s%x = 0.0_dp
+      s%r = 0.0_dp
+      s%p = 0.0_dp
+      s%q = 0.0_dp
       s%wx = 2.0_dp
       s%wx(1) = 1.0_dp
       if (mod(s%grid%n(1), 2) == 0) s%wx(nxh) = 1.0_dp
@@ -290,7 +293,7 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       integer(ip) :: nx, i, j, k, c, it, dim
       real(dp) :: ext(2), red(2), bb, rz, rz_new, alpha, beta, pq, emin, emax
-      complex(dp) :: f(3), dc(3)
+      complex(dp) :: f(3)
 
       stat = FOLD_OK
       errmsg = ""
@@ -378,6 +381,8 @@ contains
       red = [precond_dot(s, s%r), 0.0_dp]
       call s%fft%sum_all(red)
       rz = red(1)
+      ! the first direction update reads p (times beta = 0): it must be finite
+      s%p = 0.0_dp
       s%residual = sqrt(max(rz, 0.0_dp)/bb)
       s%history(0) = s%residual
       it = 0
@@ -387,11 +392,8 @@ contains
          it = it + 1
          call cg_direction_strain(s, alpha, beta)
          do c = 1, s%ncg
-            call s%fft%c2r(s%work(s%cg_comp(c)))
-            ! strain of the unnormalised c2r: 1/N folds into the viscosity
-            call scale_by_field(nx, s%fft%nxp, s%grid%nl(2)*s%grid%nl(3), 2.0_dp/real(grid_total(s%grid), dp), &
-                                s%eta%r, s%work(s%cg_comp(c))%r)
-            call s%fft%r2c(s%work(s%cg_comp(c)))
+            ! back, times 2 eta (the 1/N of the unnormalised c2r folds in), forward
+            call s%fft%c2r_scale_r2c(s%work(s%cg_comp(c)), 2.0_dp/real(grid_total(s%grid), dp), s%eta)
          end do
          red = [cg_apply(s), 0.0_dp]
          call s%fft%sum_all(red)
@@ -689,19 +691,6 @@ contains
          w3(m) = 0.5_dp*(d1*p2 + d2*p1)
       end do
    end subroutine direction_strain2
-
-   !> w(1:nx, :) = c eta(1:nx, :) w(1:nx, :) on padded real fields (nxp, nyz).
-   subroutine scale_by_field(nx, nxp, nyz, c, eta, w)
-      integer(ip), intent(in) :: nx, nxp, nyz
-      real(dp), intent(in) :: c, eta(nxp, nyz)
-      real(dp), intent(inout) :: w(nxp, nyz)
-      integer(ip) :: i, jk
-      do jk = 1, nyz
-         do i = 1, nx
-            w(i, jk) = (c*eta(i, jk))*w(i, jk)
-         end do
-      end do
-   end subroutine scale_by_field
 
    !> q = P B^H (stress in work(1:nc)%c), zero on removed modes; returns the local <p, q>.
    function cg_apply(s) result(pq)
