@@ -27,7 +27,7 @@ from pyfold.closures.hybrid import hybrid
 from pyfold.closures.tabulated import TabulatedA4
 from pyfold.closures.implicit import siq, sihyb
 from pyfold.closures.symmetric_quadratic import sqc
-from pyfold.closures.natural import natural_2d
+from pyfold.closures.natural import natural_2d, natural_3d
 from pyfold.closures.ibof import ibof
 from pyfold.closures.orthotropic import ore, orf, orl, ors, orw, orw3
 from pyfold.closures.exact import fec
@@ -45,6 +45,7 @@ __all__ = [
     "sihyb",
     "sqc",
     "natural_2d",
+    "natural_3d",
     "ibof",
     "ore",
     "ors",
@@ -68,7 +69,8 @@ CLOSURES: dict[str, dict[int, Closure]] = {
     "sihyb": {2: sihyb, 3: sihyb},
     "siq": {2: siq, 3: siq},
     "sqc": {2: sqc, 3: sqc},
-    "natural": {2: natural_2d},
+    # 3-D: the natural form with pyfold's own fit to FEC (not the published NAT1/NAT2)
+    "natural": {2: natural_2d, 3: natural_3d},
     "ibof": {3: ibof},
     "ore": {3: ore},
     "ors": {3: ors},
@@ -88,10 +90,11 @@ _EXACT_HINT = (
 #: Published closures deliberately not provided, with the reason and the alternative.
 NOT_PROVIDED: dict[str, str] = {
     name: (
-        f"the 3-D natural closure {name.upper()} (Verleye & Dupret 1993; Dupret & Verleye 1999) "
-        "is not provided: its fitted coefficient table could not be verified from any available "
-        "source. Use 'fec' (the exact closure it approximates) or 'ore' (VerWeyst's orthotropic "
-        "fit to it); in 2-D, 'natural' is the closed form"
+        f"the published 3-D natural closure {name.upper()} (Verleye & Dupret 1993; Dupret & "
+        "Verleye 1999) is not provided: its coefficient tables are unavailable (not found in any "
+        "source reachable when pyfold was written). Use 'natural' (pyfold's own least-squares refit "
+        "of the same natural-closure form to the exact closure; its coefficients are not the "
+        "published ones) or 'fec' (the exact closure of Jeffery's equation that NAT1/NAT2 approximate)"
     )
     for name in ("nat1", "nat2")
 }

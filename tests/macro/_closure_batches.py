@@ -23,6 +23,7 @@ import scipy.linalg as sl
 from pyfold._jax import jax, jnp
 from pyfold import closures as C
 from pyfold import tensors as T
+from pyfold.closures import _natural_fit as NATURAL_FIT
 
 #: Step of the central differences [dimensionless, a2 components].
 FD_STEP = 1e-5
@@ -149,11 +150,24 @@ def state_groups(d: int) -> dict[str, np.ndarray]:
         groups["jeffery"] = np.stack([a2 for a2, _, _ in jeffery_populations()])
         x = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
         groups["near_isotropic"] = np.stack([iso + eps * x for eps in NEAR_ISOTROPIC_EPS])
+        # held-out states stored with the natural closure's fit, and planar states (a3 = 0)
+        # where the exact closure is known in closed form (A_1122 = a1 a2 / 2)
+        groups["natural_heldout"] = principal_states(NATURAL_FIT.HELDOUT_EIGENVALUES)
+        groups["planar_in_3d"] = principal_states([(a, 1.0 - a, 0.0) for a in PLANAR_A1])
     else:
         groups["shear_population"] = planar_shear_population()[0][None]
         groups["planar_random"] = random_a2(2, 3, seed=7, n_vectors=50)
     return groups
 
+
+def principal_states(values) -> np.ndarray:
+    """Diagonal a2 with the given principal values, (n, 3, 3)."""
+    return np.einsum("ni,ij->nij", np.asarray(values, dtype=np.float64), np.eye(3))
+
+
+#: Largest principal value a1 of the ``planar_in_3d`` states (a2 = 1 - a1, a3 = 0); 0.943
+#: is where the 3-D natural fit is worst on that edge.
+PLANAR_A1 = (0.5, 0.7, 0.9, 0.943, 0.99)
 
 #: Distances from isotropy of the ``near_isotropic`` group.
 NEAR_ISOTROPIC_EPS = (0.0, 1e-14, 1e-9, 1e-6)
