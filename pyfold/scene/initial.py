@@ -62,8 +62,9 @@ def initial_state(resolved: ResolvedScene) -> InitialState:
     from pyfold.native.geometry import Cell, place_particles
 
     a = particle_arrays(resolved)
+    # the full gradient: a non-shear flow places in its deforming lattice at t = 0
     cell = Cell(tuple(resolved.cell_lengths[: resolved.dim]), walls=resolved.walls,
-                shear_rate=float(resolved.velocity_gradient[0, 1]))
+                velocity_gradient=resolved.velocity_gradient)
     placed = place_particles(cell, a["shape"], a["radius"], a["length"], alpha=resolved.alpha, seed=resolved.seed,
                              orientation=a["orient_mode"], axis=a["axis"], max_attempts=MAX_ATTEMPTS,
                              relax_sweeps=RELAX_SWEEPS)

@@ -229,6 +229,29 @@ def _gradient(scene: Scene, problems: Problems) -> np.ndarray | None:
     return np.asarray(kinematics.uniaxial_elongation(flow.rate))
 
 
+def _check_lattice_duration(scene: Scene, G: np.ndarray, lengths: np.ndarray, good: list, alpha: float, dt: float,
+                            t_end: float, problems: Problems) -> None:
+    """A lattice deformed by an elongational or general flow thins unless it can be
+    remapped (Kraynik-Reinelt planar elongation in a cell with Lx = Ly): the run is
+    admissible only while the reduced cell is thicker than twice the contact search
+    range (fold_cell.cell_admissible_time, fold_contacts.contact_search_range)."""
+    from pyfold.native import geometry as geo
+
+    dim = scene.cell.dim
+    rc = geo.contact_search_range([f.shape_code for f in good], [f.radius for f in good],
+                                  [f.length for f in good], alpha=alpha)
+    cell = geo.Cell(tuple(lengths[:dim]), velocity_gradient=G)
+    t_ok = geo.admissible_t_end(cell, rc, dt, t_end)
+    if t_ok < 0:
+        problems.add("cell.size", f"the cell must be thicker than twice the contact search range 2 x {rc:.4g} "
+                     f"(particle extent, alpha and Verlet skin) along every lattice direction; got {cell.lattice().thickness.min():.4g}")
+    elif t_ok < t_end:
+        problems.add("numerics.t_end", f"flow.type = {scene.flow.type!r} deforms the periodic lattice without a "
+                     f"reproducible remap (Kraynik-Reinelt needs planar elongation with cell.size x = y): the reduced "
+                     f"cell gets thinner than twice the contact search range {rc:.4g} after t = {t_ok:g}; allowed: "
+                     f"numerics.t_end <= {t_ok:g} (or enlarge cell.size), got {t_end:g}")
+
+
 def _family(scene: Scene, index: int, problems: Problems, cell_volume: float) -> Family | None:
     fam = scene.particles[index]
     dim = scene.cell.dim
@@ -354,16 +377,15 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
     walls = cell.boundary == "couette"
 
     G = _gradient(scene, problems)
-    if G is not None and not _is_simple_shear(G):
-        # fold_cell (fortran/geometry) keeps the cell shape: only the sliding images of
-        # simple shear (Lees-Edwards) or the moving walls of Couette flow are exact.
+    shear_flow = G is None or _is_simple_shear(G)
+    if not shear_flow and walls:
+        # Couette walls drive a simple shear; other flows use the periodic lattice
+        # that deforms with the flow (fold_cell, fortran/geometry).
         key = "flow.gradient" if scene.flow.type == "general" else "flow.type"
-        what = ("no-slip walls (cell.boundary = 'couette') drive a simple shear u = (rate y, 0, 0)" if walls else
-                "a periodic cell that does not deform is exact only for simple shear (sliding Lees-Edwards "
-                "images, physics.md section 3); elongational flows need a deforming (Kraynik-Reinelt) lattice, "
-                "which pyfold does not have yet")
-        problems.add(key, f"{what}: G_xy must be the only non-zero entry; got flow.type = {scene.flow.type!r}"
-                     f"{' with G = ' + str(G.tolist()) if scene.flow.type == 'general' else ''}")
+        problems.add(key, "no-slip walls (cell.boundary = 'couette') drive a simple shear u = (rate y, 0, 0): "
+                     f"G_xy must be the only non-zero entry; got flow.type = {scene.flow.type!r}"
+                     f"{' with G = ' + str(G.tolist()) if scene.flow.type == 'general' else ''}; "
+                     "use cell.boundary = 'periodic' for elongational flows")
 
     families = [_family(scene, i, problems, cell_volume) for i in range(len(scene.particles))]
     names = [f.name for f in families if f is not None]
@@ -378,6 +400,10 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
     if alpha > min(radii):
         problems.add("model.alpha", f"must be between 0 and the smallest particle radius {min(radii):g} "
                      f"(a security zone of the order of a grid cell), got {alpha:g}")
+    if model.hydrodynamics == "stokes" and not shear_flow:
+        problems.add("model.hydrodynamics", "'stokes' is available for simple shear only: the FFT Stokes solver has "
+                     f"no deforming (elongational) lattice yet (flow.type = {scene.flow.type!r}); use "
+                     "hydrodynamics = 'jeffery'")
     if model.hydrodynamics == "stokes" and walls:
         problems.add("model.hydrodynamics", "'stokes' needs a fully periodic cell: the FFT Stokes solver cannot impose "
                      "the no-slip walls of cell.boundary = 'couette' (a wall-bounded solver is not built); use "
@@ -464,6 +490,9 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
             else:
                 every[key] = k
 
+    if not shear_flow and not walls and n_steps is not None and good:
+        _check_lattice_duration(scene, G, lengths, good, alpha, num.dt, num.t_end, problems)
+
     problems.raise_if_any(source)
     assert G is not None and n_steps is not None
 
@@ -503,6 +532,10 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
                    "viscosity is under 12 % of Einstein's (Batchelor & Green 1972)" if regime == "spheres" else
                    f"{regime_text}: hydrodynamic interactions between particles are negligible")
             reasons.insert(0, f"hydrodynamics = jeffery (auto): {why}")
+        elif not shear_flow:
+            reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but the FFT "
+                           "Stokes solver has no deforming (elongational) lattice; hydrodynamic interactions are "
+                           "neglected, an approximation in this regime")
         elif walls:
             reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but the FFT "
                            "Stokes solver is periodic and this cell has Couette walls; hydrodynamic interactions "
