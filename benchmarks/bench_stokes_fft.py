@@ -36,9 +36,9 @@ def _run(exe: Path, args: list[str], ranks: int) -> str:
     return subprocess.run(cmd, capture_output=True, text=True, check=True, env=ENV).stdout
 
 
-def cost(exe: Path, n: int, ranks: int, repeats: int) -> dict:
+def cost(exe: Path, n: int, ranks: int, repeats: int, backend: str = "auto") -> dict:
     """Medians over repeats of the BENCH lines (first repeat dropped: page faults, caches)."""
-    out = _run(exe, [str(n), "1000", str(repeats + 1), "cost"], ranks)
+    out = _run(exe, [str(n), "1000", str(repeats + 1), "cost", "sphere", backend], ranks)
     rows = [dict((k, float(v)) for k, v in re.findall(r"(\w+)=\s*(\S+)", line))
             for line in out.splitlines() if line.startswith("BENCH")][1:]
     return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
@@ -60,20 +60,25 @@ def main() -> None:
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
 
     # Parameters
-    cases = [(64, 1), (64, 2)] if args.quick else [(64, 1), (128, 1), (128, 2)]
+    # (grid, ranks, backend): "auto" = serial FFTW (fused viscosity step) on one rank,
+    # FFTW-MPI slabs on two; "mpi" on one rank shows the unfused step for comparison
+    cases = ([(64, 1, "auto"), (64, 1, "mpi"), (64, 2, "auto")] if args.quick else
+             [(64, 1, "auto"), (64, 1, "mpi"), (128, 1, "auto"), (128, 1, "mpi"), (128, 2, "auto")])
     kappas = [1e1, 1e2, 1e3, 1e4]
     grids = [32, 48, 64] if args.quick else [32, 48, 64, 96, 128]
 
     # Run: cost of an iteration
-    print(f"\n{'grid':>6} {'ranks':>5} {'t_iter [s]':>11} {'t_fft hot':>10} {'t_fft seq':>10} "
+    print(f"\n{'grid':>6} {'ranks':>5} {'backend':>13} {'t_iter [s]':>11} {'t_fft hot':>10} {'t_fft seq':>10} "
           f"{'iter/FFT hot':>13} {'iter/FFT seq':>13} {'FFTs/iter':>9}")
     t_iter = {}
-    for n, ranks in cases:
-        c = cost(exe, n, ranks, args.repeats)
-        t_iter[(n, ranks)] = c["t_iter"]
-        print(f"{n:>5}^3 {ranks:>5} {c['t_iter']:>11.3e} {c['t_fft']:>10.3e} {c['t_fft_seq']:>10.3e} "
+    for n, ranks, backend in cases:
+        c = cost(exe, n, ranks, args.repeats, backend)
+        name = "mpi (unfused)" if backend == "mpi" or ranks > 1 else "serial"
+        if backend == "auto":
+            t_iter[(n, ranks)] = c["t_iter"]
+        print(f"{n:>5}^3 {ranks:>5} {name:>13} {c['t_iter']:>11.3e} {c['t_fft']:>10.3e} {c['t_fft_seq']:>10.3e} "
               f"{c['ratio']:>13.1f} {c['ratio_seq']:>13.1f} {int(c['ffts']):>9}")
-    big = max(n for n, _ in cases)
+    big = max(n for n, _, _ in cases)
     if (big, 2) in t_iter:
         print(f"speed-up np=2 vs np=1 at {big}^3 (wall time per iteration): {t_iter[(big, 1)] / t_iter[(big, 2)]:.2f}")
 

@@ -1,6 +1,9 @@
 !> Benchmark of the Stokes solver (run through benchmarks/bench_stokes_fft.py).
 !>
-!> Usage: bench_stokes_fft N [kappa] [repeats] [mode] [shape]
+!> Usage: bench_stokes_fft N [kappa] [repeats] [mode] [shape] [backend]
+!>   backend "auto" (default): serial FFTW on one rank (what fold_run and the Python
+!>     extension use; fused c2r -> product -> r2c), FFTW-MPI slabs on several;
+!>     "mpi": FFTW-MPI slabs even on one rank (unfused).
 !>   mode "cost" (default): wall time of one CG iteration in units of one real 3-D
 !>     FFT of the same grid, two ways: against a "hot" FFT (r2c + c2r of one field,
 !>     repeated; K's original unit) and against the FFTs as the iteration sees them
@@ -21,12 +24,14 @@ program bench_stokes_fft
    use fold_kinds, only: dp, ip, msg_len
    use fold_fft_backend, only: fft_backend_t, FOLD_PLAN_MEASURE
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
+   use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_stokes_fft
    use fold_grid, only: shear_lattice
    implicit none
    include 'fftw3-mpi.f03'
    class(fft_backend_t), allocatable :: fft
    type(fft_mpi_t), allocatable :: slab
+   type(fft_serial_t), allocatable :: serial
    type(stokes_fft_t) :: s
    type(stokes_settings_t) :: set
    real(dp), allocatable :: chi(:, :, :)
@@ -34,7 +39,7 @@ program bench_stokes_fft
    integer :: stat, rank, nranks, rep, nrep, i, j, k, c
    integer(ip) :: n
    character(len=msg_len) :: msg
-   character(len=32) :: arg, mode, shape
+   character(len=32) :: arg, mode, shape, backend
    real(dp) :: ax(3), along
 
    call MPI_Init()
@@ -60,6 +65,8 @@ program bench_stokes_fft
    if (command_argument_count() >= 4) call get_command_argument(4, mode)
    shape = "sphere"
    if (command_argument_count() >= 5) call get_command_argument(5, shape)
+   backend = "auto"
+   if (command_argument_count() >= 6) call get_command_argument(6, backend)
    ax = 1.0_dp/sqrt(3.0_dp)
    set%plan_effort = FOLD_PLAN_MEASURE
    set%warm_start = .false.
@@ -70,10 +77,17 @@ program bench_stokes_fft
       set%tol = 1.0e-14_dp
       set%max_iter = 20
    end if
-   allocate (slab)
-   call fft_mpi_create(slab, MPI_COMM_WORLD, 3, [n, n, n], FOLD_PLAN_MEASURE, stat, msg)
-   call check("fft_mpi_create")
-   call move_alloc(slab, fft)
+   if (nranks == 1 .and. trim(backend) /= "mpi") then
+      allocate (serial)
+      call fft_serial_create(serial, 3, [n, n, n], FOLD_PLAN_MEASURE, stat, msg)
+      call check("fft_serial_create")
+      call move_alloc(serial, fft)
+   else
+      allocate (slab)
+      call fft_mpi_create(slab, MPI_COMM_WORLD, 3, [n, n, n], FOLD_PLAN_MEASURE, stat, msg)
+      call check("fft_mpi_create")
+      call move_alloc(slab, fft)
+   end if
    call stokes_fft_init(s, fft, set, stat, msg)
    call check("stokes_fft_init")
    call stokes_fft_set_lattice(s, shear_lattice([1.0_dp, 1.0_dp, 1.0_dp], 0.2_dp), stat, msg)
