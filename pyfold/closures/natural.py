@@ -2,10 +2,10 @@
 
 References for the form: Verleye & Dupret (1993), *Numerical prediction of fiber
 orientation in complex injection molded parts*, ASME MD 49:264; Dupret & Verleye
-(1999), in *Advances in the Flow and Rheology of Non-Newtonian Fluids*, Elsevier;
-reprinted in Advani & Sims (eds., 2011) / Kennedy & Zheng (2013) textbooks; the
-trace conditions that leave three free coefficients: Chung & Kwon (2002), J. Rheol.
-46:169, eq. 26.
+(1999), in *Advances in the Flow and Rheology of Non-Newtonian Fluids*, Elsevier
+(the form, not the coefficient tables, is reprinted in the Advani & Sims and the
+Kennedy & Zheng textbooks); the trace conditions that leave three free coefficients:
+Chung & Kwon (2002), J. Rheol. 46:169, eq. 26.
 """
 from __future__ import annotations
 
