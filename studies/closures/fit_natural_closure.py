@@ -37,7 +37,7 @@ Method.
 Errors are per state max_ijkl |a4 - a4_exact|, summarised as max and RMS over states.
 
 Command:  python studies/closures/fit_natural_closure.py [--grid 60] [--degree 2] [--write]
-Cost: ~20 s on 2 cores (FEC compilation dominates).
+Cost: ~35 s on the shared 2 cores (measured; FEC compilation dominates).
 Output: a table (natural fit, IBOF, ORW3 on the fit grid, its planar edge, the
 held-out and the Jeffery states); with --write, pyfold/closures/_natural_fit.py (the
 coefficient table as a Python literal, with date, command and residuals).
