@@ -58,6 +58,7 @@ from pyfold.closures import TabulatedA4
 from pyfold.errors import InputError
 from pyfold.kinematics import velocity_gradient
 from pyfold.models import FolgarTucker, solve_orientation
+from pyfold.models.solve import _integrate
 from pyfold.tensors import check_orientation_tensor
 
 __all__ = [
@@ -297,30 +298,16 @@ def _nudged_inside(x: float, lo: float, hi: float) -> float:
 
 
 def _forward_mode_solve(model, a2_0, L, t, rtol: float, atol: float, max_steps: int):
-    """Integrate ``model.rate`` exactly as :func:`pyfold.models.solve_orientation` does
-    (Tsit5, PID controller, output at ``t``), but with ``diffrax.ForwardMode``.
+    """The solve of :func:`pyfold.models.solve_orientation` (Tsit5, PID controller,
+    output at ``t``) in forward mode.
 
-    Why not call ``solve_orientation``: it uses diffrax' default checkpointed
-    adjoint, which supports reverse mode only. A fit has 1-3 parameters and
-    hundreds of residuals, so the Jacobian wants forward mode (p JVPs instead of
-    n VJPs): measured on FT/IBOF, 41 samples, 9 s to compile and 8 ms per
-    Jacobian, against ~60 s and ~1.7 s in reverse mode. Keep the solver and
-    controller in step with ``pyfold.models.solve``.
+    Why forward mode: a fit has 1-3 parameters and hundreds of residuals, so the
+    Jacobian wants p JVPs rather than n VJPs: measured on FT/IBOF, 41 samples,
+    9 s to compile and 8 ms per Jacobian, against ~60 s and ~1.7 s in reverse mode.
     """
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(lambda s, a2, args: model.rate(s, a2, L(s))),
-        diffrax.Tsit5(),
-        t0=t[0],
-        t1=t[-1],
-        dt0=None,
-        y0=a2_0,
-        saveat=diffrax.SaveAt(ts=t),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        max_steps=max_steps,
-        adjoint=diffrax.ForwardMode(),
-        throw=False,
-    )
-    return sol.ys, jnp.asarray(sol.result._value, dtype=jnp.int32)
+    ys, status, _ = _integrate(model, a2_0, L, t, rtol, atol, diffrax.Tsit5(), max_steps,
+                               adjoint=diffrax.ForwardMode())
+    return ys, status
 
 
 class _Problem(eqx.Module):

@@ -95,8 +95,11 @@ def _check_tolerances(rtol, atol, max_steps) -> None:
         raise InputError(f"max_steps: must be a positive integer, got {max_steps!r}")
 
 
-def _integrate(model, a2_0, L, t_eval, rtol, atol, solver, max_steps):
-    """One diffrax solve (traceable; never throws)."""
+def _integrate(model, a2_0, L, t_eval, rtol, atol, solver, max_steps, adjoint=None):
+    """One diffrax solve (traceable; never throws): the only place pyfold calls
+    ``diffeqsolve`` for orientation models. ``adjoint=None`` is diffrax' default
+    checkpointed adjoint (reverse mode); fitting passes ``diffrax.ForwardMode()``,
+    because a Jacobian with few parameters and many residuals wants JVPs."""
 
     def vector_field(t, a2, args):
         return model.rate(t, a2, L(t))
@@ -111,6 +114,7 @@ def _integrate(model, a2_0, L, t_eval, rtol, atol, solver, max_steps):
         saveat=diffrax.SaveAt(ts=t_eval),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
         max_steps=max_steps,
+        adjoint=diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint,
         throw=False,
     )
     status = jnp.asarray(sol.result._value, dtype=jnp.int32)
