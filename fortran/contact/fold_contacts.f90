@@ -92,7 +92,8 @@ module fold_contacts
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_OVERLAP
    use fold_cell, only: cell_t, cell_min_image, cell_advance
-   use fold_cell_list, only: cell_list_t, cell_list_build, cell_list_candidates
+   use fold_cell_list, only: cell_list_t, cell_list_build, cell_list_candidates, bin_sort_t, cell_list_sort, &
+                             cell_list_has_image_stencil, cell_list_image_stencil, STENCIL_MAX
    use fold_particles, only: particle_set_t, particle_half_segment, FOLD_FIBRE, FOLD_SPHERE, FOLD_SPHEROID
    use fold_segment, only: capsule_contact
    use fold_kinematics, only: rotate_axis
@@ -294,12 +295,15 @@ contains
       real(dp), intent(in) :: xp(:, :), pp(:, :), hseg(:)
       integer(ip), intent(in) :: a, b
       real(dp), intent(out) :: dist, n(:), sa, sb
-      real(dp) :: r(parts%dim)
+      real(dp) :: r(3), nn(3)
+      integer :: d
 
-      r = xp(:, a) - xp(:, b)
-      call cell_min_image(cell, r)
-      call capsule_contact(r, pp(:, a), hseg(a), parts%radius(a), pp(:, b), hseg(b), parts%radius(b), &
-                           dist, n, sa, sb)
+      d = parts%dim
+      r(1:d) = xp(:, a) - xp(:, b)
+      call cell_min_image(cell, r(1:d))
+      call capsule_contact(r(1:d), pp(:, a), hseg(a), parts%radius(a), pp(:, b), hseg(b), parts%radius(b), &
+                           dist, nn(1:d), sa, sb)
+      n = nn(1:d)
    end subroutine pair_geometry
 
    !> Lowest (bottom) or highest (top) point of a capsule axis: arm s and surface gap to the wall.
@@ -330,22 +334,38 @@ contains
       real(dp), intent(in) :: xp(:, :), pp(:, :), hseg(:), cutoff
       integer(ip), intent(in) :: a, b
       type(pair_list_t), intent(inout) :: list
-      real(dp) :: r(parts%dim), dist, n(parts%dim), sa, sb
+      call consider_pair(cell, parts%dim, xp(:, a), pp(:, a), hseg(a), parts%radius(a), &
+                         xp(:, b), pp(:, b), hseg(b), parts%radius(b), a, b, cutoff, list)
+   end subroutine list_consider
 
-      r = xp(:, a) - xp(:, b)
-      call cell_min_image(cell, r)
+   !> list_consider from the data of the two particles (centre, axis, half segment,
+   !> radius; a < b): the same operations in the same order as pair_geometry, so the
+   !> listed geometry is bit-identical to it whichever copy of the data is read.
+   pure subroutine consider_pair(cell, dim, xa, pa, ha, ra, xb, pb, hb, rb, a, b, cutoff, list)
+      type(cell_t), intent(in) :: cell
+      integer(ip), intent(in) :: dim
+      real(dp), intent(in) :: xa(:), pa(:), ha, ra, xb(:), pb(:), hb, rb, cutoff
+      integer(ip), intent(in) :: a, b
+      type(pair_list_t), intent(inout) :: list
+      ! fixed-size locals: an automatic array would cost a heap allocation per pair
+      real(dp) :: r(3), dist, n(3), sa, sb
+
+      r(1:dim) = xa(1:dim) - xb(1:dim)
+      call cell_min_image(cell, r(1:dim))
       ! centre distance minus both capsule extents is a lower bound of the surface
       ! distance: most pairs are rejected without the segment computation
-      if (norm2(r) - (hseg(a) + parts%radius(a) + hseg(b) + parts%radius(b)) >= cutoff) return
-      call pair_geometry(cell, parts, xp, pp, hseg, a, b, dist, n, sa, sb)
+      if (norm2(r(1:dim)) - (ha + ra + hb + rb) >= cutoff) return
+      call capsule_contact(r(1:dim), pa, ha, ra, pb, hb, rb, dist, n(1:dim), sa, sb)
       if (.not. (dist < cutoff)) return
       if (list%n == size(list%dist)) call list_grow(list)
       list%n = list%n + 1
-      list%ab(:, list%n) = [a, b]
+      list%ab(1, list%n) = a
+      list%ab(2, list%n) = b
       list%dist(list%n) = dist
-      list%nrm(:, list%n) = n
-      list%arm(:, list%n) = [sa, sb]
-   end subroutine list_consider
+      list%nrm(:, list%n) = n(1:dim)
+      list%arm(1, list%n) = sa
+      list%arm(2, list%n) = sb
+   end subroutine consider_pair
 
    !> Double the capacity of a pair list.
    pure subroutine list_grow(list)
@@ -369,6 +389,20 @@ contains
    !> is below cutoff, found with the cell lists (use_cells) or the O(N^2) double loop
    !> (the reference). The cell list is built in both modes: its setup checks that the
    !> cell exceeds twice the range rc (unique minimum image).
+   !>
+   !> Cells, in a sheared or fixed cell with at least three bins per periodic direction
+   !> (cell_list_has_image_stencil; the others take the generic candidate scan): the
+   !> particles are counting-sorted by bin and their data copied in that order, so a
+   !> bin's neighbours are read from a few contiguous stretches of memory (particle
+   !> indices are random in space: reading by index fetches every neighbour from
+   !> elsewhere, which made the cost per particle grow once the data left the cache).
+   !> Every pair is visited once, from its lower slot, with the image translation of
+   !> the neighbour bin: a pair whose centres are farther apart than the two extents
+   !> plus cutoff plus a margin far above round-off is rejected from that image
+   !> without the minimum image; all others go through consider_pair, the same exact
+   !> operations as the double loop. The list therefore holds exactly the pairs of the
+   !> double loop with bit-identical geometry (ordered by bin instead of by index:
+   !> nothing downstream depends on the order, see find_worst).
    subroutine build_pair_list(cell, parts, xp, pp, hseg, cutoff, rc, use_cells, list, stat, errmsg)
       type(cell_t), intent(in) :: cell
       type(particle_set_t), intent(in) :: parts
@@ -378,8 +412,14 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       type(cell_list_t) :: cl
+      type(bin_sort_t) :: bs
       integer(ip), allocatable :: cand(:)
-      integer(ip) :: a, b, c, nc
+      real(dp), allocatable :: xs(:, :), ps(:, :), ext(:), hs(:), rs(:)
+      integer(ip) :: a, b, c, nc, ia, jb, bin, t, dim, sbins(STENCIL_MAX)
+      integer :: nst
+      real(dp) :: shift(3, STENCIL_MAX), d(3), reach, margin, pc(3), cc
+      ! |p_a x p_b|^2 above which the line distance is used (its round-off ~ eps |d| / |c|)
+      real(dp), parameter :: SKEW_MIN = 1.0e-8_dp
 
       if (.not. allocated(list%dist)) then
          allocate (list%ab(2, 4*parts%n), list%dist(4*parts%n), list%nrm(parts%dim, 4*parts%n), &
@@ -388,7 +428,53 @@ contains
       list%n = 0
       call cell_list_build(cl, cell, xp, rc, stat, errmsg)
       if (stat /= FOLD_OK) return
-      if (use_cells) then
+      if (use_cells .and. cell_list_has_image_stencil(cl, cell)) then
+         dim = parts%dim
+         call cell_list_sort(cl, cell, xp, bs)
+         allocate (xs(dim, parts%n), ps(dim, parts%n), hs(parts%n), rs(parts%n), ext(parts%n))
+         do ia = 1, parts%n
+            a = bs%id(ia)
+            xs(:, ia) = xp(:, a)
+            ps(:, ia) = pp(:, a)
+            hs(ia) = hseg(a)
+            rs(ia) = parts%radius(a)
+            ext(ia) = hseg(a) + parts%radius(a)
+         end do
+         ! round-off of wrapped coordinates is ~ eps L; 1e-9 L can never reject a pair
+         ! the exact test would keep
+         margin = 1.0e-9_dp*(sum(cell%lengths(1:dim)) + rc)
+         d = 0.0_dp
+         do bin = 1, int(size(bs%first) - 1, ip)
+            do ia = bs%first(bin), bs%first(bin + 1) - 1
+               call cell_list_image_stencil(cl, cell, bs%xw(:, ia), nst, sbins, shift)
+               do t = 1, nst
+                  ! pairs are taken from their lower slot
+                  do jb = max(bs%first(sbins(t)), ia + 1), bs%first(sbins(t) + 1) - 1
+                     d(1:dim) = bs%xw(1:dim, ia) - bs%xw(1:dim, jb) - shift(1:dim, t)
+                     reach = ext(ia) + ext(jb) + cutoff + margin
+                     if (d(1)**2 + d(2)**2 + d(3)**2 >= reach**2) cycle
+                     if (dim == 3) then
+                        ! the distance |d.pc|/|pc| of the two axis lines (pc = p_a x p_b)
+                        ! bounds the axis distance from below: skew pairs far apart
+                        ! skip the segment computation (not near-parallel ones: round-off)
+                        pc = [ps(2, ia)*ps(3, jb) - ps(3, ia)*ps(2, jb), ps(3, ia)*ps(1, jb) - ps(1, ia)*ps(3, jb), &
+                             ps(1, ia)*ps(2, jb) - ps(2, ia)*ps(1, jb)]
+                        cc = pc(1)**2 + pc(2)**2 + pc(3)**2
+                        if (cc > SKEW_MIN .and. (d(1)*pc(1) + d(2)*pc(2) + d(3)*pc(3))**2 > &
+                            (rs(ia) + rs(jb) + cutoff + margin)**2*cc) cycle
+                     end if
+                     if (bs%id(ia) < bs%id(jb)) then
+                        call consider_pair(cell, dim, xs(:, ia), ps(:, ia), hs(ia), rs(ia), xs(:, jb), ps(:, jb), &
+                                           hs(jb), rs(jb), bs%id(ia), bs%id(jb), cutoff, list)
+                     else
+                        call consider_pair(cell, dim, xs(:, jb), ps(:, jb), hs(jb), rs(jb), xs(:, ia), ps(:, ia), &
+                                           hs(ia), rs(ia), bs%id(jb), bs%id(ia), cutoff, list)
+                     end if
+                  end do
+               end do
+            end do
+         end do
+      else if (use_cells) then
          allocate (cand(parts%n))
          do a = 1, parts%n
             call cell_list_candidates(cl, cell, xp(:, a), cand, nc)

@@ -47,7 +47,7 @@
 !> up to the image shift that cell_wrap adds, and every distance goes through
 !> cell_min_image.
 module fold_cell
-   use fold_kinds, only: dp, ip, msg_len
+   use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_matrix_exp, only: expm3
    implicit none
@@ -468,19 +468,19 @@ contains
       end if
       lx = cell%lengths(1)
       ly = cell%lengths(2)
-      if (cell%dim == 3) dx(3) = dx(3) - cell%lengths(3)*anint(dx(3)/cell%lengths(3))
+      if (cell%dim == 3) dx(3) = dx(3) - cell%lengths(3)*nearest_whole(dx(3)/cell%lengths(3))
       if (cell%walls) then
-         dx(1) = dx(1) - lx*anint(dx(1)/lx)
+         dx(1) = dx(1) - lx*nearest_whole(dx(1)/lx)
          return
       end if
-      ny0 = nint(dx(2)/ly)
+      ny0 = int(nearest_whole(dx(2)/ly))
       d2best = huge(1.0_dp)
       best = 0.0_dp
       do ny = ny0 - 1, ny0 + 1
          trial = 0.0_dp
          trial(1) = dx(1) - ny*cell%shear_offset
          trial(2) = dx(2) - ny*ly
-         trial(1) = trial(1) - lx*anint(trial(1)/lx)
+         trial(1) = trial(1) - lx*nearest_whole(trial(1)/lx)
          d2 = trial(1)**2 + trial(2)**2
          ! strict < keeps the central row on exact ties: the result is deterministic
          if (d2 < d2best .or. ny == ny0 .and. d2 <= d2best) then
@@ -490,6 +490,24 @@ contains
       end do
       dx(1:2) = best(1:2)
    end subroutine cell_min_image
+
+   !> anint(x) (nearest whole number, halves away from zero, signed zero kept),
+   !> bit-identical, without the libm round() call that anint compiles to: the
+   !> minimum image runs for every candidate pair of a contact search. Truncation by
+   !> an integer conversion is exact for |x| < 2^52, x - trunc(x) is then exact too;
+   !> larger |x| are already whole (and NaN / Inf pass through unchanged).
+   elemental function nearest_whole(x) result(y)
+      real(dp), intent(in) :: x
+      real(dp) :: y
+      real(dp), parameter :: whole_above = 2.0_dp**52
+      if (.not. (abs(x) < whole_above)) then
+         y = x
+         return
+      end if
+      y = real(int(x, i8), dp)
+      if (abs(x - y) >= 0.5_dp) y = y + sign(1.0_dp, x)
+      y = sign(y, x)
+   end function nearest_whole
 
    !> Minimum image on the reduced deforming lattice (see cell_min_image).
    pure subroutine min_image_lattice(cell, dx)
@@ -501,7 +519,7 @@ contains
       d = cell%dim
       f = 0.0_dp
       f(1:d) = matmul(cell%dual(1:d, 1:d), dx(1:d))
-      f(1:d) = f(1:d) - anint(f(1:d))
+      f(1:d) = f(1:d) - nearest_whole(f(1:d))
       r0 = 0.0_dp
       r0(1:d) = matmul(cell%basis(1:d, 1:d), f(1:d))
       d2best = dot_product(r0, r0)

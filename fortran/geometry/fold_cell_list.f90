@@ -42,8 +42,23 @@ module fold_cell_list
       integer(ip), allocatable :: next(:)
    end type cell_list_t
 
+   !> Particles sorted by bin (counting sort): slots first(b) .. first(b+1) - 1 hold the
+   !> particles of bin b in increasing index order, so a bin's neighbours are read from
+   !> a few contiguous stretches of memory instead of from all over the particle arrays.
+   type, public :: bin_sort_t
+      !> First slot of every bin, first(nbins + 1) = n + 1
+      integer(ip), allocatable :: first(:)
+      !> Particle index held by every slot
+      integer(ip), allocatable :: id(:)
+      !> Wrapped position of every slot (3, n), unused components 0 [m]
+      real(dp), allocatable :: xw(:, :)
+   end type bin_sort_t
+
+   !> Most bins an image stencil can hold (x windows of at most 4 bins, 3 rows in y, z)
+   integer, parameter, public :: STENCIL_MAX = 36
+
    public :: cell_list_setup, cell_list_insert, cell_list_build, cell_list_candidates
-   public :: neighbour_pairs
+   public :: neighbour_pairs, cell_list_sort, cell_list_has_image_stencil, cell_list_image_stencil
 
 contains
 
@@ -275,6 +290,119 @@ contains
          end do
       end do
    end subroutine cell_list_candidates
+
+   !> Counting sort of the n particles x(dim, n) by bin (O(N + bins)), with their
+   !> wrapped positions. cl must have been set up (cell_list_setup) for this cell.
+   subroutine cell_list_sort(cl, cell, x, bs)
+      type(cell_list_t), intent(in) :: cl
+      type(cell_t), intent(in) :: cell
+      real(dp), intent(in) :: x(:, :)
+      type(bin_sort_t), intent(inout) :: bs
+      integer(ip) :: n, nbins, k, b, slot
+      integer(ip), allocatable :: bin(:), fill(:)
+      real(dp), allocatable :: xw(:, :)
+      integer :: ib(3)
+
+      n = int(size(x, 2), ip)
+      nbins = int(product(cl%nb), ip)
+      if (allocated(bs%first)) deallocate (bs%first, bs%id, bs%xw)
+      allocate (bs%first(nbins + 1), bs%id(n), bs%xw(3, n), bin(n), xw(3, n), fill(nbins))
+      bs%first = 0
+      do k = 1, n
+         call bin_of(cl, cell, x(:, k), ib, xw(:, k))
+         bin(k) = bin_index(cl, ib)
+         bs%first(bin(k)) = bs%first(bin(k)) + 1
+      end do
+      ! counts -> first slots (exclusive prefix sum)
+      slot = 1
+      do b = 1, nbins
+         fill(b) = slot
+         slot = slot + bs%first(b)
+         bs%first(b) = fill(b)
+      end do
+      bs%first(nbins + 1) = n + 1
+      do k = 1, n
+         slot = fill(bin(k))
+         fill(bin(k)) = slot + 1
+         bs%id(slot) = k
+         bs%xw(:, slot) = xw(:, k)
+      end do
+   end subroutine cell_list_sort
+
+   !> True when cell_list_image_stencil applies: a sheared (or fixed) periodic cell,
+   !> or one with walls, with at least three bins along every periodic direction, so
+   !> that every bin of a stencil is a distinct bin reached by exactly one image.
+   !> Otherwise (small cells, deforming lattices) callers use cell_list_candidates
+   !> and the minimum image of every candidate.
+   pure logical function cell_list_has_image_stencil(cl, cell) result(ok)
+      type(cell_list_t), intent(in) :: cl
+      type(cell_t), intent(in) :: cell
+      ok = .not. cell_deforming(cell) .and. cl%nb(1) >= 3 .and. (cell%walls .or. cl%nb(2) >= 3) &
+           .and. (cell%dim == 2 .or. cl%nb(3) >= 3)
+   end function cell_list_has_image_stencil
+
+   !> The bins of cell_list_candidates for a query at wrapped position xw (from
+   !> bin_sort_t) together with the lattice translation of each: a particle at wrapped
+   !> position xw_b in bins(k) has the image xw_b + shift(:, k) next to the query, and
+   !> that image is its minimum image whenever the pair is closer than rc (up to the
+   !> round-off of the wrapping). The same windows as cell_list_candidates: rows in y
+   !> (and z) differ by at most one, a row across the sheared y-face is read in the
+   !> window shifted by -/+s and its images are translated by +/-a2 = +/-(s, Ly, 0).
+   !> Requires cell_list_has_image_stencil.
+   pure subroutine cell_list_image_stencil(cl, cell, xw, nst, bins, shift)
+      type(cell_list_t), intent(in) :: cl
+      type(cell_t), intent(in) :: cell
+      !> Wrapped query position (3) [m]
+      real(dp), intent(in) :: xw(3)
+      !> Number of stencil bins
+      integer, intent(out) :: nst
+      !> Bin numbers (STENCIL_MAX)
+      integer(ip), intent(out) :: bins(:)
+      !> Lattice translation of the images in each bin (3, STENCIL_MAX) [m]
+      real(dp), intent(out) :: shift(:, :)
+      integer :: ib(3), jx, jy, jz, jxlo, jxhi, jxw, jyw, jzw, iz_lo, iz_hi, my
+      real(dp) :: xshift
+
+      nst = 0
+      do jx = 1, cell%dim
+         ib(jx) = min(max(int(floor(xw(jx)/cl%w(jx))), 0), cl%nb(jx) - 1)
+      end do
+      if (cell%dim == 2) ib(3) = 0
+      iz_lo = 0
+      iz_hi = 0
+      if (cell%dim == 3) then
+         iz_lo = ib(3) - 1
+         iz_hi = ib(3) + 1
+      end if
+      do jy = ib(2) - 1, ib(2) + 1
+         jyw = jy
+         my = 0
+         if (jy < 0) then
+            if (cell%walls) cycle
+            jyw = jy + cl%nb(2)
+            my = -1
+         else if (jy >= cl%nb(2)) then
+            if (cell%walls) cycle
+            jyw = jy - cl%nb(2)
+            my = 1
+         end if
+         ! images of the row across the top face sit at x + s, i.e. window x - s
+         xshift = -my*cell%shear_offset
+         jxlo = int(floor((xw(1) + xshift - cl%rc)/cl%w(1)))
+         jxhi = int(floor((xw(1) + xshift + cl%rc)/cl%w(1)))
+         do jz = iz_lo, iz_hi
+            jzw = modulo(jz, cl%nb(3))
+            do jx = jxlo, min(jxhi, jxlo + 3)
+               jxw = modulo(jx, cl%nb(1))
+               nst = nst + 1
+               bins(nst) = 1 + jxw + cl%nb(1)*(jyw + cl%nb(2)*jzw)
+               shift(1, nst) = ((jx - jxw)/cl%nb(1))*cell%lengths(1) + my*cell%shear_offset
+               shift(2, nst) = my*cell%lengths(2)
+               shift(3, nst) = ((jz - jzw)/cl%nb(3))*cell%lengths(3)
+            end do
+         end do
+      end do
+   end subroutine cell_list_image_stencil
 
    !> All pairs i < j whose minimum-image centre distance is < rc, either by the
    !> O(N^2) double loop (use_cells = false, the reference) or with the cell list.

@@ -143,16 +143,18 @@ contains
       !> Closest axis-point parameters on 1 and 2 [m]
       real(dp), intent(out) :: s, t
 
-      real(dp) :: dvec(size(r)), dn, scale, c(3), cn
+      ! fixed-size local (used as dvec(1:dim)): an automatic array would be a heap
+      ! allocation per call, and this runs for every candidate pair of every list build
+      real(dp) :: dvec(3), dn, scale, c(3), cn
       integer :: dim
 
       dim = size(r)
-      call segment_closest(r, p1, h1, p2, h2, s, t, dvec)
-      dn = norm2(dvec)
+      call segment_closest(r, p1, h1, p2, h2, s, t, dvec(1:dim))
+      dn = norm2(dvec(1:dim))
       dist = dn - rad1 - rad2
       scale = max(h1 + h2 + rad1 + rad2, tiny(1.0_dp))
       if (dn > 1.0e-14_dp*scale) then
-         n = dvec/dn
+         n = dvec(1:dim)/dn
          return
       end if
       ! degenerate: axes intersect

@@ -53,14 +53,62 @@ def fibre_scene(seed, n_l3=12.0):
     return cell, shape, radius, length, pl.x, pl.p, v, omega
 
 
+def mixed_scene(seed):
+    """3-D fibres (beta = 10) and spheres in a sheared periodic cell of 3 x 3 x 3 search bins
+    (offset s = -0.61, not a multiple of a bin), random translation and rotation rates."""
+    cell = geo.Cell((2.0, 2.2, 1.9), shear_rate=1.0, shear_offset=-0.61)
+    nf, ns = 600, 150
+    shape = np.concatenate([np.full(nf, geo.FIBRE), np.full(ns, geo.SPHERE)])
+    radius = np.concatenate([np.full(nf, 0.025), np.full(ns, 0.06)])
+    length = np.concatenate([np.full(nf, 0.5), np.full(ns, 0.12)])
+    pl = geo.place_particles(cell, shape, radius, length, alpha=0.002, seed=seed)
+    rng = np.random.default_rng(seed)
+    v = rng.normal(scale=0.25, size=(nf + ns, 3))
+    omega = rng.normal(scale=1.0, size=(nf + ns, 3))
+    return cell, shape, radius, length, pl.x, pl.p, v, omega
+
+
+def search_bins(scene, alpha):
+    """Bins per direction of the contact search (cell edge // range)."""
+    cell, shape, radius, length = scene[:4]
+    rc = geo.contact_search_range(shape, radius, length, alpha=alpha)
+    return [int(edge // rc) for edge in cell.lengths]
+
+
 @pytest.fixture(scope="module")
 def disks():
     return disk_scene(True, 4)
 
 
 @pytest.fixture(scope="module")
+def periodic_disks():
+    return disk_scene(False, 4)
+
+
+@pytest.fixture(scope="module")
 def fibres():
     return fibre_scene(8)
+
+
+@pytest.fixture(scope="module")
+def mixed():
+    return mixed_scene(3)
+
+
+# Time step and alpha of every scene of the search-equivalence tests. The strategy reads
+# the particles bin-sorted with each neighbour bin's lattice image when there are at least
+# three bins per periodic direction (disks, periodic_disks, mixed: the sheared y-face is
+# crossed with the offset) and falls back to the generic candidate scan otherwise
+# (fibres: 2 bins); both must reproduce the O(N^2) double loop bit for bit.
+SCENE_DT_ALPHA = {"disks": (0.05, 0.005), "periodic_disks": (0.05, 0.005), "fibres": (0.02, 0.002),
+                  "mixed": (0.02, 0.002)}
+SEARCH_SCENES = list(SCENE_DT_ALPHA)
+
+
+def test_equivalence_scenes_cover_both_search_paths(request):
+    bins = {s: search_bins(request.getfixturevalue(s), SCENE_DT_ALPHA[s][1]) for s in SEARCH_SCENES}
+    assert min(bins["fibres"]) == 2
+    assert min(bins["mixed"]) >= 3 and min(bins["periodic_disks"][:2]) >= 3 and bins["disks"][0] >= 3
 
 
 def test_head_on_spheres_are_corrected_by_the_seed_formula():
@@ -124,10 +172,10 @@ def test_dense_3d_fibres_keep_every_gap_above_alpha(fibres):
     np.testing.assert_allclose(np.linalg.norm(p1, axis=1), 1.0, atol=1e-14)
 
 
-@pytest.mark.parametrize("scene", ["disks", "fibres"])
+@pytest.mark.parametrize("scene", SEARCH_SCENES)
 def test_naive_and_strategy_give_identical_corrections(scene, request):
     cell, shape, radius, length, x, p, v, omega = request.getfixturevalue(scene)
-    dt, alpha = (0.05, 0.005) if scene == "disks" else (0.02, 0.002)
+    dt, alpha = SCENE_DT_ALPHA[scene]
     a = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, dt, alpha=alpha, mode="naive", max_iter=500)
     b = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, dt, alpha=alpha, mode="strategy",
                              max_iter=500)
@@ -214,14 +262,14 @@ def test_mode_none_only_measures(disks):
     assert st.min_gap == pytest.approx(before.min(), abs=1e-12) and st.min_gap < 0.005
 
 
-@pytest.mark.parametrize("scene", ["disks", "fibres"])
+@pytest.mark.parametrize("scene", SEARCH_SCENES)
 def test_verlet_list_is_exact_whatever_the_skin(scene, request):
     # One candidate list per pass, rebuilt when a particle's corrections exceed skin/2:
     # a skin far below the corrections' size forces rebuilds, yet no pair outside the
     # list may ever violate, so the corrections must be bit-identical to the default
     # skin (alpha + R_max: at most one rebuild here) in both search modes.
     cell, shape, radius, length, x, p, v, omega = request.getfixturevalue(scene)
-    dt, alpha = (0.05, 0.005) if scene == "disks" else (0.02, 0.002)
+    dt, alpha = SCENE_DT_ALPHA[scene]
     ref = geo.resolve_contacts(cell, shape, radius, length, x, p, v, omega, dt, alpha=alpha, max_iter=500)
     assert ref[2].list_builds <= 2 and ref[2].n_corrections > 0
     for mode in ("strategy", "naive"):
