@@ -417,7 +417,7 @@ contains
       real(dp), allocatable :: xs(:, :), ps(:, :), ext(:), hs(:), rs(:)
       integer(ip) :: a, b, c, nc, ia, jb, bin, t, dim, sbins(STENCIL_MAX)
       integer :: nst
-      real(dp) :: shift(3, STENCIL_MAX), d(3), reach, margin, pc(3), cc
+      real(dp) :: shift(3, STENCIL_MAX), d(3), qa(3), ea, margin, pc(3), cc
       ! |p_a x p_b|^2 above which the line distance is used (its round-off ~ eps |d| / |c|)
       real(dp), parameter :: SKEW_MIN = 1.0e-8_dp
 
@@ -443,16 +443,18 @@ contains
          ! round-off of wrapped coordinates is ~ eps L; 1e-9 L can never reject a pair
          ! the exact test would keep
          margin = 1.0e-9_dp*(sum(cell%lengths(1:dim)) + rc)
-         d = 0.0_dp
          do bin = 1, int(size(bs%first) - 1, ip)
             do ia = bs%first(bin), bs%first(bin + 1) - 1
                call cell_list_image_stencil(cl, cell, bs%xw(:, ia), nst, sbins, shift)
                do t = 1, nst
+                  ! the query seen from the images in bin sbins(t); all three components
+                  ! (2-D: the third is 0 for both), in scalars for the inner loop
+                  qa = bs%xw(:, ia) - shift(:, t)
+                  ea = ext(ia) + cutoff + margin
                   ! pairs are taken from their lower slot
                   do jb = max(bs%first(sbins(t)), ia + 1), bs%first(sbins(t) + 1) - 1
-                     d(1:dim) = bs%xw(1:dim, ia) - bs%xw(1:dim, jb) - shift(1:dim, t)
-                     reach = ext(ia) + ext(jb) + cutoff + margin
-                     if (d(1)**2 + d(2)**2 + d(3)**2 >= reach**2) cycle
+                     d = qa - bs%xw(:, jb)
+                     if (d(1)**2 + d(2)**2 + d(3)**2 >= (ea + ext(jb))**2) cycle
                      if (dim == 3) then
                         ! the distance |d.pc|/|pc| of the two axis lines (pc = p_a x p_b)
                         ! bounds the axis distance from below: skew pairs far apart

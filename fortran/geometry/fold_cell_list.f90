@@ -360,7 +360,7 @@ contains
       integer(ip), intent(out) :: bins(:)
       !> Lattice translation of the images in each bin (3, STENCIL_MAX) [m]
       real(dp), intent(out) :: shift(:, :)
-      integer :: ib(3), jx, jy, jz, jxlo, jxhi, jxw, jyw, jzw, iz_lo, iz_hi, my
+      integer :: ib(3), jx, jy, jz, jxlo, jxhi, jxw, jyw, jzw, iz_lo, iz_hi, mx, my, mz
       real(dp) :: xshift
 
       nst = 0
@@ -391,14 +391,25 @@ contains
          jxlo = int(floor((xw(1) + xshift - cl%rc)/cl%w(1)))
          jxhi = int(floor((xw(1) + xshift + cl%rc)/cl%w(1)))
          do jz = iz_lo, iz_hi
-            jzw = modulo(jz, cl%nb(3))
+            ! wrap only at the faces (integer divisions per bin cost more than the rest)
+            jzw = jz
+            mz = 0
+            if (jz < 0 .or. jz >= cl%nb(3)) then
+               jzw = modulo(jz, cl%nb(3))
+               mz = (jz - jzw)/cl%nb(3)
+            end if
             do jx = jxlo, min(jxhi, jxlo + 3)
-               jxw = modulo(jx, cl%nb(1))
+               jxw = jx
+               mx = 0
+               if (jx < 0 .or. jx >= cl%nb(1)) then
+                  jxw = modulo(jx, cl%nb(1))
+                  mx = (jx - jxw)/cl%nb(1)
+               end if
                nst = nst + 1
                bins(nst) = 1 + jxw + cl%nb(1)*(jyw + cl%nb(2)*jzw)
-               shift(1, nst) = ((jx - jxw)/cl%nb(1))*cell%lengths(1) + my*cell%shear_offset
+               shift(1, nst) = mx*cell%lengths(1) + my*cell%shear_offset
                shift(2, nst) = my*cell%lengths(2)
-               shift(3, nst) = ((jz - jzw)/cl%nb(3))*cell%lengths(3)
+               shift(3, nst) = mz*cell%lengths(3)
             end do
          end do
       end do
