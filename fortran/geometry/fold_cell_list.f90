@@ -21,6 +21,14 @@
 !> triclinic cell list. Every non-zero lattice vector is at least min h_k long, so
 !> h_k > 2 rc keeps the image within rc unique; a thinner cell is refused with the
 !> time it was reached (the run driver then stops cleanly).
+!>
+!> Bin-sorted search (cell_list_sort, cell_list_image_stencil; used by fold_contacts):
+!> a counting sort puts the particles of every bin in consecutive slots with their
+!> wrapped positions, and the stencil of a query gives, with each bin, the lattice
+!> translation of its images next to the query, so a caller reads the neighbours
+!> from a few contiguous stretches of memory and gets their image without a minimum
+!> image per candidate. Only for sheared / fixed cells with >= 3 bins per periodic
+!> direction (every stencil bin then distinct); other cells use the chained lists.
 module fold_cell_list
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
