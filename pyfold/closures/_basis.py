@@ -35,6 +35,23 @@ def sym_product(A: jax.Array, B: jax.Array) -> jax.Array:
     return (t + perm(0, 2, 1, 3) + perm(0, 2, 3, 1) + perm(2, 3, 0, 1) + perm(2, 0, 3, 1) + perm(2, 0, 1, 3)) / 6.0
 
 
+def sym_product_contract(A: jax.Array, B: jax.Array, D: jax.Array) -> jax.Array:
+    """``S(A B) : D`` without forming the fourth-order tensor.
+
+    For symmetric ``A``, ``B``, ``D`` the six pairings of :func:`sym_product` contract to
+
+        S(A B)_ijkl D_kl = [A_ij (B:D) + B_ij (A:D) + 2 (A.D.B)_ij + 2 (B.D.A)_ij] / 6,
+
+    O(d^3) per state instead of O(d^4): the rate of an orientation model needs only
+    ``a4:D``, and forming every ``S(..)`` term dominated its cost (measured: IBOF
+    Folgar–Tucker right-hand side 5x the quadratic closure's).
+    """
+    ad = jnp.sum(A * D, axis=(-2, -1))
+    bd = jnp.sum(B * D, axis=(-2, -1))
+    adb = jnp.einsum("...ik,...kl,...lj->...ij", A, D, B)
+    return (A * bd[..., None, None] + B * ad[..., None, None] + 2.0 * adb + 2.0 * jnp.swapaxes(adb, -1, -2)) / 6.0
+
+
 def from_principal(principal: jax.Array, vectors: jax.Array) -> jax.Array:
     """Rotate an orthotropic fourth-order tensor from its principal frame to the lab.
 

@@ -11,7 +11,7 @@ three for any ``tr a = 1``, so only ``b3``, ``b4``, ``b6`` are free.
 from __future__ import annotations
 
 from pyfold._jax import jax, jnp
-from pyfold.closures._basis import identity_like, sym_product
+from pyfold.closures._basis import identity_like, sym_product, sym_product_contract
 from pyfold.tensors import invariants
 
 
@@ -45,6 +45,35 @@ def invariant_form(a2: jax.Array, b3: jax.Array, b4: jax.Array, b6: jax.Array) -
     b3, b4, b6 : arrays (...,)
         The three free coefficients at each state.
     """
+    betas = _all_coefficients(a2, b3, b4, b6)
+    eye = identity_like(a2)
+    aa = jnp.einsum("...ik,...kj->...ij", a2, a2)
+    out = 0.0
+    for beta, (A, B) in zip(betas, _factor_pairs(eye, a2, aa)):
+        out = out + beta[..., None, None, None, None] * sym_product(A, B)
+    return out
+
+
+def invariant_form_contract(a2: jax.Array, b3: jax.Array, b4: jax.Array, b6: jax.Array,
+                            D: jax.Array) -> jax.Array:
+    """``invariant_form(a2, b3, b4, b6) : D`` for a symmetric ``D``, without forming a4
+    (:func:`pyfold.closures._basis.sym_product_contract`; same value to round-off)."""
+    betas = _all_coefficients(a2, b3, b4, b6)
+    eye = identity_like(a2)
+    aa = jnp.einsum("...ik,...kj->...ij", a2, a2)
+    out = 0.0
+    for beta, (A, B) in zip(betas, _factor_pairs(eye, a2, aa)):
+        out = out + beta[..., None, None] * sym_product_contract(A, B, D)
+    return out
+
+
+def _factor_pairs(eye, a2, aa):
+    """The symmetric factors (A, B) of the six terms S(A B), in the order b1..b6."""
+    return ((eye, eye), (eye, a2), (a2, a2), (eye, aa), (a2, aa), (aa, aa))
+
+
+def _all_coefficients(a2, b3, b4, b6):
+    """(b1, ..., b6): b1, b2, b5 from the trace conditions (Chung & Kwon 2002, eq. 26)."""
     _, ii, iii = invariants(a2)
     b1 = 0.6 * (
         -1.0 / 7.0
@@ -59,17 +88,4 @@ def invariant_form(a2: jax.Array, b3: jax.Array, b4: jax.Array, b6: jax.Array) -
         - b6 * (-0.2 + 2.0 / 3.0 * iii + 0.8 * ii - 1.6 * ii**2)
     )
     b5 = -0.8 * b3 - 1.4 * b4 - 1.2 * b6 * (1.0 - 4.0 / 3.0 * ii)
-    eye = identity_like(a2)
-    aa = jnp.einsum("...ik,...kj->...ij", a2, a2)
-    terms = (
-        sym_product(eye, eye),
-        sym_product(eye, a2),
-        sym_product(a2, a2),
-        sym_product(eye, aa),
-        sym_product(a2, aa),
-        sym_product(aa, aa),
-    )
-    out = 0.0
-    for beta, term in zip((b1, b2, b3, b4, b5, b6), terms):
-        out = out + beta[..., None, None, None, None] * term
-    return out
+    return b1, b2, b3, b4, b5, b6

@@ -5,7 +5,7 @@ import numpy as np
 
 from pyfold._jax import jax, jnp
 from pyfold.closures import _coefficients as K
-from pyfold.closures._invariant_form import invariant_form, monomials
+from pyfold.closures._invariant_form import invariant_form, invariant_form_contract, monomials
 
 _COEFFS = np.asarray([K.IBOF_BETA3, K.IBOF_BETA4, K.IBOF_BETA6], dtype=np.float64)
 
@@ -26,6 +26,16 @@ def ibof(a2: jax.Array) -> jax.Array:
     """
     if a2.shape[-1] != 3:
         raise ValueError("IBOF is defined in 3-D only; a2 must be (..., 3, 3)")
+    return invariant_form(a2, *_betas(a2))
+
+
+def ibof_contract(a2: jax.Array, D: jax.Array) -> jax.Array:
+    """``ibof(a2) : D`` without forming a4 (same value to round-off, ~5x cheaper)."""
+    return invariant_form_contract(a2, *_betas(a2), D)
+
+
+def _betas(a2: jax.Array):
+    if a2.shape[-1] != 3:
+        raise ValueError("IBOF is defined in 3-D only; a2 must be (..., 3, 3)")
     mono = monomials(a2, K.IBOF_MONOMIALS)
-    b3, b4, b6 = (jnp.einsum("...m,m->...", mono, jnp.asarray(c)) for c in _COEFFS)
-    return invariant_form(a2, b3, b4, b6)
+    return tuple(jnp.einsum("...m,m->...", mono, jnp.asarray(c)) for c in _COEFFS)

@@ -7,7 +7,7 @@ import equinox as eqx
 import numpy as np
 
 from pyfold._jax import jax, jnp
-from pyfold.closures import resolve
+from pyfold.closures import resolve, resolve_contraction
 from pyfold.errors import InputError
 
 DEFAULT_CLOSURE = "ibof"
@@ -61,6 +61,10 @@ class OrientationModel(eqx.Module):
     def a4(self, a2: jax.Array, t) -> jax.Array:
         """Fourth-order tensor from the model's closure (``(a2, t) -> a4``)."""
         return resolve(self.closure)(a2, t)  # type: ignore[attr-defined]
+
+    def a4_contract(self, a2: jax.Array, B: jax.Array, t) -> jax.Array:
+        """``a4:B`` for a symmetric ``B`` (closed form where the closure has one)."""
+        return resolve_contraction(self.closure)(a2, B, t)  # type: ignore[attr-defined]
 
     def rate(self, t, a2: jax.Array, L: jax.Array) -> jax.Array:
         """Material derivative ``Da2/Dt`` [1/s] at time ``t`` for the gradient ``L`` (d, d).

@@ -64,7 +64,13 @@ def rotation_term(a2: jax.Array, W: jax.Array) -> jax.Array:
 def stretching_term(a2: jax.Array, a4: jax.Array, D: jax.Array, xi) -> jax.Array:
     """Alignment by the rate of strain, ``xi (D.a + a.D - 2 a4:D)`` (Jeffery 1922;
     moment form of Advani & Tucker 1987, J. Rheol. 31:751)."""
-    return xi * (mat(D, a2) + mat(a2, D) - 2.0 * contract4(a4, D))
+    return stretching_term_contracted(a2, contract4(a4, D), D, xi)
+
+
+def stretching_term_contracted(a2: jax.Array, a4_D: jax.Array, D: jax.Array, xi) -> jax.Array:
+    """:func:`stretching_term` given ``a4:D`` directly (models that need nothing else
+    of a4 use the closure's cheaper contraction)."""
+    return xi * (mat(D, a2) + mat(a2, D) - 2.0 * a4_D)
 
 
 def isotropic_diffusion(a2: jax.Array, ci, gamma_dot) -> jax.Array:

@@ -12,7 +12,7 @@ from pyfold.models._terms import (
     isotropic_diffusion,
     mat,
     rotation_term,
-    stretching_term,
+    stretching_term_contracted,
 )
 from pyfold.tensors import contract4
 
@@ -47,10 +47,9 @@ class FolgarTucker(OrientationModel):
 
     def _rate(self, t, a2, L):
         D, W, gamma_dot = flow_parts(L)
-        a4 = self.a4(a2, t)
         return (
             rotation_term(a2, W)
-            + stretching_term(a2, a4, D, self.xi)
+            + stretching_term_contracted(a2, self.a4_contract(a2, D, t), D, self.xi)
             + isotropic_diffusion(a2, self.ci, gamma_dot)
         )
 
@@ -92,11 +91,10 @@ class FTMS(OrientationModel):
 
     def _rate(self, t, a2, L):
         D, W, gamma_dot = flow_parts(L)
-        a4 = self.a4(a2, t)
-        potential = 2.0 * self.u0 * gamma_dot * (mat(a2, a2) - contract4(a4, a2))
+        potential = 2.0 * self.u0 * gamma_dot * (mat(a2, a2) - self.a4_contract(a2, a2, t))
         return (
             rotation_term(a2, W)
-            + stretching_term(a2, a4, D, self.xi)
+            + stretching_term_contracted(a2, self.a4_contract(a2, D, t), D, self.xi)
             + isotropic_diffusion(a2, self.ci, gamma_dot)
             + potential
         )

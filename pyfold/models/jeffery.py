@@ -11,7 +11,7 @@ from pyfold._jax import jax, jnp
 from pyfold.errors import ConvergenceError, InputError
 from pyfold.kinematics import ConstantGradient, velocity_gradient
 from pyfold.models._base import OrientationModel, check_range, closure_field, parameter
-from pyfold.models._terms import flow_parts, rotation_term, stretching_term
+from pyfold.models._terms import flow_parts, rotation_term, stretching_term_contracted
 
 __all__ = ["Jeffery", "jeffery_vectors"]
 
@@ -40,7 +40,7 @@ class Jeffery(OrientationModel):
 
     def _rate(self, t, a2, L):
         D, W, _ = flow_parts(L)
-        return rotation_term(a2, W) + stretching_term(a2, self.a4(a2, t), D, self.xi)
+        return rotation_term(a2, W) + stretching_term_contracted(a2, self.a4_contract(a2, D, t), D, self.xi)
 
 
 @jax.jit
