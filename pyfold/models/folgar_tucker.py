@@ -14,7 +14,6 @@ from pyfold.models._terms import (
     rotation_term,
     stretching_term_contracted,
 )
-from pyfold.tensors import contract4
 
 
 class FolgarTucker(OrientationModel):
