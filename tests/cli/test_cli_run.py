@@ -11,7 +11,6 @@ import pytest
 import pyfold
 from conftest import base_scene, write_scene
 from pyfold.cli import main
-from pyfold.errors import PyfoldError
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -84,16 +83,6 @@ def test_np_must_be_positive(scene, tmp_path, capsys):
     assert "--np" in capsys.readouterr().err
 
 
-def _real_fold_run():
-    from pyfold.commands.run import find_fold_run
-
-    try:
-        return find_fold_run()
-    except PyfoldError:
-        return None
-
-
-@pytest.mark.skipif(_real_fold_run() is None, reason="fold_run executable not built")
 def test_real_run_of_seed_disks_no_overlap(tmp_path, capsys, monkeypatch):
     """The seed's disks in Couette flow, first 2 time units, through the real fold_run:
     the run file comes back through open_run, and with the strategy no gap is negative."""

@@ -145,8 +145,7 @@ TUCKER_FITCI = {"ibof": 0.0054, "orw": 0.0052, "hybrid": 0.0207, "ore": 0.0053}
 
 @pytest.mark.parametrize("closure", sorted(TUCKER_FITCI))
 def test_fit_ci_reproduces_tucker_fitci_example(closure):
-    if closure not in available(3):
-        pytest.skip(f"closure {closure!r} not in pyfold.closures.available(3) = {available(3)}")
+    assert closure in available(3), f"closure {closure!r} missing from {available(3)}"
     ci = fit_ci_to_steady_a11(0.8261, closure, 1.0)
     assert round(ci, 4) == TUCKER_FITCI[closure]
     a = steady_state_a2(FolgarTucker(ci=ci, xi=1.0, closure=closure), SHEAR)

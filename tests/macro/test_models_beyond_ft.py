@@ -216,8 +216,6 @@ def test_every_model_runs_from_isotropy_keeping_trace_symmetry_and_finiteness(di
     assert np.all(np.abs(a2[:, -1] - np.eye(dim) / dim).max(axis=(-1, -2)) > 0.05)  # flow-induced alignment
 
 
-@pytest.mark.skipif("ibof" not in __import__("pyfold.closures").closures.available(3),
-                    reason="needs the IBOF closure (pyfold.closures, closures engineer)")
 @pytest.mark.parametrize("model", [IARD(ci=0.0627, cm=0.9908, closure="ibof"),
                                    PARD(ci=0.0218, omega=0.9673, closure="ibof")], ids=["iARD", "pARD"])
 def test_ard_models_reproduce_tucker_table_5_3_steady_shear_state(model):

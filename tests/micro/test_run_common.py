@@ -40,7 +40,8 @@ def fold_run_path() -> Path | None:
 def require_fold_run() -> Path:
     exe = fold_run_path()
     if exe is None or not exe.exists():
-        pytest.skip("fold_run executable not built")
+        # the build makes it: a missing executable is a failure, never a silent skip
+        pytest.fail("fold_run executable not built (see fortran/app/README.md)")
     return exe
 
 
@@ -53,7 +54,7 @@ def run_fold(path, np_ranks: int = 1, resume: bool = False, timeout: float = 120
     if np_ranks > 1:
         mpiexec = shutil.which("mpiexec") or shutil.which("mpirun")
         if mpiexec is None:
-            pytest.skip("mpiexec not found")
+            pytest.fail("mpiexec not found (Open MPI is installed by scripts/bootstrap)")
         cmd = [mpiexec, "-np", str(np_ranks), "--oversubscribe"] + cmd
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
 
