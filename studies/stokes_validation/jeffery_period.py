@@ -6,11 +6,13 @@ Jeffery's T = (2 pi / gamma_dot)(beta + 1/beta) (Jeffery 1922) as the grid is
 refined, and at which observed order?
 Method: Stokes flow has no memory, so the orbit is dtheta/dt = omega(theta) with
 omega computed at fixed orientations; T = int_0^{2 pi} dtheta / |omega(theta)|
-by the trapezoid rule on n_theta orientations (spectrally accurate for a smooth
-periodic integrand). A time-marched orbit converges to this T as dt -> 0
+by the trapezoid rule on n_theta orientations. The solver's omega(theta) carries
+voxelisation wiggles, so the rule is NOT spectrally accurate here: at 27^3 the
+period moves 18.79 / 18.44 / 18.25 / 18.22 / 18.17 / 18.19 for 8 / 16 / 24 / 32 /
+48 / 96 orientations (benchmarks/bench_speed_accuracy.py); use >= 48. A time-marched orbit converges to this T as dt -> 0
 (see tests/micro/test_stokes.py for the Euler/AB2 orders).
-Command:  python studies/stokes_validation/jeffery_period.py [--grids 36 48 64] [--ntheta 8]
-Cost: ~1.5 min for 36/48/64 (64^3: ~8 s per orientation). Output: a table
+Command:  python studies/stokes_validation/jeffery_period.py [--grids 48 64 96] [--ntheta 48]
+Cost (48 orientations, load ~1): 48^3 38 s, 64^3 79 s, 96^3 several minutes. Output: a table
 (grid, voxels per diameter, T, relative error, observed order).
 """
 from __future__ import annotations
@@ -59,7 +61,7 @@ def omega_at(theta: float, n: int, settings: StokesSettings) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grids", type=int, nargs="+", default=[36, 48, 64])
-    ap.add_argument("--ntheta", type=int, default=8)
+    ap.add_argument("--ntheta", type=int, default=48)
     ap.add_argument("--kappa", type=float, default=1e3)
     args = ap.parse_args()
     # Problem / Solver
