@@ -1,6 +1,8 @@
 """Common machinery of the orientation models: parameter fields, closure, validation."""
 from __future__ import annotations
 
+import abc
+
 from typing import Any
 
 import equinox as eqx
@@ -55,8 +57,9 @@ class OrientationModel(eqx.Module):
     and a static ``dim`` (3 or 2), and implement :meth:`_rate`.
     """
 
-    def _rate(self, t, a2: jax.Array, L: jax.Array) -> jax.Array:  # pragma: no cover
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _rate(self, t, a2: jax.Array, L: jax.Array) -> jax.Array:
+        """Unsymmetrised ``Da2/Dt`` of the model (subclasses define it)."""
 
     def a4(self, a2: jax.Array, t) -> jax.Array:
         """Fourth-order tensor from the model's closure (``(a2, t) -> a4``)."""

@@ -7,6 +7,8 @@ principal-frame kinetics (RSC: Wang et al. 2008; RPR: Tseng et al. 2013).
 """
 from __future__ import annotations
 
+import abc
+
 from typing import Any
 
 import equinox as eqx
@@ -58,8 +60,9 @@ def rpr_correction(a2: jax.Array, x: jax.Array, alpha, beta) -> jax.Array:
 class _ARDBase(OrientationModel):
     """Hydrodynamic + ARD term for the subclass's ``diffusivity(a2, D, gamma_dot)``."""
 
-    def diffusivity(self, a2, D, gamma_dot):  # pragma: no cover
-        raise NotImplementedError
+    @abc.abstractmethod
+    def diffusivity(self, a2, D, gamma_dot):
+        """The ARD diffusion tensor ``C`` of the subclass's model."""
 
     def _principal_and_rotation(self, t, a2, L):
         D, W, gamma_dot = flow_parts(L)
