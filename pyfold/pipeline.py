@@ -30,6 +30,11 @@ DEFAULT_CLOSURES: tuple[str, ...] = ("exact", "fec", "ibof", "orw3", "hybrid", "
 #: values, physics.md §6); bounds C_I >= 0 come from pyfold.fit.
 CI_START = 1e-3
 
+#: Per-record solver diagnostics of a Stokes run that the summary reports; each is a
+#: variable fold_run writes (``fortran/io/fold_output.f90``; a test checks the names
+#: against a real run, so a renamed record cannot drop out of the summary unseen).
+STOKES_SUMMARY_RECORDS: tuple[str, ...] = ("stokes_iterations", "stokes_residual", "rigidity_max")
+
 
 @dataclass
 class ChainResult:
@@ -209,10 +214,12 @@ def stokes_summary(run_path: Path) -> str:
         eta_f = float(ds.attrs.get("viscosity", 1.0))
         lines.append(f"  effective viscosity / fluid viscosity: mean {np.nanmean(eta) / eta_f:.4f} "
                      f"(min {np.nanmin(eta) / eta_f:.4f}, max {np.nanmax(eta) / eta_f:.4f})")
-    for name in ("stokes_iterations", "stokes_residual", "rigidity_residual_max"):
-        if name in ds:
-            values = np.asarray(ds[name].values)
-            lines.append(f"  {name}: median {np.nanmedian(values):.3g}, max {np.nanmax(values):.3g}")
+    missing = [name for name in STOKES_SUMMARY_RECORDS if name not in ds]
+    if missing:
+        raise PyfoldError(f"{run_path}: not a complete Stokes run file, records {missing} are missing")
+    for name in STOKES_SUMMARY_RECORDS:
+        values = np.asarray(ds[name].values)
+        lines.append(f"  {name}: median {np.nanmedian(values):.3g}, max {np.nanmax(values):.3g}")
     return "\n".join(lines)
 
 

@@ -2,9 +2,8 @@
 
 The run files follow the micro contract (/setup/resolved + /initial, root
 attributes); they are written directly here so that the executable can be tested
-independently of the scene layer. The executable is found, in order, from
-``$PYFOLD_FOLD_RUN``, the package directory (``pyfold/fold_run``, wheel or editable
-build) and ``build/editable/fortran/app/fold_run``.
+independently of the scene layer. The executable is found exactly as ``pyfold run``
+finds it (:func:`pyfold.commands.run.find_fold_run`).
 """
 from __future__ import annotations
 
@@ -18,31 +17,17 @@ import h5py
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def fold_run_path() -> Path | None:
-    env = os.environ.get("PYFOLD_FOLD_RUN")
-    if env:
-        return Path(env)
-    try:
-        from pyfold.native import fold_run_executable  # provided with the package when present
-
-        return Path(fold_run_executable())
-    except Exception:
-        pass
-    for cand in (ROOT / "build" / "editable" / "fortran" / "app" / "fold_run", ROOT / "build" / "editable" / "fold_run"):
-        if cand.exists():
-            return cand
-    return None
-
 
 def require_fold_run() -> Path:
-    exe = fold_run_path()
-    if exe is None or not exe.exists():
-        # the build makes it: a missing executable is a failure, never a silent skip
-        pytest.fail("fold_run executable not built (see fortran/app/README.md)")
-    return exe
+    """The fold_run executable, found as ``pyfold run`` finds it (one rule in one place);
+    a missing executable is a failure, never a silent skip."""
+    from pyfold.commands.run import find_fold_run
+    from pyfold.errors import PyfoldError
+
+    try:
+        return find_fold_run()
+    except PyfoldError as exc:
+        pytest.fail(f"fold_run executable not built (see fortran/app/README.md): {exc}")
 
 
 def run_fold(path, np_ranks: int = 1, resume: bool = False, timeout: float = 120.0) -> subprocess.CompletedProcess:
@@ -65,6 +50,22 @@ def shear(rate: float) -> np.ndarray:
     return g
 
 
+#: FFTW planning of every Stokes solve in the tests: "estimate" (default: the same plan
+#: every time) or "measure" (timed at start-up, so the transform algorithm, and with it
+#: the round-off, may change from one run to the next). ``PYFOLD_TEST_FFT_PLAN=measure``
+#: runs the suite with timed plans: no outcome may depend on the choice.
+FFT_PLAN = os.environ.get("PYFOLD_TEST_FFT_PLAN", "estimate")
+if FFT_PLAN not in ("estimate", "measure"):
+    raise ValueError(f"PYFOLD_TEST_FFT_PLAN: 'estimate' or 'measure', got {FFT_PLAN!r}")
+
+
+def stokes_settings(**kw):
+    """``pyfold.native.stokes.StokesSettings`` with the suite's FFTW planning."""
+    from pyfold.native.stokes import StokesSettings
+
+    return StokesSettings(measure_plans=FFT_PLAN == "measure", **kw)
+
+
 #: Stokes settings of /setup/resolved (what the scene layer writes for hydrodynamics = stokes)
 STOKES_DEFAULTS = {
     "stokes_grid": (32, 32, 32),
@@ -72,7 +73,7 @@ STOKES_DEFAULTS = {
     "stokes_max_iterations": np.int64(1000),
     "stokes_kappa": 1e3,
     "stokes_derivative": np.int64(1),
-    "stokes_fft_plan": np.int64(0),
+    "stokes_fft_plan": np.int64(FFT_PLAN == "measure"),
     "time_scheme": np.int64(2),
 }
 

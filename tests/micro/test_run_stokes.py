@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import tomli_w
 
-from test_run_common import require_fold_run, run_fold, write_run_file, xi_of
+from test_run_common import FFT_PLAN, require_fold_run, run_fold, stokes_settings, write_run_file, xi_of
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -27,7 +27,7 @@ def _scene(tmp_path: Path, name: str, **over) -> Path:
                        "orientation": "aligned", "direction": [1.0, 0.0, 0.0]}],
         "model": {"hydrodynamics": "stokes", "collisions": "none"},
         "numerics": {"dt": 0.05, "t_end": 0.2, "seed": 5, "time_scheme": "ab2",
-                     "stokes": {"cells_per_diameter": 8, "fft_plan": "estimate"}},
+                     "stokes": {"cells_per_diameter": 8, "fft_plan": FFT_PLAN}},
         "output": {"interval": 0.05, "snapshot_interval": 0.2, "checkpoint_interval": 0.2},
     }
     for key, value in over.items():
@@ -88,11 +88,22 @@ def test_stokes_records_carry_units_and_are_consistent(sphere_run):
     # shear: eta_eff = Sigma_xy / gamma_dot
     np.testing.assert_allclose(ds["effective_viscosity"].values, ds["stress"].sel(i="x", j="y").values, rtol=1e-12)
     # Einstein (1906): eta_eff = eta_f (1 + 2.5 phi); phi = 0.82 %, the cubic-array
-    # correction at this fraction is a few % of the 2.5 (K's solver test: within 10 %)
+    # correction at this fraction is a few % of the 2.5 (within 10 %)
     phi = 4.0 / 3.0 * np.pi * 0.125**3
     assert (ds["effective_viscosity"].values[0] - 1.0) / phi == pytest.approx(2.5, rel=0.10)
     assert np.all(ds["rigidity_max"].values < 0.01)  # ~1/kappa, kappa = 1e3
     assert np.all(ds["rigidity_mean"].values <= ds["rigidity_max"].values)
+
+
+def test_main_job_stokes_summary_reports_every_record_it_names(sphere_run):
+    # the summary names its records in one tuple; each must be a variable of a real run
+    from pyfold import pipeline
+
+    ds, out = sphere_run
+    assert set(pipeline.STOKES_SUMMARY_RECORDS) <= set(ds.data_vars)
+    text = pipeline.stokes_summary(out)
+    for name in pipeline.STOKES_SUMMARY_RECORDS:
+        assert f"  {name}: median" in text, text
 
 
 def _tiny_scene_file(path, dim_grid=(24, 24, 24), tol=1e-10):
@@ -150,7 +161,7 @@ def test_dilute_spheroid_follows_jeffery_with_its_discrete_shape_factor(tmp_path
     xr = pytest.importorskip("xarray")
     from scipy.integrate import solve_ivp
 
-    from pyfold.native.stokes import Particles, StokesSettings, solve_particles
+    from pyfold.native.stokes import Particles, solve_particles
 
     n, beta, dt, t_end = 32, 3.0, 0.05, 1.0
     R = 2.0 / n  # 4 cells per diameter
@@ -168,7 +179,7 @@ def test_dilute_spheroid_follows_jeffery_with_its_discrete_shape_factor(tmp_path
     theta = np.unwrap(np.arctan2(p[:, 1], p[:, 0]))
 
     om = [solve_particles(Particles(x=x0, p=[axis], radius=R, length=2 * beta * R, shape="spheroid"), [1, 1, 1],
-                          (n, n, n), settings=StokesSettings(tol=1e-8)).omega[0, 2]
+                          (n, n, n), settings=stokes_settings(tol=1e-8)).omega[0, 2]
           for axis in ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])]
     assert om[0] + om[1] == pytest.approx(-1.0, abs=1e-3)  # mean rate = vorticity (centre: symmetric)
     lam = om[0] - om[1]

@@ -8,6 +8,7 @@ import pytest
 
 from pyfold.errors import ConvergenceError, InputError
 from pyfold.native.stokes import Particles, StokesSettings, march, solve_chi, solve_particles
+from test_run_common import stokes_settings
 
 SHEAR = np.array([[0.0, 1.0], [0.0, 0.0]])
 
@@ -26,7 +27,7 @@ def test_laminate_in_shear_has_harmonic_mean_viscosity_on_a_sheared_lattice(deri
     # discretely: voxel values); the skewed Lees-Edwards basis must not change that
     kappa, eta_f = 50.0, 2.0
     chi = laminate(n, (n, n))
-    settings = StokesSettings(kappa=kappa, eta_f=eta_f, tol=1e-11, derivative=derivative, mixing="arithmetic")
+    settings = stokes_settings(kappa=kappa, eta_f=eta_f, tol=1e-11, derivative=derivative, mixing="arithmetic")
     lattice = np.array([[1.0, 0.37], [0.0, 0.8]])
     sol = solve_chi(chi, lattice, SHEAR, settings)
     eta = eta_f * (1 + (kappa - 1) * chi[0])
@@ -43,14 +44,14 @@ def test_laminate_3d_and_any_mixing_rule():
     chi = laminate(n, (8, n, 6))
     G = np.zeros((3, 3))
     G[0, 1] = 0.7
-    settings = StokesSettings(kappa=1e3, tol=1e-11, mixing="harmonic")
+    settings = stokes_settings(kappa=1e3, tol=1e-11, mixing="harmonic")
     sol = solve_chi(chi, np.diag([1.0, 1.2, 0.9]), G, settings)
     eta = 1.0 / ((1 - chi[0, :, 0]) + chi[0, :, 0] / 1e3)
     assert sol.eta_eff == pytest.approx(1.0 / np.mean(1.0 / eta), rel=1e-9)
 
 
 def test_uniform_viscosity_leaves_the_mean_flow_undisturbed():
-    sol = solve_chi(np.full((8, 10), 0.4), np.eye(2), SHEAR, StokesSettings(kappa=10.0, mixing="arithmetic"))
+    sol = solve_chi(np.full((8, 10), 0.4), np.eye(2), SHEAR, stokes_settings(kappa=10.0, mixing="arithmetic"))
     assert sol.iterations == 0
     assert np.abs(sol.u).max() == 0.0
     assert sol.eta_eff == pytest.approx(1 + 9 * 0.4, rel=1e-14)
@@ -60,7 +61,7 @@ def test_uniform_viscosity_leaves_the_mean_flow_undisturbed():
 def sphere():
     # radius 4 voxels in a 32^3 periodic cell (phi = 0.82 %), off-centre in y
     P = Particles(x=[[0.5, 0.3, 0.45]], p=[[1.0, 0.0, 0.0]], radius=0.125, length=0.25, shape="sphere")
-    return P, solve_particles(P, [1, 1, 1], (32, 32, 32), shear_rate=1.0, settings=StokesSettings(kappa=1e3))
+    return P, solve_particles(P, [1, 1, 1], (32, 32, 32), shear_rate=1.0, settings=stokes_settings(kappa=1e3))
 
 
 def test_sphere_in_shear_spins_at_half_the_shear_rate(sphere):
@@ -95,7 +96,7 @@ def test_rigidity_error_falls_like_inverse_kappa_and_iterations_grow_slower_than
     kappas = np.array([10.0, 100.0, 1000.0, 10000.0])
     rig, its = [], []
     for k in kappas:
-        sol = solve_particles(P, [1, 1], (96, 96), settings=StokesSettings(kappa=k, tol=1e-8))
+        sol = solve_particles(P, [1, 1], (96, 96), settings=stokes_settings(kappa=k, tol=1e-8))
         rig.append(sol.rigidity[0])
         its.append(sol.iterations)
     slope_rig = np.polyfit(np.log(kappas[:3]), np.log(rig[:3]), 1)[0]
@@ -115,7 +116,7 @@ def test_spheroid_rotation_rate_approaches_jeffery_under_refinement():
         om = []
         for p in ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]):
             P = Particles(x=[[0.5, 0.5, 0.5]], p=[p], radius=1 / 18, length=2 * beta / 18, shape="spheroid")
-            om.append(solve_particles(P, [1, 1, 1], (n, n, n), settings=StokesSettings(tol=1e-6)).omega[0, 2])
+            om.append(solve_particles(P, [1, 1, 1], (n, n, n), settings=stokes_settings(tol=1e-6)).omega[0, 2])
         assert om[0] + om[1] == pytest.approx(-1.0, abs=0.01)  # sum = vorticity: -gamma_dot
         errors.append(abs((om[0] - om[1]) / lam - 1.0))
     assert errors[1] < errors[0]
@@ -129,7 +130,7 @@ def _orbit_angle(scheme, dt, t_end=0.96):
     th = np.deg2rad(100.0)
     P = Particles(x=[[0.5, 0.5]], p=[[np.cos(th), np.sin(th)]], radius=1 / 16, length=6 / 16, shape="spheroid")
     res = march(P, [1, 1], (48, 48), dt=dt, nsteps=int(round(t_end / dt)), t0=-0.48, scheme=scheme,
-                settings=StokesSettings(tol=1e-10))
+                settings=stokes_settings(tol=1e-10))
     assert np.allclose(np.linalg.norm(res.p, axis=-1), 1.0, atol=1e-13)  # exact rotations
     p = res.p[-1, 0]
     return np.arctan2(p[1], p[0])
@@ -163,7 +164,7 @@ def test_partial_volume_chi_has_the_particle_volume_and_moves_smoothly(shape, ra
         P = Particles(x=[[0.5 + shift, 0.45, 0.5]], p=[[0.48, 0.6, 0.64]], radius=radius, length=length,
                       shape=shape)
         sol = solve_particles(P, [1, 1, 1], (32, 32, 32), shear_offset=0.2,
-                              settings=StokesSettings(kappa=1.0, max_iter=1))
+                              settings=stokes_settings(kappa=1.0, max_iter=1))
         vols.append(sol.chi.sum() / 32**3)
     tol = 0.01 if shape != "fibre" else 0.02  # sharp cylinder edges
     assert np.allclose(vols, exact, rtol=tol)
@@ -177,7 +178,7 @@ def test_bad_settings_and_non_convergence_are_reported():
         StokesSettings(kappa=0.5)
     P = Particles(x=[[0.5, 0.5]], p=[[1.0, 0.0]], radius=0.1, length=0.2, shape="sphere")
     with pytest.raises(ConvergenceError, match="residual"):
-        solve_particles(P, [1, 1], (32, 32), settings=StokesSettings(max_iter=3, tol=1e-12))
+        solve_particles(P, [1, 1], (32, 32), settings=stokes_settings(max_iter=3, tol=1e-12))
     with pytest.raises(InputError, match="own periodic image"):
         big = Particles(x=[[0.5, 0.5]], p=[[1.0, 0.0]], radius=0.05, length=0.98, shape="fibre")
         solve_particles(big, [1, 1], (32, 32))
