@@ -2,7 +2,8 @@
 
 Question
     What does each numerical setting of the fictitious-domain FFT Stokes solver buy
-    in accuracy, and what does it cost in wall time? Test case (physics.md §4): a
+    in accuracy, and what does it cost in wall time? Test case
+    (docs/physics.md#single-particles-in-shear): a
     prolate spheroid of aspect ratio beta = 3 at the centre of a periodic cubic cell
     3 particle lengths wide, in simple shear (gamma_dot = 1, Lees-Edwards lattice).
     Its orbit period should approach Jeffery's T_J = (2 pi / gamma_dot)(beta + 1/beta)

@@ -6,7 +6,7 @@
           ─► figures, a NetCDF of the results, a text summary
 
 Why fit with several closures: the fitted ``C_I`` depends on the closure used
-(physics.md §6), so the table reports one value per closure, plus the value
+(docs/physics.md#the-fitted-c_i-depends-on-the-closure), so the table reports one value per closure, plus the value
 obtained with the "exact" closure (the simulation's own ``a4``), which isolates
 what the fibre–fibre interactions do from what a closure approximation does.
 """
@@ -27,7 +27,7 @@ from pyfold.errors import InputError, PyfoldError
 DEFAULT_CLOSURES: tuple[str, ...] = ("exact", "fec", "ibof", "orw3", "hybrid", "quadratic")
 
 #: Folgar–Tucker starting guess of C_I for every fit (order of the published
-#: values, physics.md §6); bounds C_I >= 0 come from pyfold.fit.
+#: values, docs/physics.md#published-c_i-values); bounds C_I >= 0 come from pyfold.fit.
 CI_START = 1e-3
 
 #: Per-record solver diagnostics of a Stokes run that the summary reports; each is a

@@ -1,4 +1,4 @@
-"""The HDF5 run file: what ``pyfold run`` hands to ``fold_run`` (micro contract, issue 3).
+"""The HDF5 run file: what ``pyfold run`` hands to ``fold_run``.
 
 Python writes the root attributes, ``/setup`` (the scene verbatim, the
 normalised scene, and ``/setup/resolved``: every number Fortran needs, with

@@ -1,4 +1,4 @@
-!> The seed's collision strategy (Laure, Megally & Coupez; physics.md section 3).
+!> The seed's collision strategy (Laure, Megally & Coupez; docs/physics.md#collision-strategy).
 !>
 !> Gaps are evaluated at the PREDICTED configuration at t + dt (x + v dt, p turned
 !> exactly by omega dt, cell offset advanced by dt), exactly as rigid_update will move
@@ -55,7 +55,7 @@
 !> (round-off of a distance between coordinates of size L; the seed's exact
 !> criterion min d_ij >= 0 could loop forever on -1e-17), or after max_iter sweeps.
 !>
-!> Naive (the reference, physics.md section 3): the seed's literal loop. EVERY sweep
+!> Naive (the reference, docs/physics.md#sphere-collisions): the seed's literal loop. EVERY sweep
 !> rescans all N(N-1)/2 pairs by the O(N^2) double loop at the current prediction
 !> (minimum image of each pair, then the segment distance of those whose centre
 !> distance minus both extents is below the cutoff) to find each D_i. Nothing is
@@ -233,7 +233,7 @@ contains
       end select
    end function transverse_inertia
 
-   !> Seed's lubrication force on sphere i from sphere j (physics.md section 3):
+   !> Seed's lubrication force on sphere i from sphere j (docs/physics.md#lubrication-between-spheres):
    !> F_ij = -(3/2) pi R^2 eta ((u_i - u_j).n_ij) / (|O_jO_i| - 2R) n_ij. The gap is
    !> floored at gap_min (the under-resolved gap the security zone guarantees) [N].
    pure function lubrication_force(radius, eta, dx, du, gap_min) result(f)

@@ -2,9 +2,9 @@
 !>
 !> Simple shear (G_xy the only non-zero entry, or G = 0): lattice basis a1 = (Lx,0,0),
 !> a2 = (s,Ly,0), a3 = (0,0,Lz), s(t) = gamma_dot t Ly wrapped to [-Lx/2, Lx/2)
-!> (Lees & Edwards 1972, J. Phys. C 5:1921; physics.md section 3). The image of a point
-!> x across the upper y-face sits at x + a2 and moves with the extra velocity
-!> G.a2 = (gamma_dot Ly, 0, 0). This path is kept exactly as the original shear code.
+!> (Lees & Edwards 1972, J. Phys. C 5:1921; docs/physics.md#lees-edwards-skewed-lattice).
+!> The image of a point x across the upper y-face sits at x + a2 and moves with the
+!> extra velocity G.a2 = (gamma_dot Ly, 0, 0). This path is kept exactly as the original shear code.
 !> Wall cell: no-slip walls at y = 0 and y = Ly moving at -U and +U (U = gamma_dot Ly/2),
 !> periodic in x (and z); s = 0. Walls host simple shear only.
 !>

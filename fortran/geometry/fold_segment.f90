@@ -4,7 +4,7 @@
 !> point: a sphere's centre). We minimise the convex quadratic
 !>     f(s,t) = |r + s p1 - t p2|^2,  r = c1 - c2,
 !> over the rectangle [-h1,h1] x [-h2,h2]. Its unconstrained minimiser is the seed's
-!> interior formula (physics.md section 3, Laure, Megally & Coupez):
+!> interior formula (Laure, Megally & Coupez; docs/physics.md#fibre-collisions):
 !>     s* = (b e - d)/(1 - b^2),  t* = (e - b d)/(1 - b^2),  b = p1.p2, d = p1.r, e = p2.r;
 !> f is convex, so on the rectangle its minimum is either that interior point or lies
 !> on an edge, i.e. an end point of one segment against the other segment, where the

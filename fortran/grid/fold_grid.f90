@@ -2,8 +2,8 @@
 !>
 !> The cell is the parallelepiped spanned by the lattice basis A = [a1 a2 a3]
 !> (columns). Under simple shear a1 = (Lx,0,0), a2 = (s,Ly,0), a3 = (0,0,Lz) with
-!> the wrapped offset s (physics.md §3); when s wraps the cell module re-chooses
-!> the basis and the grid simply takes the new A (Stokes flow has no memory, so
+!> the wrapped offset s (docs/physics.md#lees-edwards-skewed-lattice); when s wraps the
+!> cell module re-chooses the basis and the grid simply takes the new A (Stokes flow has no memory, so
 !> every step may rebuild the grid; the FFT plans only depend on the counts n).
 !> Voxel m = (m1, m2, m3), 0 <= m_j < n_j, is the parallelepiped with corner
 !> A (m/n) and centre A ((m + 1/2)/n); the characteristic function chi and the
@@ -137,7 +137,7 @@ contains
    end function grid_total
 
    !> Lees-Edwards lattice of a box lengths L sheared in x along y with offset s:
-   !> a1 = (Lx,0,0), a2 = (s,Ly,0), a3 = (0,0,Lz) (physics.md §3).
+   !> a1 = (Lx,0,0), a2 = (s,Ly,0), a3 = (0,0,Lz) (docs/physics.md#lees-edwards-skewed-lattice).
    pure function shear_lattice(lengths, s) result(A)
       real(dp), intent(in) :: lengths(3), s
       real(dp) :: A(3, 3)

@@ -1,8 +1,8 @@
 !> Partial-volume characteristic function chi of the particles on the grid.
 !>
-!> chi of a voxel is the fraction of its volume covered by particles (between 0
-!> and 1, physics.md §3), so a particle can move by less than one voxel and its
-!> discrete volume changes smoothly. The fraction is the mean over S^dim
+!> chi of a voxel is the fraction of its volume covered by particles (between 0 and 1,
+!> docs/physics.md#characteristic-function-by-voxelisation), so a particle can move by
+!> less than one voxel and its discrete volume changes smoothly. The fraction is the mean over S^dim
 !> sub-voxel points of a smooth ramp H(1/2 - phi/w) of the signed distance phi
 !> (w = h/S the sub-voxel size), H(t) = 10t^3 - 15t^4 + 6t^5 on [0, 1] (0 below,
 !> 1 above). H(1 - t) = 1 - H(t), so for a plane interface the ramp integrates
@@ -11,7 +11,7 @@
 !> the rigid velocities, twice differentiable in the particle position and
 !> orientation, which the second-order time stepping needs to show its order.
 !> Signed distances: sphere |r| - R; flat cylinder (exact, radius R, length L);
-!> capped fibre = G's contact capsule (segment of half-length L/2, radius R);
+!> capped fibre = the contact capsule of fold_segment (segment of half-length L/2, radius R);
 !> prolate spheroid (a = L/2, b = R) by the first-order estimate
 !> (q - 1)/|grad q|, q^2 = z^2/a^2 + rho^2/b^2, exact on the surface. 2-D: the same
 !> formulas in the plane (rectangle 2R x L, disk, ellipse).

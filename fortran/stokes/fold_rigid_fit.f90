@@ -5,14 +5,16 @@
 !>   [ W0 I    -[m]x ] [V    ]   [ sum w u     ]
 !>   [ [m]x     I_r  ] [omega] = [ sum w r x u ],
 !> W0 = sum w, m = sum w r, I_r = sum w (|r|^2 I - r r^T), are the rigid-body
-!> "mass matrix" of the chi distribution (physics.md §3: a fit over all cells is
-!> more robust than moving two end points). In 2-D the unknowns are (Vx, Vy, w_z).
+!> "mass matrix" of the chi distribution (a fit over all cells is more robust than
+!> moving two end points, docs/physics.md#rigid-motion-fit-and-update). In 2-D the
+!> unknowns are (Vx, Vy, w_z).
 !> Moments are summed over the local slab and then over ranks, so every rank
 !> gets the same (V, omega). The rigidity residual of particle k is
 !>   sqrt(sum w |u - V - omega x r|^2 / W0) / (|E| l_k),
 !> |E| = sqrt(2 E:E) (= gamma_dot in shear), l_k = max(L/2, R): the non-rigid
 !> part of the velocity relative to the imposed velocity differences across the
-!> particle; it falls like 1/kappa (penalty error, physics.md §5).
+!> particle; it falls like 1/kappa (penalty error,
+!> docs/physics.md#penalty-too-soft-for-long-fibres).
 module fold_rigid_fit
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL

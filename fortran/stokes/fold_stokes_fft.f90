@@ -2,9 +2,10 @@
 !>
 !> Velocity u = G x + u~, u~ periodic with zero mean; viscosity eta_f in the
 !> fluid and kappa eta_f in the solid (Glowinski-Joseph style penalisation,
-!> physics.md §3). In a partially covered voxel the default is the harmonic
-!> (Reuss) mixing 1/eta = (1 - chi)/eta_f + chi/(kappa eta_f); the arithmetic
-!> rule eta_f (1 + (kappa - 1) chi) of physics.md is available but makes every
+!> docs/physics.md#fictitious-domain-penalisation). In a partially covered voxel the
+!> default is the harmonic (Reuss) mixing 1/eta = (1 - chi)/eta_f + chi/(kappa eta_f);
+!> the arithmetic rule eta_f (1 + (kappa - 1) chi)
+!> (docs/physics.md#viscosity-of-partially-covered-voxels) is available but makes every
 !> touched voxel nearly rigid, i.e. inflates particles by ~h/2: measured for a
 !> sphere of radius 4 voxels (kappa 1e3): intrinsic viscosity 3.96 vs 2.35
 !> (harmonic; Einstein 2.5) and spin 1.036 vs 1.0036 x gamma_dot/2. With B the symmetric-gradient operator and P the projection
@@ -25,7 +26,8 @@
 !> Wavevectors of the skewed lattice are k = 2 pi A^-T m. Derivative schemes:
 !>  * FOLD_DERIV_SPECTRAL: d = i k; velocity and strain at voxel centres. Every
 !>    mode with a Nyquist index is removed from the unknowns (on even grids its
-!>    derivative is not Hermitian-consistent and CG stalls, physics.md §5).
+!>    derivative is not Hermitian-consistent and CG stalls,
+!>    docs/physics.md#spectral-derivatives-and-even-grids).
 !>  * FOLD_DERIV_FD (default): the "rotated" finite-difference scheme of Willot
 !>    (2015, C. R. Mecanique 343:232): velocity at voxel corners, strain at voxel
 !>    centres from the 2^dim corners (trilinear element, one-point integration):

@@ -5,7 +5,7 @@
 !> Lees-Edwards offset gives the lattice) and particle set; v and omega of the
 !> set are overwritten with the rigid motion fitted to the computed flow
 !> (contacts are resolved afterwards, as for the Jeffery kinematics). The
-!> per-step record holds what physics.md §5 asks to record every step.
+!> per-step record holds what docs/physics.md#what-to-record-every-step lists.
 !> stokes_march integrates a set in time (explicit Euler or Adams-Bashforth 2,
 !> exact rotations) for tests and studies; the run driver has its own loop.
 module fold_stokes_step

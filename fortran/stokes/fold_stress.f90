@@ -1,6 +1,7 @@
 !> Bulk (volume-averaged) stress of the suspension and its effective viscosity.
 !>
-!> Polarisation average (physics.md §3; Batchelor 1970, J. Fluid Mech. 41:545):
+!> Polarisation average (Batchelor 1970, J. Fluid Mech. 41:545;
+!> docs/physics.md#bulk-stress-and-effective-viscosity):
 !>   Sigma = -<p> I + 2 eta_f E + (1/V) int 2 (eta - eta_f) eps(u) dV,
 !> with eps(u) = E + eps(u~) and <eps(u~)> = 0 on the periodic cell. The mean
 !> pressure of an incompressible periodic flow is arbitrary: we report the

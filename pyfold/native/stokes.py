@@ -3,8 +3,8 @@
 The periodic cell (lattice basis ``A``, columns a1, a2, a3; Lees–Edwards shear:
 ``a2 = (s, Ly, 0)``) carries the flow ``u = G·x + ũ`` with ``ũ`` periodic. The
 particles are a region of viscosity ``κ η_f``; with ``κ → ∞`` they move rigidly
-(Glowinski & Joseph penalisation, physics.md §3). The solver is a preconditioned
-conjugate-gradient method whose preconditioner is the constant-viscosity Stokes
+(Glowinski & Joseph penalisation, docs/physics.md#fictitious-domain-penalisation). The
+solver is a preconditioned conjugate-gradient method whose preconditioner is the constant-viscosity Stokes
 Green operator in Fourier space (Moulinec & Suquet 1998, *Comput. Methods Appl.
 Mech. Eng.* 157:69; CG variant: Zeman et al. 2010, *J. Comput. Phys.* 229:8065).
 
@@ -44,7 +44,8 @@ class StokesSettings:
     derivative : ``"fd"`` (rotated finite differences, Willot 2015, *C. R. Mécanique*
         343:232; default) or ``"spectral"`` (``i k``, Nyquist modes removed).
     mixing : viscosity of partially covered voxels: ``"harmonic"`` (default),
-        ``"arithmetic"`` (η_f(1 + (κ−1)χ), physics.md; inflates particles by ~h/2),
+        ``"arithmetic"`` (η_f(1 + (κ−1)χ), docs/physics.md#viscosity-of-partially-covered-voxels;
+        inflates particles by ~h/2),
         ``"geometric"``.
     subsamples : sub-samples per voxel edge for the partial-volume χ, 1..8.
     fibre_ends : ``"flat"`` cylinder (default) or ``"capped"`` (the contact capsule).

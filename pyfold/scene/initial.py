@@ -1,6 +1,6 @@
 """The initial particle state of a resolved scene, from the Fortran placement kernel.
 
-``fold_placement`` (engineer G, ``fortran/particles/fold_placement.f90``) draws the
+``fold_placement`` (``fortran/particles/fold_placement.f90``) draws the
 axes (given, isotropic, or uniform in a plane) and places the centres by random
 sequential addition, then, for dense targets, relaxation sweeps that push
 overlapping pairs apart, so every surface gap is >= alpha (alpha/2 to walls). It

@@ -418,7 +418,7 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
                      f"max_grid_points = {st.max_grid_points}; raise it (memory ~ {_grid_megabytes(grid, dim):.0f} MB), "
                      f"lower numerics.stokes.cells_per_diameter or the cell size")
     if model.lubrication and not any(f.shape == "sphere" for f in good):
-        problems.add("model.lubrication", "the lubrication force (physics.md section 3) is defined between spheres; "
+        problems.add("model.lubrication", "the lubrication force (docs/physics.md#lubrication-between-spheres) is defined between spheres; "
                      "this scene has no sphere family")
 
     # Each particle (grown by alpha) must not meet its own periodic image, and the
@@ -496,7 +496,7 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
     problems.raise_if_any(source)
     assert G is not None and n_steps is not None
 
-    # Regime from the longest family (physics.md section 2).
+    # Regime from the longest family (docs/physics.md#suspension-regimes).
     longest = max(good, key=lambda f: f.length)
     n_density = sum(f.count for f in good) / cell_volume
     regime, measure = shapes.regime(n_density, longest.length, 2.0 * longest.radius, dim)
@@ -561,10 +561,10 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
         step = rate * 0.5 * f.length * num.dt  # tip displacement relative to the centre per step
         if collisions != "none" and step > 0.5 * alpha:
             warnings.append(f"{f.name}: a tip moves up to {step:.3g} per step, more than alpha/2 = {0.5 * alpha:.3g} "
-                            "(physics.md section 5); contacts may need many iterations, consider a smaller dt")
+                            "(docs/physics.md#time-step); contacts may need many iterations, consider a smaller dt")
         if step > f.radius:
             warnings.append(f"{f.name}: a tip moves up to {step:.3g} per step, more than a radius {f.radius:.3g} "
-                            "(physics.md section 5: a fraction of a diameter per step)")
+                            "(a fraction of a diameter per step, docs/physics.md#time-step)")
 
     fam_tables = []
     for f in good:
@@ -623,7 +623,7 @@ def stokes_grid(lengths, diameter: float, cells_per_diameter: int) -> tuple[int,
     diameter : float
         Thinnest particle diameter 2R [m].
     cells_per_diameter : int
-        Target resolution (physics.md section 5: 4-8 for quantitative results).
+        Target resolution (4-8 for quantitative results, docs/physics.md#resolution).
     """
     h = diameter / cells_per_diameter
     counts = [_fft_size(int(np.ceil(float(L) / h * (1.0 - 1e-12)))) for L in lengths]

@@ -31,7 +31,7 @@ __all__ = [
 
 #: Default rule for the equivalent aspect ratio of a finite cylinder: Cox (1971,
 #: J. Fluid Mech. 45:625) slender-body result ``beta_e = 1.24 beta / sqrt(ln beta)``,
-#: the classic choice for long fibres (physics.md section 2).
+#: the classic choice for long fibres (docs/physics.md#equivalent-aspect-ratio-of-a-finite-cylinder).
 EQUIVALENT_ASPECT_RATIO_DEFAULT = "cox"
 
 
@@ -122,7 +122,7 @@ class Model(_Table):
     contact_max_iter: Annotated[int, Field(ge=1, le=100_000)] = 100
     #: what to do when the cap is hit: "stop" the run (status failed) or "continue" and count it
     on_contact_cap: Literal["stop", "continue"] = "stop"
-    #: sphere-sphere lubrication force (physics.md section 3); spheres only
+    #: sphere-sphere lubrication force (docs/physics.md#lubrication-between-spheres); spheres only
     lubrication: bool = False
 
 
@@ -134,9 +134,10 @@ class StokesSettings(_Table):
     #: CG iteration cap per solve; reaching it stops the run (exit 1, residual reported)
     max_iterations: Annotated[int, Field(ge=1, le=1_000_000)] = 1000
     #: viscosity contrast of the penalisation eta_solid / eta_fluid (seed: 1e3); rigidity
-    #: error ~ 1/kappa, CG iterations ~ sqrt(kappa) (physics.md sections 3, 5) [-]
+    #: error ~ 1/kappa, CG iterations ~ sqrt(kappa) (docs/physics.md#fictitious-domain-penalisation,
+    #: docs/physics.md#solver-vs-contrast) [-]
     kappa: Annotated[float, Field(gt=1, le=1e12), AfterValidator(_finite)] = 1e3
-    #: grid cells per diameter of the thinnest particle (physics.md section 5: 4-8) [-]
+    #: grid cells per diameter of the thinnest particle (4-8, docs/physics.md#resolution) [-]
     cells_per_diameter: Annotated[int, Field(ge=1, le=64)] = 4
     #: largest Stokes grid (voxel count) allowed: "auto" falls back to jeffery above it,
     #: an explicit "stokes" is rejected (default 64^3; memory ~ 0.27 kB per point in 3-D)

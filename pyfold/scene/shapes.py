@@ -24,7 +24,7 @@ SHAPE_CODES = {"fibre": 1, "sphere": 2, "spheroid": 3}
 RANDOM_CLOSE_PACKING = {2: 0.82, 3: 0.64}
 
 #: Random packing of long rods: phi * (L/d) -> 5.4 for L/d >> 1
-#: (Philipse 1996, Langmuir 12:1127; physics.md section 5). An upper bound for
+#: (Philipse 1996, Langmuir 12:1127; docs/physics.md#packing). An upper bound for
 #: finite rods (excluded-volume corrections only lower it).
 ROD_PACKING_PHI_TIMES_BETA = 5.4
 
@@ -84,7 +84,7 @@ def jeffery_xi(shape: str, beta: float, rule: str) -> tuple[float, float]:
 
 
 def regime(number_density: float, length: float, diameter: float, dim: int) -> tuple[str, float]:
-    """Suspension regime from ``n L^dim`` (physics.md section 2).
+    """Suspension regime from ``n L^dim`` (docs/physics.md#suspension-regimes).
 
     dilute ``n L^3 < 1``; semi-dilute ``1 <= n L^3 < L/d``; concentrated
     ``n L^3 >= L/d`` (Doi & Edwards 1978, J. Chem. Soc. Faraday Trans. 2 74:560).

@@ -2,8 +2,8 @@
 
 Dilute fibres move by Jeffery kinematics without contacts, so Folgar–Tucker fed
 with the run's own a4 ("exact" closure) must fit C_I = 0 (on its bound), and the
-closure errors must be measured against that same a4 (physics.md §4: dilute
-fibres). This is the test of `pyfold analyse` and of the main job's pipeline.
+closure errors must be measured against that same a4 (docs/physics.md#dilute-suspensions).
+This is the test of `pyfold analyse` and of the main job's pipeline.
 """
 import pytest
 import xarray as xr

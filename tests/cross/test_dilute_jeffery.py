@@ -1,7 +1,7 @@
 """Dilute fibres, Jeffery kinematics, no collisions: micro (fold_run) against macro.
 
-physics.md §4: "dilute fibres: DNS a2(t) = Folgar–Tucker with C_I = 0 and the DNS's
-own a4". Without interactions every fibre follows Jeffery's equation, and averaging
+docs/physics.md#dilute-suspensions: a dilute run's a2(t) equals Folgar–Tucker with C_I = 0
+and the run's own a4. Without interactions every fibre follows Jeffery's equation, and averaging
 it over the population gives exactly
     da2/dt = W.a2 - a2.W + xi (D.a2 + a2.D - 2 a4:D),
 i.e. Folgar–Tucker at C_I = 0 with the population's true a4 (Advani & Tucker 1987).

@@ -2,8 +2,9 @@
 
 * the exact closure (FEC) against the moments of a Jeffery population from isotropy,
   computed by quadrature over the initial sphere (FEC is exact there);
-* the a2 of that population against the published value of physics.md
-  (lambda = 1, shear, t = 10: a11 = 0.89963802, a12 = 0.08882965);
+* the a2 of that population against the published value
+  (lambda = 1, shear, t = 10: a11 = 0.89963802, a12 = 0.08882965;
+  docs/physics.md#exact-jeffery-solution-from-isotropy);
 * the planar natural closure, equal to the planar exact closure;
 * IBOF against ORW3 (Chung & Kwon 2002 present IBOF as reproducing ORW3);
 * ORS against the full principal table of Tucker's toolbox, ORE against the exact
@@ -33,7 +34,8 @@ from _closure_batches import (
 
 
 def test_exact_a2_of_jeffery_from_isotropy_matches_published_value():
-    # physics.md: lambda = 1, u = (y, 0, 0), t = 10 -> a11 = 0.89963802, a12 = 0.08882965
+    # docs/physics.md#exact-jeffery-solution-from-isotropy:
+    # lambda = 1, u = (y, 0, 0), t = 10 -> a11 = 0.89963802, a12 = 0.08882965
     B = np.eye(3) + 10.0 * SHEAR  # exp(t L) for the nilpotent shear gradient (lambda = 1)
     a2 = np.asarray(acg_a2(jnp.asarray(B @ B.T)))
     assert abs(a2[0, 0] - 0.89963802) < 5e-9 and abs(a2[0, 1] - 0.08882965) < 5e-9

@@ -59,7 +59,8 @@ def sphere_quadrature(n_theta, n_phi):
 
 
 def test_jeffery_from_isotropy_matches_published_exact_a2():
-    # physics.md 2: lambda = 1, shear, t = 10 -> a11 = 0.89963802, a12 = 0.08882965
+    # docs/physics.md#exact-jeffery-solution-from-isotropy:
+    # lambda = 1, shear, t = 10 -> a11 = 0.89963802, a12 = 0.08882965
     # (exact solution, sample free: the isotropic population is a sphere quadrature).
     # 640 x 1280 nodes: the quadrature is converged to ~2e-9 (1280 x 2560 differs by 1.7e-9)
     p0, w = sphere_quadrature(640, 1280)

@@ -61,7 +61,8 @@ def test_shape_factor_limits():
 
 @pytest.mark.parametrize(
     "rule, expected",
-    # physics.md section 2: beta = 5 -> 4.89 / 4.11 / 4.43, beta = 10 -> 8.17 / 7.61 / 7.96
+    # docs/physics.md#equivalent-aspect-ratio-of-a-finite-cylinder:
+    # beta = 5 -> 4.89 / 4.11 / 4.43, beta = 10 -> 8.17 / 7.61 / 7.96
     [("cox", (4.89, 8.17)), ("zhang", (4.11, 7.61)), ("harris_pittman", (4.43, 7.96))],
 )
 def test_equivalent_aspect_ratio_matches_published_values(rule, expected):

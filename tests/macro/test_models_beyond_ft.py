@@ -221,7 +221,8 @@ def test_every_model_runs_from_isotropy_keeping_trace_symmetry_and_finiteness(di
 def test_ard_models_reproduce_tucker_table_5_3_steady_shear_state(model):
     # Tucker (2022) Table 5.3 (FitARDparams): target (A11, A_gradient) = (0.653, 0.020)
     # is matched by iARD C_I = 0.0627, C_M = 0.9908 and pARD C_I = 0.0218, Omega = 0.9673
-    # (xi = 1; the closure is not quoted in physics.md: with IBOF we reproduce both).
+    # (xi = 1; the closure is not stated with these values, docs/physics.md#tuckers-fitting-examples:
+    # with IBOF we reproduce both).
     from pyfold.models import solve_orientation
 
     a2 = np.asarray(solve_orientation(model, np.eye(3) / 3, simple_shear(1.0), np.array([0.0, 2000.0])).a2[-1])

@@ -16,7 +16,8 @@ SHEAR = simple_shear(1.0)
 
 
 def quadratic_ft_steady_state(ci):
-    """Closed form (physics.md 2): 2y(y + 3C_I)^2 = C_I for y = a12, quadratic closure, xi = 1."""
+    """Closed form: 2y(y + 3C_I)^2 = C_I for y = a12, quadratic closure, xi = 1
+    (docs/physics.md#closed-form-folgar-tucker-steady-state)."""
     y = brentq(lambda y: 2 * y * (y + 3 * ci) ** 2 - ci, 0.0, 1.0, xtol=1e-15, rtol=1e-15)
     a22 = ci / (y + 3 * ci)
     return np.array([[1 - 2 * a22, y, 0], [y, a22, 0], [0, 0, a22]])

@@ -1,4 +1,5 @@
-"""Collision invariants of full fold_run runs (physics.md §4):
+"""Collision invariants of full fold_run runs
+(docs/physics.md#no-overlap-with-the-collision-strategy):
 strategy -> every gap >= 0 at every step; none -> overlaps appear, and are recorded.
 
 * the seed's 2-D Couette disks: cell 1.5 x 1, R = 0.075, phi ~ 50 % (42 disks),

@@ -55,7 +55,8 @@ def test_spheres_keep_contacts_under_auto():
 
 @pytest.mark.parametrize("rule, beta_e", [("cox", 8.17), ("zhang", 7.61), ("harris_pittman", 7.96)])
 def test_cylinder_xi_from_the_equivalent_aspect_ratio(rule, beta_e):
-    """physics.md section 2: beta = 10 -> beta_e = 8.17 / 7.61 / 7.96."""
+    """beta = 10 -> beta_e = 8.17 / 7.61 / 7.96
+    (docs/physics.md#equivalent-aspect-ratio-of-a-finite-cylinder)."""
     fam = scene([dict(FIBRE, radius=0.05, count=1, equivalent_aspect_ratio=rule)]).families[0]
     assert fam.aspect_ratio == pytest.approx(10.0)
     assert fam.equivalent_aspect_ratio == pytest.approx(beta_e, abs=0.006)
