@@ -214,7 +214,7 @@ def _cox(beta):
 
 
 def _zhang(beta):
-    # Zhang, Smith, Jack & Montgomery-Smith 2011, J. Compos. Mater. 45:1279, cubic fit
+    # Zhang, Smith, Jack & Montgomery-Smith 2011, J. Manuf. Sci. Eng. 133:051002, cubic fit
     return 3.5e-5 * beta**3 - 4.67e-3 * beta**2 + 0.764 * beta + 0.404
 
 
@@ -233,13 +233,14 @@ def equivalent_aspect_ratio(beta, rule: str = "cox"):
     The Jeffery period of a cylinder equals that of a spheroid with ``beta_e < beta``:
 
     * ``"cox"`` (Cox 1971, J. Fluid Mech. 45:625): ``beta_e = 1.24 beta / sqrt(ln beta)``;
-    * ``"zhang"`` (Zhang, Smith, Jack & Montgomery-Smith 2011, J. Compos. Mater.
-      45:1279): ``beta_e = 3.5e-5 beta^3 - 4.67e-3 beta^2 + 0.764 beta + 0.404``;
+    * ``"zhang"`` (Zhang, Smith, Jack & Montgomery-Smith 2011, J. Manuf. Sci. Eng.
+      133:051002): ``beta_e = 3.5e-5 beta^3 - 4.67e-3 beta^2 + 0.764 beta + 0.404``;
     * ``"harris_pittman"`` (Harris & Pittman 1975, J. Colloid Interface Sci. 50:280):
       ``beta_e = 1.14 beta^0.844``.
 
-    They agree within ~1 % for ``beta >= 20`` and differ by up to 25 % for
-    ``beta <= 5``; the Cox rule needs ``beta > 1`` (it diverges at ``beta = 1``).
+    They differ by up to 25 % for ``beta <= 5``, by 1.6 % at ``beta = 20`` and 1.2 %
+    at ``beta = 50``, and by 17 % at ``beta = 100``, where the cubic fit of Zhang et
+    al. leaves the other two; the Cox rule needs ``beta > 1`` (it diverges at ``beta = 1``).
 
     Raises
     ------
