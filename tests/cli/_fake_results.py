@@ -1,5 +1,5 @@
-"""Results laid out as the micro contract says fold_run appends them (netCDF dimension
-scales at the root), written with h5netcdf: lets the reader be tested before, and
+"""Results laid out as fold_run appends them (fortran/io/fold_output.f90: netCDF
+dimension scales at the root), written with h5netcdf: lets the reader be tested before, and
 independently of, the Fortran writer."""
 from __future__ import annotations
 

@@ -36,7 +36,7 @@ def write_scene(path: Path, scene: dict) -> Path:
 @pytest.fixture
 def fake_fold_run(tmp_path, monkeypatch):
     """Point PYFOLD_FOLD_RUN at a stand-in that reads the run file, appends results in
-    the contract's layout (a2 from the initial axes, snapshots = initial state),
+    fold_run's layout (a2 from the initial axes, snapshots = initial state),
     prints PROGRESS lines and exits with $FAKE_FOLD_RUN_EXIT (default 0). It tests
     the orchestration of `pyfold run`, not the physics of fold_run."""
     script = tmp_path / "fold_run"

@@ -1,5 +1,5 @@
 """Run files: a valid scene goes into /setup and /initial and comes back unchanged;
-open_run labels the contract's results; the XDMF file points at real datasets."""
+open_run labels fold_run's results; the XDMF file points at real datasets."""
 from __future__ import annotations
 
 import json

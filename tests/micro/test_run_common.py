@@ -1,6 +1,6 @@
 """Shared helpers of the fold_run tests: write run files with h5py, run fold_run.
 
-The run files follow the micro contract (/setup/resolved + /initial, root
+The run files follow the layout of pyfold/run_file.py (/setup/resolved + /initial, root
 attributes); they are written directly here so that the executable can be tested
 independently of the scene layer. The executable is found exactly as ``pyfold run``
 finds it (:func:`pyfold.commands.run.find_fold_run`).
@@ -190,8 +190,8 @@ def xi_of(beta: float) -> float:
     return (beta**2 - 1.0) / (beta**2 + 1.0)
 
 
-def test_writer_produces_contract_layout(tmp_path):
-    """The helper itself writes what the contract lists (guards the other tests)."""
+def test_writer_produces_the_run_file_layout(tmp_path):
+    """The helper itself writes the layout fold_run reads (guards the other tests)."""
     rng = np.random.default_rng(0)
     path = tmp_path / "r.h5"
     write_run_file(path, x=rng.uniform(size=(3, 3)), p=random_unit(rng, 3, 3), radius=0.01, length=0.1, xi=0.9)
