@@ -88,6 +88,10 @@ ERROR_VS_EXACT: dict[str, tuple[float, float]] = {
 # eigenspace: at isotropy their gradient is finite but not the derivative (measured
 # mismatch with central differences ~1e-5 relative, against <1e-13 elsewhere).
 GRADIENT_INEXACT_AT_ISOTROPY = {"ors", "ore", "orf", "orl", "orw", "orw3"}
+# States whose smallest eigenvalue is below this are on the boundary of the admissible
+# set (their zero eigenvalues are exact up to round-off, ~1e-16; the interior test
+# states have eigenvalues above 1e-3).
+BOUNDARY_MARGIN = 1e-8
 
 CASES = [(name, d) for d in (3, 2) for name in C.available(d)]
 CASES_3D = [name for name in C.available(3)]
@@ -243,7 +247,14 @@ def test_closure_vmap_members_agree_and_gradient_is_finite_and_correct(name, d):
     v = closure_values(name, d)
     # the two vmap members hold the same states in opposite order
     np.testing.assert_allclose(v.a4_reversed, v.a4, atol=1e-13)
-    np.testing.assert_allclose(v.grads_reversed, v.grads, atol=1e-12)
+    # Gradients are compared in the interior of the admissible set only: where a2 has a
+    # zero eigenvalue (aligned fibres, planar states in 3-D) only one-sided derivatives
+    # exist, and what a closure reports there (FEC: out of its damped normal equations,
+    # pyfold/closures/exact.py) changes by O(1) under round-off, so it may differ
+    # between two evaluations of the same state on another processor or BLAS kernel.
+    interior = np.linalg.eigvalsh(v.batch).min(axis=-1) > BOUNDARY_MARGIN
+    assert interior.sum() > len(v.batch) // 2
+    np.testing.assert_allclose(v.grads_reversed[interior], v.grads[interior], atol=1e-12)
     assert np.all(np.isfinite(v.grads)), f"{name}: non-finite gradient"
     assert np.abs(v.grad("random")[0]).max() > 0.0
     # reverse-mode derivative of F = sum(a4 * W) against central differences, at a
