@@ -13,11 +13,22 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 
 from pyfold.errors import (  # noqa: E402
     ConvergenceError,
+    EigenvalueCrossingWarning,
+    InadmissibleOrientationWarning,
     InputError,
     PyfoldError,
+    PyfoldWarning,
 )
 
-__all__ = ["__version__", "PyfoldError", "InputError", "ConvergenceError"]
+__all__ = [
+    "__version__",
+    "PyfoldError",
+    "InputError",
+    "ConvergenceError",
+    "PyfoldWarning",
+    "InadmissibleOrientationWarning",
+    "EigenvalueCrossingWarning",
+]
 
 
 def __getattr__(name: str):

@@ -38,6 +38,23 @@ class NumericalError(PyfoldError, ArithmeticError):
     """NaN, infinity or another numerical blow-up."""
 
 
+
+class PyfoldWarning(UserWarning):
+    """Base class of every warning pyfold emits on purpose."""
+
+
+class InadmissibleOrientationWarning(PyfoldWarning, RuntimeWarning):
+    """A computed ``a2`` left the set of orientation tensors (symmetric, unit
+    trace, positive semi-definite) by more than the solver's error allows: the
+    model (usually its closure) is outside its domain of validity there."""
+
+
+class EigenvalueCrossingWarning(PyfoldWarning, RuntimeWarning):
+    """Two eigenvalues of ``a2`` crossed (or came closer than the integration
+    resolves) in a model built on the principal axes of ``a2`` (RSC, ARD-RSC,
+    pARD, iARD-RPR, pARD-RPR, MRD): the equations are ill-posed there, and
+    round-off decides which path the solution takes."""
+
 _RAISES: dict[int, type[PyfoldError]] = {
     FOLD_INPUT_ERROR: InputError,
     FOLD_NOT_CONVERGED: ConvergenceError,

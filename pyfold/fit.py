@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from typing import Any, Callable, Mapping, Sequence
 
 import diffrax
@@ -734,6 +735,16 @@ def synthetic_dataset(
 
 # --------------------------------------------------------------------------- steady state
 
+#: Margin [dimensionless; eigenvalues of a2 lie in [0, 1]] by which a steady state may
+#: leave the orientation tensors before it is reported: the eigenvalues must be
+#: >= -_STEADY_MARGIN (else ConvergenceError, as always) and |tr a2 - 1| <=
+#: _STEADY_MARGIN (else InadmissibleOrientationWarning: a closure that breaks
+#: a4_iikl = a2_kl, such as SQC, has a stationary point off the unit trace). At the
+#: default residual tol = 1e-13 the state error is |J^-1| tol, at most ~1e-10 for
+#: the slowest relaxation rate considered (C_I gamma_dot ~ 1e-3 gamma_dot), so the
+#: margin separates a converged admissible state from a real violation.
+_STEADY_MARGIN = 1e-10
+
 
 def _reduced_indices(d: int) -> tuple[np.ndarray, np.ndarray]:
     # Independent unknowns of a symmetric, unit-trace tensor: the upper triangle
@@ -749,14 +760,31 @@ def _from_reduced(x: jax.Array, d: int) -> jax.Array:
     return a.at[d - 1, d - 1].set(1.0 - jnp.trace(a))
 
 
+def _from_full(x: jax.Array, d: int) -> jax.Array:
+    # Independent unknowns of a symmetric tensor of free trace: the upper triangle.
+    iu, ju = np.triu_indices(d)
+    return jnp.zeros((d, d), dtype=x.dtype).at[iu, ju].set(x).at[ju, iu].set(x)
+
+
 @eqx.filter_jit
-def _steady_state(model, a2_start: jax.Array, L, dt0, tol: float, max_iter: int):
+def _steady_state(model, a2_start: jax.Array, L, dt0, tol: float, max_iter: int, unit_trace: bool):
+    """Pseudo-transient continuation on the unit-trace components (``unit_trace``,
+    d(d+1)/2 - 1 unknowns) or on every independent component (d(d+1)/2 unknowns).
+
+    Returns the state, the *full* residual ``max_ij |da_ij/dt|`` there, and the
+    number of steps. ``tol`` is absolute [1/s] (the caller scales it by gamma_dot).
+    """
     d = a2_start.shape[-1]
-    iu, ju = _reduced_indices(d)
+    if unit_trace:
+        iu, ju = _reduced_indices(d)
+        to_a2 = _from_reduced
+    else:
+        iu, ju = np.triu_indices(d)
+        to_a2 = _from_full
     Lc = L(0.0)
 
     def residual(x):
-        return model.rate(0.0, _from_reduced(x, d), Lc)[iu, ju]
+        return model.rate(0.0, to_a2(x, d), Lc)[iu, ju]
 
     eye = jnp.eye(iu.size)
     f0 = jnp.max(jnp.abs(residual(a2_start[iu, ju])))
@@ -776,8 +804,9 @@ def _steady_state(model, a2_start: jax.Array, L, dt0, tol: float, max_iter: int)
         return (k < max_iter) & (err > tol)
 
     x, k, _ = jax.lax.while_loop(cond, body, (a2_start[iu, ju], 0, jnp.inf))
-    err = jnp.max(jnp.abs(residual(x)))
-    return _from_reduced(x, d), err, k
+    a2 = to_a2(x, d)
+    full_err = jnp.max(jnp.abs(model.rate(0.0, a2, Lc)))
+    return a2, full_err, k
 
 
 def steady_state_a2(
@@ -790,22 +819,85 @@ def steady_state_a2(
 ) -> np.ndarray:
     """Steady orientation ``a2`` of a model under a constant velocity gradient.
 
-    Solves ``da2/dt = 0`` for the ``d(d+1)/2 - 1`` independent components of the
-    symmetric, unit-trace tensor by pseudo-transient continuation (Kelley &
-    Keyes 1998, SIAM J. Numer. Anal. 35:508): backward-Euler steps of the
-    orientation equation from ``a2_start`` (isotropic by default),
-    ``(I/dt_k - J) dx = F(x_k)``, with the step grown by switched evolution
-    relaxation ``dt_k = dt_0 |F_0| / |F_k|`` (``dt_0`` = one strain unit). Far
-    from the solution it follows the flow (so it reaches the *attracting*
-    state, as the integrate-then-Newton approach of Tucker's ``Asteady.m``
-    does); near it, it is Newton's method.
+    Solves ``da2/dt = F(a2) = 0`` (``F = model.rate``) by pseudo-transient
+    continuation (Kelley & Keyes 1998, SIAM J. Numer. Anal. 35:508):
+    backward-Euler steps of the orientation equation from ``a2_start``
+    (isotropic by default), ``(I/dt_k - J) dx = F(x_k)``, with the step grown by
+    switched evolution relaxation ``dt_k = dt_0 |F_0| / |F_k|`` (``dt_0`` = one
+    strain unit). Far from the solution it follows the flow (so it reaches the
+    *attracting* state, as the integrate-then-Newton approach of Tucker's
+    ``Asteady.m`` does); near it, it is Newton's method.
+
+    **Which components are solved.** The trace obeys ``d(tr a)/dt = tr F(a)``;
+    for Folgar--Tucker ``tr F = 2 xi (D:a - a4_iikl D_kl) + 2 d C_I gamma_dot
+    (1 - tr a)``. A closure with ``a4_iikl = a_kl`` on the unit-trace tensors
+    (every registered closure but SQC, whose contraction is
+    ``(a + 2 a.a)/(1 + 2 a:a)``) makes ``tr a = 1`` an invariant manifold, and its
+    steady state lies on it. There the trace equation is implied by the others,
+    and how the full ``d(d+1)/2``-component Jacobian behaves across the manifold
+    depends on how the closure is extended off it: its trace-direction entry is
+    ``-2 d C_I gamma_dot`` plus the closure's ``2 xi d(D:a - a4_iikl D_kl)/d(tr a)``,
+    which is zero for ``C_I = 0`` and a closure whose contraction is ``a_kl`` at
+    any trace, and small for small ``C_I``: Newton on all components would be
+    singular or ill-conditioned exactly where it is not needed. pyfold therefore
+
+    1. solves first the ``d(d+1)/2 - 1`` components of a unit-trace tensor
+       (``a_dd = 1 - sum`` of the other diagonals: 5 unknowns in 3-D, 2 in 2-D);
+    2. checks the *full* residual ``max_ij |F_ij| / gamma_dot`` at that state,
+       ``a_dd`` rate and trace rate included. If it is within ``tol``, the trace
+       equation was implied and this state is returned (trace-preserving
+       closures: the result of step 1, unchanged);
+    3. otherwise the trace equation is *not* implied (the closure moves the trace),
+       and the continuation is rerun from ``a2_start`` on all ``d(d+1)/2``
+       independent components (6 in 3-D, 3 in 2-D). Then the trace is whatever
+       the model's stationary point has (SQC: not 1), the one the long-time
+       integration (:func:`pyfold.models.solve_orientation`) reaches.
+
+    The returned state always satisfies ``max |da2/dt| <= tol * gamma_dot`` in
+    every component.
+
+    Parameters
+    ----------
+    model : orientation model of :mod:`pyfold.models`
+    L : array (d, d)
+        Constant velocity gradient [1/s] with shear rate ``gamma_dot =
+        sqrt(2 D:D) > 0``.
+    a2_start : array (d, d), optional
+        Initial orientation tensor of the continuation (default ``I/d``).
+    tol : float
+        Tolerance on ``max_ij |da_ij/dt| / gamma_dot`` [dimensionless].
+    max_iter : int
+        Maximum number of pseudo-transient steps (per stage).
+
+    Returns
+    -------
+    numpy.ndarray (d, d)
 
     Raises
     ------
     pyfold.errors.ConvergenceError
-        No convergence to ``max |da2/dt| <= tol`` in ``max_iter`` steps, or the
-        result is not an orientation tensor (eigenvalues outside [0, 1]).
+        No state with full residual ``max |da2/dt| / gamma_dot <= tol`` was
+        found in ``max_iter`` steps (the message names the model, its closure and
+        ``C_I``, and the residual reached), or the result is not positive
+        semi-definite (eigenvalue below ``-1e-10``).
+
+    Warns
+    -----
+    pyfold.errors.InadmissibleOrientationWarning
+        The steady state is the model's fixed point but not an orientation tensor:
+        ``|tr a2 - 1| > 1e-10`` (a closure that does not conserve the trace).
     """
+    from pyfold.errors import InadmissibleOrientationWarning
+
+    a2, off_trace = _steady_state_checked(model, L, a2_start, tol, max_iter)
+    if off_trace:
+        warnings.warn(off_trace, InadmissibleOrientationWarning, stacklevel=2)
+    return a2
+
+
+def _steady_state_checked(model, L, a2_start, tol: float, max_iter: int) -> tuple[np.ndarray, str]:
+    """:func:`steady_state_a2` without the warning: ``(a2, message)``, the message
+    non-empty when the stationary point is off the unit trace."""
     from pyfold.errors import ConvergenceError
     from pyfold.kinematics import shear_rate
 
@@ -817,15 +909,38 @@ def steady_state_a2(
     if rate <= 0.0:
         raise InputError("L: steady_state_a2 needs a deforming flow (shear rate > 0)")
     a2_start = jnp.eye(dim) / dim if a2_start is None else jnp.asarray(check_orientation_tensor(a2_start, "a2_start"))
-    a2, err, k = _steady_state(model, a2_start, L, jnp.asarray(1.0 / rate), float(tol), int(max_iter))
-    a2, err = np.asarray(a2), float(err)
-    eig = np.linalg.eigvalsh(a2) if np.all(np.isfinite(a2)) else np.array([np.nan])
-    if not (err <= tol) or not (eig.min() >= -1e-10 and eig.max() <= 1 + 1e-10):
-        raise ConvergenceError(
-            f"steady_state_a2: stopped after {int(k)} pseudo-transient Newton steps with "
-            f"max |da2/dt| = {err:.3e} (tol {tol:.1e}), eigenvalues {eig}"
+    dt0 = jnp.asarray(1.0 / rate)
+    # tol is relative to the rate scale gamma_dot; the loop compares absolute rates.
+    tol_abs = float(tol) * rate
+    a2, err, k = _steady_state(model, a2_start, L, dt0, tol_abs, int(max_iter), True)
+    a2, err = np.asarray(a2), float(err) / rate
+    stages = f"{int(k)} steps on the {dim * (dim + 1) // 2 - 1} unit-trace components"
+    if not (err <= tol):
+        # The trace equation is not implied: solve for every independent component.
+        a2, err, k = _steady_state(model, a2_start, L, dt0, tol_abs, int(max_iter), False)
+        a2, err = np.asarray(a2), float(err) / rate
+        stages += f", then {int(k)} steps on all {dim * (dim + 1) // 2} components (free trace)"
+    finite = bool(np.all(np.isfinite(a2)))
+    eig = np.linalg.eigvalsh(a2) if finite else np.array([np.nan])
+    trace = float(np.trace(a2)) if finite else math.nan
+    if not (err <= tol) or not (eig.min() >= -_STEADY_MARGIN):
+        why = (
+            f"max |da2/dt| / gamma_dot = {err:.3e} > tol {tol:.1e}"
+            if not (err <= tol)
+            else f"the state is not positive semi-definite (smallest eigenvalue {eig.min():.3e} < -{_STEADY_MARGIN:.0e})"
         )
-    return a2
+        raise ConvergenceError(
+            f"steady_state_a2: {_model_description(model)}, gamma_dot = {rate:g} 1/s: {why} "
+            f"after {stages}; eigenvalues {eig}, tr a2 = {trace:.6g}"
+        )
+    off_trace = ""
+    if abs(trace - 1.0) > _STEADY_MARGIN:
+        off_trace = (
+            f"steady_state_a2: the stationary point of {_model_description(model)} is not an orientation "
+            f"tensor: tr a2 = {trace:.10g} (|tr a2 - 1| > {_STEADY_MARGIN:.0e}); the closure does not "
+            "conserve the trace (a4_iikl != a2_kl)"
+        )
+    return a2, off_trace
 
 
 def fit_ci_to_steady_a11(
@@ -863,19 +978,37 @@ def fit_ci_to_steady_a11(
 
     if not (0.34 < a11_target < 0.99):
         raise InputError(f"a11_target: must lie in (0.34, 0.99) as in Tucker's fitCI, got {a11_target!r}")
+    from pyfold.errors import InadmissibleOrientationWarning
+
     L = np.asarray(simple_shear(1.0, dim=3))
     base = FolgarTucker(ci=0.01, xi=float(xi), closure=closure, dim=3)
+    off_trace: list[str] = []
 
     def a11(ci: float) -> float:
         model = eqx.tree_at(lambda m: m.ci, base, jnp.asarray(ci))
-        return float(steady_state_a2(model, L)[0, 0])
+        a2, message = _steady_state_checked(model, L, None, 1e-13, 500)
+        if message:
+            off_trace.append(message)
+        return float(a2[0, 0])
 
+    def warn_once() -> None:
+        # One warning per fit rather than one per evaluation of the bracket search.
+        if off_trace:
+            warnings.warn(
+                f"fit_ci_to_steady_a11: closure {closure!r}: steady states off the unit trace "
+                f"({len(off_trace)} of the evaluations); last: {off_trace[-1]}",
+                InadmissibleOrientationWarning,
+                stacklevel=3,
+            )
 
     lo, hi = bracket
     f_lo, f_hi = a11(lo) - a11_target, a11(hi) - a11_target
     if f_lo * f_hi > 0:
+        warn_once()
         raise InputError(
             f"a11_target: {a11_target} not reachable with C_I in {bracket} for closure {closure!r} "
             f"(steady a11 spans [{f_hi + a11_target:.4f}, {f_lo + a11_target:.4f}])"
         )
-    return float(scipy.optimize.brentq(lambda c: a11(c) - a11_target, lo, hi, xtol=xtol, rtol=1e-14))
+    ci = float(scipy.optimize.brentq(lambda c: a11(c) - a11_target, lo, hi, xtol=xtol, rtol=1e-14))
+    warn_once()
+    return ci

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import abc
 
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import numpy as np
@@ -55,7 +55,19 @@ class OrientationModel(eqx.Module):
 
     Subclasses declare their parameters with :func:`parameter`, a ``closure`` field
     and a static ``dim`` (3 or 2), and implement :meth:`_rate`.
+
+    Attributes
+    ----------
+    uses_eigenvectors : bool (class attribute)
+        The rate depends on the principal axes of ``a2`` (RSC, ARD-RSC, iARD-RPR,
+        pARD, pARD-RPR, MRD). Such a model is ill-posed where two eigenvalues of
+        ``a2`` cross (see :class:`~pyfold.models.RSC`), and
+        :func:`~pyfold.models.solve_orientation` / :func:`~pyfold.models.solve_batch`
+        look for crossings in their solutions and warn
+        (:class:`pyfold.errors.EigenvalueCrossingWarning`).
     """
+
+    uses_eigenvectors: ClassVar[bool] = False
 
     @abc.abstractmethod
     def _rate(self, t, a2: jax.Array, L: jax.Array) -> jax.Array:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import abc
 
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 
@@ -94,7 +94,14 @@ class ARDRSC(_ARDBase):
     dimensionless; we follow the paper.) Defaults are Phelps & Tucker's fit for
     long-glass-fibre polypropylene: b1 = 1.924e-4, b2 = 5.839e-3, b3 = 0.04,
     b4 = 1.168e-5, b5 = 0, kappa = 1/30.
+
+    Eigenvalue crossings: the RSC slow-down makes the model ill-posed where two
+    eigenvalues of ``a2`` cross (a perturbation of the axes grows like
+    ``|gap|^-(1-kappa)/kappa``, see :class:`~pyfold.models.RSC`); the solvers
+    detect crossings and warn (``uses_eigenvectors = True``).
     """
+
+    uses_eigenvectors: ClassVar[bool] = True
 
     b1: jax.Array = parameter(1.924e-4)
     b2: jax.Array = parameter(5.839e-3)
@@ -176,7 +183,16 @@ class IARDRPR(_ARDBase):
     zero). ``alpha = 0`` is iARD. Parameters ``ci, cm`` as in :class:`IARD`;
     ``alpha`` in [0, 1); ``beta`` (3-D only) the nonlinear retardance of the RPR
     paper, 0 by default.
+
+    Eigenvalue crossings: the RPR term retards the eigenvalue rates only, like the
+    RSC slow-down with ``kappa = 1 - alpha`` (``beta = 0``), so the model is
+    ill-posed where two eigenvalues of ``a2`` cross (perturbations of the axes
+    grow like ``|gap|^-alpha/(1-alpha)``, see :class:`~pyfold.models.RSC`); the
+    solvers detect crossings and warn (``uses_eigenvectors = True``, also for
+    ``alpha = 0``, where the model is iARD and the warning is only a caution).
     """
+
+    uses_eigenvectors: ClassVar[bool] = True
 
     ci: jax.Array = parameter(0.0627)
     cm: jax.Array = parameter(0.9908)
@@ -226,7 +242,17 @@ class PARD(_ARDBase):
     ``C = (2/3) C_I I`` in 3-D, the only isotropic choice with the published trace.
 
     Defaults: Tucker (2022) Table 5.3 fit ``C_I = 0.0218, Omega = 0.9673``.
+
+    Eigenvalue crossings: the coefficients ``(1, Omega, 1 - Omega)`` are attached
+    to the eigenvalues by their *order*, so ``C`` jumps where two eigenvalues of
+    ``a2`` cross (pyfold smooths the jump over a gap of ``GAP_WIDTH = 1e-6``, see
+    :mod:`pyfold.models._terms`); a tilt ``eps/gap`` of the axes changes ``C`` by
+    ``(c_i - c_j) eps/gap``, so near a crossing the rate is as sensitive to the
+    axes as RSC's (:class:`~pyfold.models.RSC`) and round-off decides the path.
+    The solvers detect crossings and warn (``uses_eigenvectors = True``).
     """
+
+    uses_eigenvectors: ClassVar[bool] = True
 
     ci: jax.Array = parameter(0.0218)
     omega: jax.Array = parameter(0.9673)
@@ -249,6 +275,10 @@ class PARDRPR(PARD):
     ``Da/Dt = (pARD rate) - alpha R diag(y) R^T`` with ``y`` the eigenvalue rates
     of the pARD rate (the linear RPR, ``beta = 0``, as in fiberoripy's
     ``pardrpr_ode`` and Tucker's ``Adot2.m`` with ``kappa = 1 - alpha``).
+
+    Eigenvalue crossings: ill-posed there for both reasons of :class:`PARD` and
+    :class:`~pyfold.models.RSC` (``kappa = 1 - alpha``); detected and warned
+    about by the solvers (``uses_eigenvectors = True``, inherited).
     """
 
     alpha: jax.Array = parameter(0.0)

@@ -1,7 +1,7 @@
 """Moldflow rotational diffusion (MRD) model."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 
@@ -28,7 +28,15 @@ class MRD(_ARDBase):
     Repeated eigenvalues are handled as in :class:`~pyfold.models.PARD`.
 
     Defaults ``D1, D2, D3 = 1, 0.8, 0.15`` (fiberoripy's defaults).
+
+    Eigenvalue crossings: ``D1, D2, D3`` are attached to the eigenvalues by their
+    order, so, as for :class:`~pyfold.models.PARD`, the model is ill-posed where
+    two eigenvalues of ``a2`` cross (a tilt of the axes by ``eps/gap`` changes
+    ``C`` by ``C_I (D_i - D_j) eps/gap``); the solvers detect crossings and warn
+    (``uses_eigenvectors = True``).
     """
+
+    uses_eigenvectors: ClassVar[bool] = True
 
     ci: jax.Array = parameter(0.01)
     d1: jax.Array = parameter(1.0)

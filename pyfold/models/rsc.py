@@ -1,7 +1,7 @@
 """Reduced-strain-closure (RSC) model and the principal-frame slow-down it rests on."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 
@@ -53,7 +53,34 @@ class RSC(OrientationModel):
         Strain reduction factor in (0, 1].
     xi, closure, dim
         As in :class:`~pyfold.models.FolgarTucker`.
+
+    Notes
+    -----
+    **Eigenvalue crossings (ill-posedness).** The model is ill-posed where two
+    eigenvalues ``l_i, l_j`` of ``a2`` cross. Take the ``(i, j)`` block in the principal frame, with gap ``g = l_i - l_j``
+    and unreduced eigenvalue rates ``f_i, f_j``. RSC scales the eigenvalue rates,
+    so ``dg/dt = kappa (f_i - f_j)``, but not the rotation of the axes: an
+    off-diagonal perturbation ``eps`` tilts the axes by ``eps/g``, and the
+    subtracted part ``(1 - kappa) M4:(...)`` evaluated in the tilted frame feeds
+    back ``(1 - kappa)(f_j - f_i) eps/g`` into ``deps/dt``. Closing the gap
+    (``f_i < f_j``) therefore gives ``d ln eps / d ln g = -(1 - kappa)/kappa``,
+    i.e. ``eps ~ |g|^-(1-kappa)/kappa``: any perturbation, round-off included,
+    grows without bound as the eigenvalues meet (``kappa = 0.1``: as ``g^-9``),
+    and round-off decides the path taken after the crossing. (pyfold's principal
+    projection averages eigenvalues closer than ``GAP_WIDTH = 1e-6``, which keeps
+    the rate finite but not the sensitivity.) ``kappa = 1`` (FT) is well-posed.
+
+    **What pyfold does.** The model has ``uses_eigenvectors = True``;
+    :func:`~pyfold.models.solve_orientation` and :func:`~pyfold.models.solve_batch`
+    follow the eigenvectors through the saved states, and when two eigenvalues
+    cross they record the (interpolated) time in
+    ``OrientationSolution.crossing_time`` and emit a
+    :class:`pyfold.errors.EigenvalueCrossingWarning` stating it. A degeneracy
+    already present at the initial time (isotropic or transversely isotropic
+    start) that only splits is not a crossing and is not reported.
     """
+
+    uses_eigenvectors: ClassVar[bool] = True
 
     ci: jax.Array = parameter(0.01)
     kappa: jax.Array = parameter(0.1)

@@ -1,4 +1,6 @@
 """Folgar-Tucker model and the diffrax integration (single runs and batches)."""
+import warnings
+
 import numpy as np
 import pytest
 from scipy.optimize import brentq
@@ -7,7 +9,7 @@ import equinox as eqx
 
 from pyfold._jax import jax, jnp
 from pyfold.closures import available, get_closure
-from pyfold.errors import ConvergenceError, InputError
+from pyfold.errors import ConvergenceError, InadmissibleOrientationWarning, InputError, PyfoldWarning
 from pyfold.kinematics import simple_shear, uniaxial_elongation
 from pyfold.models import FolgarTucker, solve_batch, solve_orientation, status_message
 
@@ -104,24 +106,39 @@ class _ClosureSwitch(eqx.Module):
         return jax.lax.switch(self.index, [get_closure(n, 3) for n in self.names], a2)
 
 
+def _solve_expecting_flag(name, *args, **kwargs):
+    """solve_orientation that must warn (InadmissibleOrientationWarning) exactly for
+    the closures listed as breakers, and must not warn otherwise."""
+    if name in PSD_BREAKERS | TRACE_BREAKERS:
+        cause = "positive semi-definite" if name in PSD_BREAKERS else "trace not conserved"
+        with pytest.warns(InadmissibleOrientationWarning, match=cause):
+            return solve_orientation(*args, **kwargs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PyfoldWarning)
+        return solve_orientation(*args, **kwargs)
+
+
 @pytest.fixture(scope="module")
 def ft_long_shear_per_closure():
     names = available(3)
     t = np.linspace(0.0, 200.0, 201)
     sols = [
-        solve_orientation(
+        _solve_expecting_flag(
+            name,
             FolgarTucker(ci=1e-3, xi=1.0, closure=_ClosureSwitch(index=jnp.asarray(k), names=names)),
             ISO3, SHEAR, t, throw=False)
-        for k in range(len(names))
+        for k, name in enumerate(names)
     ]
-    return {n: np.asarray(s.a2) for n, s in zip(names, sols)}, {n: int(s.status) for n, s in zip(names, sols)}
+    return {n: np.asarray(s.a2) for n, s in zip(names, sols)}, {n: int(s.status) for n, s in zip(names, sols)}, \
+        {n: s.admissible for n, s in zip(names, sols)}
 
 
 def test_ft_long_shear_trace_symmetry_and_psd_findings_for_every_closure(ft_long_shear_per_closure):
-    a2s, status = ft_long_shear_per_closure
+    a2s, status, admissible = ft_long_shear_per_closure
     assert "linear" in a2s
     for name, a2 in a2s.items():
         assert status[name] == 0, name
+        assert admissible[name] == (name not in PSD_BREAKERS | TRACE_BREAKERS), name
         np.testing.assert_array_equal(a2, np.swapaxes(a2, 1, 2), err_msg=name)
         trace_err = np.abs(np.trace(a2, axis1=1, axis2=2) - 1.0).max()
         assert (trace_err > 0.1 if name in TRACE_BREAKERS else trace_err < 1e-10), f"{name}: |tr - 1| = {trace_err:.2e}"
