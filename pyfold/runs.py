@@ -21,7 +21,7 @@ import xarray as xr
 from pyfold.errors import InputError, PyfoldError
 from pyfold.run_file import check_format, read_setup
 
-__all__ = ["open_run", "write_xdmf", "run_summary", "AXIS_LABELS"]
+__all__ = ["open_run", "write_xdmf", "run_summary", "complete_counts", "AXIS_LABELS"]
 
 AXIS_LABELS = ("x", "y", "z")
 _INITIAL = {  # /initial dataset -> (variable name in the Dataset, dims after "particle")
@@ -52,6 +52,45 @@ def _attr(value):
     return value.item() if hasattr(value, "item") else value
 
 
+#: Root attributes ``fold_run`` sets once a record / snapshot is completely written
+#: (after its datasets are appended and flushed): the number of whole entries along
+#: the growing dimensions ``time`` and ``snapshot``.
+COMPLETE_COUNT_ATTRS = {"time": "records_complete", "snapshot": "snapshots_complete"}
+
+
+def _along(dset: h5py.Dataset, dim: str) -> bool:
+    """True when the first (growing) axis of a root dataset is the dimension ``dim``."""
+    if dset.name == "/" + dim:
+        return True
+    if dset.ndim == 0:
+        return False
+    try:
+        scales = dset.dims[0]
+        return len(scales) > 0 and scales[0].name == "/" + dim
+    except (KeyError, RuntimeError, ValueError):
+        return False
+
+
+def complete_counts(f: h5py.File) -> dict[str, int]:
+    """Whole entries along ``time`` and ``snapshot`` of an open run file.
+
+    A record (or snapshot) is written as one append per dataset; a killed run can
+    leave the datasets at different lengths or the last entry unwritten (read as
+    fill values). ``fold_run`` sets the root attributes ``records_complete`` /
+    ``snapshots_complete`` after an entry is whole on disk; the count is that
+    attribute, and never more than the shortest dataset along the dimension. Files
+    of a ``fold_run`` without these attributes: the shortest dataset.
+    """
+    counts = {}
+    for dim, attr in COMPLETE_COUNT_ATTRS.items():
+        lengths = [int(d.shape[0]) for d in f.values() if isinstance(d, h5py.Dataset) and _along(d, dim)]
+        n = min(lengths) if lengths else 0
+        if attr in f.attrs:
+            n = min(n, max(int(_attr(f.attrs[attr])), 0))
+        counts[dim] = n
+    return counts
+
+
 def open_run(path: str | Path) -> xr.Dataset:
     """Open a run file as a labelled :class:`xarray.Dataset`.
 
@@ -73,7 +112,9 @@ def open_run(path: str | Path) -> xr.Dataset:
         ``particle_shape, particle_family, particle_radius, particle_length,
         particle_xi (particle)``. Index dimensions are labelled ``"x", "y"[, "z"]``,
         ``family`` by family name. Every variable keeps its ``units`` and
-        ``long_name``. ``attrs`` hold the root attributes (``status``,
+        ``long_name``. Only whole records and snapshots are returned: a run killed
+        while appending one is cut to ``records_complete`` / ``snapshots_complete``
+        (:func:`complete_counts`). ``attrs`` hold the root attributes (``status``,
         ``steps_done``, ``creator``, ...), ``scene`` (normalised scene, a dict as
         JSON text), ``scene_toml`` (verbatim) and the resolved scalars
         (``dim``, ``dt``, ``alpha``, ``regime``, ``hydrodynamics_reason``, ...).
@@ -90,6 +131,7 @@ def open_run(path: str | Path) -> xr.Dataset:
         with h5py.File(path, "r") as f:
             check_format(f, path)
             root_attrs = {k: _attr(v) for k, v in f.attrs.items()}
+            counts = complete_counts(f)
             initial = {name: (f["initial"][name][()], dict(f["initial"][name].attrs)) for name in _INITIAL
                        if "initial" in f and name in f["initial"]}
     except OSError as exc:
@@ -100,6 +142,11 @@ def open_run(path: str | Path) -> xr.Dataset:
     names = list(res["family_names"]) if isinstance(res["family_names"], list) else [res["family_names"]]
 
     ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False)
+    # h5netcdf pads a shorter dataset to its dimension's length with fill values:
+    # keep the whole entries only.
+    cut = {dim: slice(0, n) for dim, n in counts.items() if dim in ds.dims and ds.sizes[dim] != n}
+    if cut:
+        ds = ds.isel(cut)
     labels = list(AXIS_LABELS[:dim])
     relabel = {d: labels for d in ("i", "j", "k", "l", "xyz") if d in ds.dims}
     if "family" in ds.dims:
@@ -168,11 +215,12 @@ def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
         if "initial" not in f or "x" not in f["initial"]:
             raise PyfoldError(f"{path}: no /initial/x to show")
         n, dim = f["initial"]["x"].shape
-        if "x" in f and "p" in f and f["x"].ndim == 3 and f["x"].shape[0] > 0:
-            full = tuple(int(s) for s in f["x"].shape)
-            times = f["snapshot_time"][()] if "snapshot_time" in f else np.arange(full[0], dtype=float)
-            frames = [(float(times[k]), _slab(h5name, "/x", k, full), _slab(h5name, "/p", k, full))
-                      for k in range(full[0])]
+        whole = complete_counts(f)["snapshot"]
+        if "x" in f and "p" in f and f["x"].ndim == 3 and whole > 0:
+            full_x, full_p = (tuple(int(s) for s in f[name].shape) for name in ("x", "p"))
+            times = f["snapshot_time"][()] if "snapshot_time" in f else np.arange(full_x[0], dtype=float)
+            frames = [(float(times[k]), _slab(h5name, "/x", k, full_x), _slab(h5name, "/p", k, full_p))
+                      for k in range(whole)]
         else:
             frames = [(0.0, _hdf_item(h5name, "/initial/x", (n, dim), "Float", 8),
                        _hdf_item(h5name, "/initial/p", (n, dim), "Float", 8))]

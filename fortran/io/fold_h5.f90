@@ -26,11 +26,12 @@ module fold_h5
    public :: h5_start, h5_stop, h5_open_file, h5_close_file, h5_flush
    public :: h5_exists, h5_shape
    public :: h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
-   public :: h5_attr_string, h5_attr_int, h5_attr_real
+   public :: h5_attr_string, h5_attr_int, h5_attr_real, h5_read_attr_int
    public :: h5_make_group, h5_delete
    public :: h5_scale_int, h5_scale_real, h5_var_create, h5_var_append_real, h5_var_append_int
    public :: h5_var_length, h5_var_truncate
    public :: h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
+   public :: h5_put_real_array, h5_put_real_scalar, h5_put_int_scalar
 
    !> Element types of h5_var_create
    integer, parameter, public :: FOLD_H5_REAL = 1, FOLD_H5_INT = 2
@@ -280,7 +281,9 @@ contains
       call h5tclose_f(vtype, err)
    end subroutine h5_attr_string
 
-   !> Write (replace) a 64-bit integer scalar attribute.
+   !> Write a 64-bit integer scalar attribute. An existing attribute's value is
+   !> overwritten in place, not deleted and re-created (the counters `records_complete`,
+   !> `steps_done` are updated this way: a kill never leaves the attribute missing).
    subroutine h5_attr_int(loc, name, value, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
@@ -290,8 +293,19 @@ contains
       integer(i8), target :: v
       integer(hid_t) :: space, attr, itype
       integer :: err
+      logical :: there
       v = value
       itype = h5kind_to_type(c_int64_t, H5_INTEGER_KIND)
+      call h5aexists_f(loc, name, there, err)
+      if (err >= 0 .and. there) then
+         call h5aopen_f(loc, name, attr, err)
+         if (err >= 0) then
+            call h5awrite_f(attr, itype, c_loc(v), err)
+            call check_err(err, "attribute "//name//": write failed", stat, errmsg)
+            call h5aclose_f(attr, err)
+            return
+         end if
+      end if
       call h5screate_f(H5S_SCALAR_F, space, err)
       call replace_attr(loc, name, itype, space, attr, stat, errmsg)
       if (stat == FOLD_OK) then
@@ -322,6 +336,31 @@ contains
       end if
       call h5sclose_f(space, err)
    end subroutine h5_attr_real
+
+   !> Read a scalar integer attribute; `found` = .false. (and stat = FOLD_OK) when absent.
+   subroutine h5_read_attr_int(loc, name, value, found, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(i8), intent(out), target :: value
+      logical, intent(out) :: found
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: attr
+      integer :: err
+      type(c_ptr) :: ptr
+      value = 0
+      stat = FOLD_OK
+      errmsg = ""
+      call h5aexists_f(loc, name, found, err)
+      if (.not. ok(err, "attribute "//name//": cannot query", stat, errmsg)) return
+      if (.not. found) return
+      call h5aopen_f(loc, name, attr, err)
+      if (.not. ok(err, "attribute "//name//": cannot open", stat, errmsg)) return
+      ptr = c_loc(value)
+      call h5aread_f(attr, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), ptr, err)
+      call check_err(err, "attribute "//name//": read failed", stat, errmsg)
+      call h5aclose_f(attr, err)
+   end subroutine h5_read_attr_int
 
    ! ------------------------------------------------------------------ groups, links
 
@@ -427,6 +466,70 @@ contains
       if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, "1", long_name, stat, errmsg)
       call h5dclose_f(dset, err)
    end subroutine h5_write_int_scalar
+
+   !> Like h5_write_real_array, but a dataset that exists with the same shape and a
+   !> floating-point type is overwritten in place: raw data only, no change to the
+   !> file's metadata (group heaps, object headers), which a kill could leave torn.
+   subroutine h5_put_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      real(dp), intent(in), target, contiguous :: buf(:)
+      integer(hsize_t), intent(in) :: shape(:)
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: err
+      if (open_same(loc, name, shape, H5T_FLOAT_F, dset)) then
+         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(buf), err)
+         call check_err(err, name//": write failed", stat, errmsg)
+         call h5dclose_f(dset, err)
+      else
+         call h5_write_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
+      end if
+   end subroutine h5_put_real_array
+
+   !> h5_write_real_scalar, in place when the scalar dataset exists (see h5_put_real_array).
+   subroutine h5_put_real_scalar(loc, name, value, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      real(dp), intent(in) :: value
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      real(dp), target :: v(1)
+      integer(hid_t) :: dset
+      integer :: err
+      v(1) = value
+      if (open_same(loc, name, [integer(hsize_t) ::], H5T_FLOAT_F, dset)) then
+         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(v), err)
+         call check_err(err, name//": write failed", stat, errmsg)
+         call h5dclose_f(dset, err)
+      else
+         call h5_write_real_scalar(loc, name, value, units, long_name, stat, errmsg)
+      end if
+   end subroutine h5_put_real_scalar
+
+   !> h5_write_int_scalar, in place when the scalar dataset exists (see h5_put_real_array).
+   subroutine h5_put_int_scalar(loc, name, value, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(i8), intent(in) :: value
+      character(len=*), intent(in) :: long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(i8), target :: v(1)
+      integer(hid_t) :: dset
+      integer :: err
+      v(1) = value
+      if (open_same(loc, name, [integer(hsize_t) ::], H5T_INTEGER_F, dset)) then
+         call h5dwrite_f(dset, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(v), err)
+         call check_err(err, name//": write failed", stat, errmsg)
+         call h5dclose_f(dset, err)
+      else
+         call h5_write_int_scalar(loc, name, value, long_name, stat, errmsg)
+      end if
+   end subroutine h5_put_int_scalar
 
    ! ------------------------------------------------------------------ netCDF-style variables
 
@@ -659,6 +762,34 @@ contains
       call h5tclose_f(ftype, err)
       checked_dataset = .true.
    end function checked_dataset
+
+   !> Open `name` when it is a dataset of exactly this Fortran-order shape (empty: a
+   !> scalar dataspace) and type class; false (nothing open) otherwise.
+   logical function open_same(loc, name, shape, tclass, dset)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: shape(:)
+      integer, intent(in) :: tclass
+      integer(hid_t), intent(out) :: dset
+      integer :: rank, stat, err, have
+      integer(hsize_t) :: got(7)
+      integer(hid_t) :: ftype
+      character(len=msg_len) :: errmsg
+
+      open_same = .false.
+      dset = -1
+      if (.not. h5_exists(loc, name)) return
+      call h5_shape(loc, name, rank, got, stat, errmsg)
+      if (stat /= FOLD_OK .or. rank /= size(shape)) return
+      if (any(got(1:rank) /= shape)) return
+      call h5dopen_f(loc, name, dset, err)
+      if (err < 0) return
+      call h5dget_type_f(dset, ftype, err)
+      call h5tget_class_f(ftype, have, err)
+      call h5tclose_f(ftype, err)
+      open_same = have == tclass
+      if (.not. open_same) call h5dclose_f(dset, err)
+   end function open_same
 
    !> Create an attribute, deleting a previous one of the same name.
    subroutine replace_attr(loc, name, atype, space, attr, stat, errmsg)

@@ -17,19 +17,29 @@
 !>   the interval), `stress(time,i,j)` [Pa] and `effective_viscosity(time)` [Pa s] (the
 !>   configuration at the record time).
 !> `/checkpoint`: latest full state (`step`, `time`, `x`, `p`, `v`, `omega`; Stokes
-!>   runs: the Adams-Bashforth history `v_hydro_prev`, `omega_hydro_prev`) for
-!>   `fold_run --resume`.
+!>   runs: the Adams-Bashforth history `v_hydro_prev`, `omega_hydro_prev`) and its
+!>   `checksum` (checkpoint_checksum) for `fold_run --resume`; `/checkpoint_shadow`: a
+!>   second copy, written (and flushed) before `/checkpoint`, so that a kill leaves one
+!>   complete copy (output_checkpoint); a resume verifies the checksums and takes the
+!>   newest complete copy.
 !> Root attributes written here: `mpi_ranks`, `fortran_creator`, `status`
-!>   ("running", "ok" or "failed: step ..., t = ...: cause"), `steps_done`.
+!>   ("running", "ok" or "failed: step ..., t = ...: cause"), `steps_done`, and
+!>   `records_complete` / `snapshots_complete`: entries along `time` / `snapshot`
+!>   whole on disk (set after the entry's datasets are appended and flushed; a kill
+!>   can leave the datasets one longer, or their last entry unwritten: readers and
+!>   a resume use only the first `records_complete` / `snapshots_complete`).
 !> Only one process (MPI rank 0) may hold a run_output_t open.
 module fold_output
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
    use fold_version, only: fold_version_string, fold_git_revision
    use fold_particles, only: particle_set_t
+   use, intrinsic :: iso_fortran_env, only: error_unit
    use fold_h5, only: hid_t, hsize_t, FOLD_H5_REAL, FOLD_H5_INT, h5_open_file, h5_close_file, h5_flush, &
+                      h5_put_real_array, h5_put_real_scalar, h5_put_int_scalar, &
                       h5_exists, h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array, &
-                      h5_attr_string, h5_attr_int, h5_make_group, h5_delete, h5_scale_int, h5_scale_real, &
+                      h5_attr_string, h5_attr_int, h5_read_attr_int, h5_make_group, h5_delete, &
+                      h5_scale_int, h5_scale_real, &
                       h5_var_create, h5_var_append_real, h5_var_append_int, h5_var_length, h5_var_truncate, &
                       h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
    implicit none
@@ -88,7 +98,7 @@ module fold_output
    end type run_output_t
 
    public :: output_open, output_resume, output_record, output_snapshot, output_checkpoint, output_status, &
-             output_close, record_init
+             output_close, record_init, checkpoint_checksum
 
    character(len=*), parameter :: SCALAR_VARS(9) = [character(len=24) :: "step", "n_corrections", &
       "contact_iterations", "pairs_left", "capped_steps", "min_gap", "min_gap_over_alpha", &
@@ -96,6 +106,28 @@ module fold_output
    !> Time series of Stokes runs only (besides `stress`)
    character(len=*), parameter :: STOKES_VARS(5) = [character(len=24) :: "stokes_iterations", "stokes_residual", &
       "rigidity_max", "rigidity_mean", "effective_viscosity"]
+   !> Variables over `snapshot`
+   character(len=*), parameter :: SNAPSHOT_VARS(4) = [character(len=24) :: "snapshot", "snapshot_time", "x", "p"]
+   !> Root attributes: number of records / snapshots completely written (set after the
+   !> record's datasets are appended and flushed; readers use no more than these)
+   character(len=*), parameter :: RECORDS_COMPLETE = "records_complete", SNAPSHOTS_COMPLETE = "snapshots_complete"
+   !> The checkpoint, and its shadow copy (written first)
+   character(len=*), parameter :: CKPT = "/checkpoint", CKPT_SHADOW = "/checkpoint_shadow"
+   character(len=*), parameter :: CHECKSUM_LONG_NAME = "Fletcher checksum (modulo 4294967291, s2*2**32 + s1) of "// &
+      "the 32-bit halves (low first) of the 64-bit words step, time, dim, n, has_prev, x, p, v, omega"// &
+      "[, v_hydro_prev, omega_hydro_prev] (Fortran order), s1 = 1, s2 = 0 at the start"
+
+   !> A checkpoint group as read back for a resume.
+   type :: checkpoint_t
+      character(len=32) :: name = ""
+      !> The group exists / is complete and verified / carries a checksum / an AB2 history
+      logical :: present = .false., valid = .false., has_checksum = .false., has_prev = .false.
+      integer(i8) :: step = 0
+      real(dp) :: time = 0.0_dp
+      real(dp), allocatable :: x(:, :), p(:, :), v(:, :), omega(:, :), v_prev(:, :), omega_prev(:, :)
+      !> Why it is not valid
+      character(len=msg_len) :: why = ""
+   end type checkpoint_t
 
 contains
 
@@ -137,11 +169,22 @@ contains
          return
       end if
       call layout(out, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_attr_int(out%file, RECORDS_COMPLETE, 0_i8, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_attr_int(out%file, SNAPSHOTS_COMPLETE, 0_i8, stat, errmsg); if (stat /= FOLD_OK) return
       call run_attributes(out, mpi_ranks, stat, errmsg)
    end subroutine output_open
 
-   !> Reopen a run file at its checkpoint: returns the checkpoint state and step,
-   !> and drops records and snapshots written after that step.
+   !> Reopen a run file at its newest complete checkpoint: returns the checkpoint state
+   !> and step, and drops records and snapshots written after that step (and any record
+   !> or snapshot beyond `records_complete` / `snapshots_complete`, i.e. torn by a kill).
+   !>
+   !> The candidates are the two copies `/checkpoint` and `/checkpoint_shadow` (see
+   !> output_checkpoint); each must have all its datasets, the expected shapes and a
+   !> `checksum` that matches its content. The complete one with the larger step is
+   !> used, and a torn or older copy is rewritten from it before the run goes on; when
+   !> neither is complete the resume is refused (FOLD_INPUT_ERROR, exit 2) with the
+   !> cause of each. A `/checkpoint` without `checksum` and without a shadow (written by
+   !> a fold_run of before the checksum: not verifiable) is used with a warning on stderr.
    subroutine output_resume(out, path, parts, n_families, mpi_ranks, step, time, stat, errmsg, stokes, &
                             v_prev, omega_prev, have_prev)
       type(run_output_t), intent(out) :: out
@@ -161,78 +204,129 @@ contains
       !> (dim, n) [m/s] and (3, n) [1/s]; have_prev = .false. when the checkpoint has none
       real(dp), intent(inout), optional :: v_prev(:, :), omega_prev(:, :)
       logical, intent(out), optional :: have_prev
-      real(dp), allocatable :: buf(:)
-      integer(i8), allocatable :: steps(:)
-      integer(hsize_t) :: d, n, nrec, keep
-      integer :: k
+      type(checkpoint_t), target :: main, shadow
+      type(checkpoint_t), pointer :: pick
+      integer(hsize_t) :: keep
+      logical :: there
 
       step = 0
       time = 0.0_dp
       if (present(have_prev)) have_prev = .false.
-      call h5_open_file(path, .true., out%file, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_open_file(path, .true., out%file, stat, errmsg)
+      if (stat /= FOLD_OK) then
+         ! An existing file HDF5 cannot open (e.g. damaged by a kill) is refused as input.
+         inquire (file=path, exist=there)
+         if (there) then
+            stat = FOLD_INPUT_ERROR
+            errmsg = trim(errmsg)//" (damaged?): cannot resume from it"
+         end if
+         return
+      end if
       out%dim = parts%dim
       out%n = parts%n
       out%n_families = n_families
       if (present(stokes)) out%stokes = stokes
-      if (.not. h5_exists(out%file, "/checkpoint/step")) then
+
+      call read_checkpoint(out, CKPT_SHADOW, shadow)
+      call read_checkpoint(out, CKPT, main, legacy_ok=.not. shadow%present)
+      if (.not. main%present .and. .not. shadow%present) then
          stat = FOLD_INPUT_ERROR
-         errmsg = "/checkpoint/step: missing, nothing to resume from (set checkpoint_every > 0)"
+         errmsg = CKPT//"/step: missing, nothing to resume from (set checkpoint_every > 0)"
          return
       end if
-      d = int(parts%dim, hsize_t)
-      n = int(parts%n, hsize_t)
-      call h5_read_int(out%file, "/checkpoint/step", step, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_read_real(out%file, "/checkpoint/time", time, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_read_real_array(out%file, "/checkpoint/x", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) return
-      parts%x = reshape(buf, [parts%dim, parts%n])
-      call h5_read_real_array(out%file, "/checkpoint/p", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) return
-      parts%p = reshape(buf, [parts%dim, parts%n])
-      call h5_read_real_array(out%file, "/checkpoint/v", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) return
-      parts%v = reshape(buf, [parts%dim, parts%n])
-      call h5_read_real_array(out%file, "/checkpoint/omega", [3_hsize_t, n], buf, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      parts%omega = reshape(buf, [3, parts%n])
+      nullify (pick)
+      if (main%valid .and. shadow%valid) then
+         pick => main
+         if (shadow%step > main%step) pick => shadow
+      else if (main%valid) then
+         pick => main
+      else if (shadow%valid) then
+         pick => shadow
+      end if
+      if (.not. associated(pick)) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "no complete checkpoint to resume from (damaged, e.g. by a kill during a checkpoint write)"
+         if (main%present) errmsg = trim(errmsg)//": "//CKPT//": "//trim(main%why)
+         if (main%present .and. shadow%present) errmsg = trim(errmsg)//";"
+         if (shadow%present .and. .not. main%present) errmsg = trim(errmsg)//":"
+         if (shadow%present) errmsg = trim(errmsg)//" "//CKPT_SHADOW//": "//trim(shadow%why)
+         return
+      end if
+      if (.not. pick%has_checksum) write (error_unit, '(a)') "fold_run: warning: "//CKPT// &
+         " has no checksum (written by an older fold_run), resuming from it unverified"
+
+      ! Both copies must hold this checkpoint before the run goes on (the next
+      ! checkpoint overwrites the shadow first): rewrite the other copy, then this one
+      ! if it lacks a checksum.
+      if (associated(pick, main)) then
+         call repair(shadow, CKPT_SHADOW); if (stat /= FOLD_OK) return
+         call repair(main, CKPT); if (stat /= FOLD_OK) return
+      else
+         call repair(main, CKPT); if (stat /= FOLD_OK) return
+      end if
+
+      step = pick%step
+      time = pick%time
+      parts%x = pick%x
+      parts%p = pick%p
+      parts%v = pick%v
+      parts%omega = pick%omega
       if (present(v_prev) .and. present(omega_prev) .and. present(have_prev)) then
-         if (h5_exists(out%file, "/checkpoint/v_hydro_prev")) then
-            call h5_read_real_array(out%file, "/checkpoint/v_hydro_prev", [d, n], buf, stat, errmsg)
-            if (stat /= FOLD_OK) return
-            v_prev = reshape(buf, [parts%dim, parts%n])
-            call h5_read_real_array(out%file, "/checkpoint/omega_hydro_prev", [3_hsize_t, n], buf, stat, errmsg)
-            if (stat /= FOLD_OK) return
-            omega_prev = reshape(buf, [3, parts%n])
+         if (pick%has_prev) then
+            v_prev = pick%v_prev
+            omega_prev = pick%omega_prev
             have_prev = .true.
          end if
       end if
 
-      ! Records are in step order: keep those up to the checkpoint.
-      call h5_var_length(out%file, "step", nrec, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_read_int_array(out%file, "step", [nrec], steps, stat, errmsg); if (stat /= FOLD_OK) return
-      keep = count(steps(1:nrec) <= step)
-      call h5_var_truncate(out%file, "time", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      do k = 1, size(SCALAR_VARS)
-         call h5_var_truncate(out%file, trim(SCALAR_VARS(k)), keep, stat, errmsg); if (stat /= FOLD_OK) return
-      end do
-      call h5_var_truncate(out%file, "a2", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_var_truncate(out%file, "a4", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_var_truncate(out%file, "a2_family", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_var_truncate(out%file, "a4_family", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      if (out%stokes) then
-         do k = 1, size(STOKES_VARS)
-            call h5_var_truncate(out%file, trim(STOKES_VARS(k)), keep, stat, errmsg); if (stat /= FOLD_OK) return
-         end do
-         call h5_var_truncate(out%file, "stress", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      end if
+      ! Records are in step order: keep the complete ones up to the checkpoint.
+      call keep_upto(record_vars(out), "step", RECORDS_COMPLETE, keep, stat, errmsg); if (stat /= FOLD_OK) return
       out%n_records = keep
-
-      call h5_var_length(out%file, "snapshot", nrec, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_read_int_array(out%file, "snapshot", [nrec], steps, stat, errmsg); if (stat /= FOLD_OK) return
-      keep = count(steps(1:nrec) <= step)
-      call h5_var_truncate(out%file, "snapshot", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_var_truncate(out%file, "snapshot_time", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_var_truncate(out%file, "x", keep, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_var_truncate(out%file, "p", keep, stat, errmsg); if (stat /= FOLD_OK) return
+      call keep_upto(SNAPSHOT_VARS, "snapshot", SNAPSHOTS_COMPLETE, keep, stat, errmsg); if (stat /= FOLD_OK) return
       out%n_snapshots = keep
       call run_attributes(out, mpi_ranks, stat, errmsg)
+
+   contains
+
+      !> Rewrite the copy `name` from the chosen checkpoint unless it holds it already.
+      subroutine repair(copy, name)
+         type(checkpoint_t), intent(in) :: copy
+         character(len=*), intent(in) :: name
+         if (copy%valid .and. copy%has_checksum .and. copy%step == pick%step) return
+         if (pick%has_prev) then
+            call write_copy(out, name, pick%step, pick%time, pick%x, pick%p, pick%v, pick%omega, stat, errmsg, &
+                            pick%v_prev, pick%omega_prev)
+         else
+            call write_copy(out, name, pick%step, pick%time, pick%x, pick%p, pick%v, pick%omega, stat, errmsg)
+         end if
+         if (stat == FOLD_OK) call h5_flush(out%file, stat, errmsg)
+      end subroutine repair
+
+      !> Truncate the variables `vars` (whose step numbers are in `steps_var`) to the
+      !> complete entries with step <= the checkpoint step; the count attribute is
+      !> lowered first, so a kill in between never exposes an entry as complete.
+      subroutine keep_upto(vars, steps_var, count_attr, keep, stat, errmsg)
+         character(len=*), intent(in) :: vars(:), steps_var, count_attr
+         integer(hsize_t), intent(out) :: keep
+         integer, intent(out) :: stat
+         character(len=msg_len), intent(out) :: errmsg
+         integer(hsize_t) :: ncomplete
+         integer(i8), allocatable :: steps(:)
+         integer :: k
+
+         keep = 0
+         call complete_length(out%file, vars, count_attr, ncomplete, stat, errmsg); if (stat /= FOLD_OK) return
+         if (ncomplete > 0) then
+            call read_prefix_int(out%file, steps_var, ncomplete, steps, stat, errmsg); if (stat /= FOLD_OK) return
+            keep = count(steps(1:ncomplete) <= step)
+         end if
+         call h5_attr_int(out%file, count_attr, int(keep, i8), stat, errmsg); if (stat /= FOLD_OK) return
+         call h5_flush(out%file, stat, errmsg); if (stat /= FOLD_OK) return
+         do k = 1, size(vars)
+            call h5_var_truncate(out%file, trim(vars(k)), keep, stat, errmsg); if (stat /= FOLD_OK) return
+         end do
+         call h5_flush(out%file, stat, errmsg)
+      end subroutine keep_upto
    end subroutine output_resume
 
    !> Append one record on the time axis and flush the file.
@@ -278,6 +372,9 @@ contains
          call h5_var_append_real(out%file, "effective_viscosity", r, [rec%effective_viscosity], stat, errmsg)
          if (stat /= FOLD_OK) return
       end if
+      ! The record is complete on disk before the count says so.
+      call h5_flush(out%file, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_attr_int(out%file, RECORDS_COMPLETE, int(r, i8), stat, errmsg); if (stat /= FOLD_OK) return
       out%n_records = r
       call h5_flush(out%file, stat, errmsg)
    end subroutine output_record
@@ -299,11 +396,19 @@ contains
       if (stat /= FOLD_OK) return
       call h5_var_append_real(out%file, "p", r, reshape(parts%p, [size(parts%p)]), stat, errmsg)
       if (stat /= FOLD_OK) return
+      call h5_flush(out%file, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_attr_int(out%file, SNAPSHOTS_COMPLETE, int(r, i8), stat, errmsg); if (stat /= FOLD_OK) return
       out%n_snapshots = r
       call h5_flush(out%file, stat, errmsg)
    end subroutine output_snapshot
 
-   !> Replace /checkpoint with the given state.
+   !> Write the checkpoint, so that a kill at any moment leaves a complete one: the state
+   !> is written into `/checkpoint_shadow`, the file flushed, then into `/checkpoint`,
+   !> and flushed again. A kill during the first write leaves `/checkpoint` complete
+   !> (the previous checkpoint), during the second the shadow (this one); the torn copy
+   !> fails its `checksum` on resume. Each copy's datasets are overwritten in place
+   !> (raw data only): after the first checkpoint no group or link changes, which a
+   !> kill could leave half-written in the file's metadata.
    subroutine output_checkpoint(out, step, time, parts, stat, errmsg, v_prev, omega_prev)
       type(run_output_t), intent(inout) :: out
       integer(i8), intent(in) :: step
@@ -314,43 +419,19 @@ contains
       !> Stokes runs with a history: the Stokes velocities of the previous step
       !> (Adams-Bashforth), (dim, n) [m/s] and (3, n) [1/s]
       real(dp), intent(in), optional :: v_prev(:, :), omega_prev(:, :)
-      integer(hsize_t) :: d, n
+      character(len=*), parameter :: COPIES(2) = [character(len=24) :: CKPT_SHADOW, CKPT]
+      integer :: k
 
-      d = int(parts%dim, hsize_t)
-      n = int(parts%n, hsize_t)
-      call h5_make_group(out%file, "/checkpoint", stat, errmsg); if (stat /= FOLD_OK) return
-      ! The step is written last: a checkpoint whose step is missing is incomplete.
-      call h5_delete(out%file, "/checkpoint/step", stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_write_real_scalar(out%file, "/checkpoint/time", time, "s", "time of the checkpoint", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5_write_real_array(out%file, "/checkpoint/x", reshape(parts%x, [size(parts%x)]), [d, n], "m", &
-                               "particle centres", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5_write_real_array(out%file, "/checkpoint/p", reshape(parts%p, [size(parts%p)]), [d, n], "1", &
-                               "particle unit axes", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5_write_real_array(out%file, "/checkpoint/v", reshape(parts%v, [size(parts%v)]), [d, n], "m s-1", &
-                               "particle velocities of the last step", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5_write_real_array(out%file, "/checkpoint/omega", reshape(parts%omega, [size(parts%omega)]), [3_hsize_t, n], &
-                               "s-1", "particle angular velocities of the last step", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5_delete(out%file, "/checkpoint/v_hydro_prev", stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_delete(out%file, "/checkpoint/omega_hydro_prev", stat, errmsg); if (stat /= FOLD_OK) return
-      if (present(v_prev) .and. present(omega_prev)) then
-         call h5_write_real_array(out%file, "/checkpoint/v_hydro_prev", reshape(v_prev, [size(v_prev)]), [d, n], &
-                                  "m s-1", "Stokes velocities of the step before the checkpoint (Adams-Bashforth history)", &
-                                  stat, errmsg)
+      do k = 1, 2
+         if (present(v_prev) .and. present(omega_prev)) then
+            call write_copy(out, trim(COPIES(k)), step, time, parts%x, parts%p, parts%v, parts%omega, stat, errmsg, &
+                            v_prev, omega_prev)
+         else
+            call write_copy(out, trim(COPIES(k)), step, time, parts%x, parts%p, parts%v, parts%omega, stat, errmsg)
+         end if
          if (stat /= FOLD_OK) return
-         call h5_write_real_array(out%file, "/checkpoint/omega_hydro_prev", reshape(omega_prev, [size(omega_prev)]), &
-                                  [3_hsize_t, n], "s-1", &
-                                  "Stokes angular velocities of the step before the checkpoint (Adams-Bashforth history)", &
-                                  stat, errmsg)
-         if (stat /= FOLD_OK) return
-      end if
-      call h5_write_int_scalar(out%file, "/checkpoint/step", step, "step number of the checkpoint", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5_flush(out%file, stat, errmsg)
+         call h5_flush(out%file, stat, errmsg); if (stat /= FOLD_OK) return
+      end do
    end subroutine output_checkpoint
 
    !> Set the root attributes `status` and `steps_done` and flush.
@@ -374,6 +455,215 @@ contains
    end subroutine output_close
 
    ! ------------------------------------------------------------------ internals
+
+   !> Checksum of a checkpoint (see CHECKSUM_LONG_NAME): Fletcher sums modulo the prime
+   !> 2**32 - 5 over the 32-bit halves of the bit patterns of step, time, the sizes and
+   !> every array, in order; any array of another step (a torn write) changes it.
+   function checkpoint_checksum(step, time, x, p, v, omega, v_prev, omega_prev) result(sum)
+      integer(i8), intent(in) :: step
+      real(dp), intent(in) :: time
+      real(dp), intent(in) :: x(:, :), p(:, :), v(:, :), omega(:, :)
+      real(dp), intent(in), optional :: v_prev(:, :), omega_prev(:, :)
+      integer(i8) :: sum
+      integer(i8) :: s1, s2, has_prev
+
+      s1 = 1
+      s2 = 0
+      has_prev = merge(1_i8, 0_i8, present(v_prev) .and. present(omega_prev))
+      call fletcher([step, transfer(time, 0_i8), int(size(x, 1), i8), int(size(x, 2), i8), has_prev])
+      call fletcher(transfer(x, [0_i8]))
+      call fletcher(transfer(p, [0_i8]))
+      call fletcher(transfer(v, [0_i8]))
+      call fletcher(transfer(omega, [0_i8]))
+      if (has_prev == 1) then
+         call fletcher(transfer(v_prev, [0_i8]))
+         call fletcher(transfer(omega_prev, [0_i8]))
+      end if
+      sum = ior(ishft(s2, 32), s1)
+   contains
+      subroutine fletcher(words)
+         integer(i8), intent(in) :: words(:)
+         integer(i8), parameter :: PRIME = 4294967291_i8, LOW = 4294967295_i8
+         integer :: k
+         do k = 1, size(words)
+            s1 = mod(s1 + iand(words(k), LOW), PRIME)
+            s2 = mod(s2 + s1, PRIME)
+            s1 = mod(s1 + iand(ishft(words(k), -32), LOW), PRIME)
+            s2 = mod(s2 + s1, PRIME)
+         end do
+      end subroutine fletcher
+   end function checkpoint_checksum
+
+   !> Write one copy of a checkpoint into the group `g` (arrays, time, step, checksum
+   !> last), in place where its datasets exist.
+   subroutine write_copy(out, g, step, time, x, p, v, omega, stat, errmsg, v_prev, omega_prev)
+      type(run_output_t), intent(in) :: out
+      character(len=*), intent(in) :: g
+      integer(i8), intent(in) :: step
+      real(dp), intent(in) :: time
+      real(dp), intent(in) :: x(:, :), p(:, :), v(:, :), omega(:, :)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      real(dp), intent(in), optional :: v_prev(:, :), omega_prev(:, :)
+      integer(hsize_t) :: d, n
+      integer(i8) :: sum
+
+      d = int(size(x, 1), hsize_t)
+      n = int(size(x, 2), hsize_t)
+      call h5_make_group(out%file, g, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_put_real_array(out%file, g//"/x", reshape(x, [size(x)]), [d, n], "m", "particle centres", stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5_put_real_array(out%file, g//"/p", reshape(p, [size(p)]), [d, n], "1", "particle unit axes", stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5_put_real_array(out%file, g//"/v", reshape(v, [size(v)]), [d, n], "m s-1", &
+                             "particle velocities of the last step", stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5_put_real_array(out%file, g//"/omega", reshape(omega, [size(omega)]), [3_hsize_t, n], &
+                             "s-1", "particle angular velocities of the last step", stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (present(v_prev) .and. present(omega_prev)) then
+         call h5_put_real_array(out%file, g//"/v_hydro_prev", reshape(v_prev, [size(v_prev)]), [d, n], &
+                                "m s-1", "Stokes velocities of the step before the checkpoint (Adams-Bashforth history)", &
+                                stat, errmsg)
+         if (stat /= FOLD_OK) return
+         call h5_put_real_array(out%file, g//"/omega_hydro_prev", reshape(omega_prev, [size(omega_prev)]), &
+                                [3_hsize_t, n], "s-1", &
+                                "Stokes angular velocities of the step before the checkpoint (Adams-Bashforth history)", &
+                                stat, errmsg)
+         if (stat /= FOLD_OK) return
+         sum = checkpoint_checksum(step, time, x, p, v, omega, v_prev, omega_prev)
+      else
+         ! (only a checkpoint before the first Stokes step has no history)
+         call h5_delete(out%file, g//"/v_hydro_prev", stat, errmsg); if (stat /= FOLD_OK) return
+         call h5_delete(out%file, g//"/omega_hydro_prev", stat, errmsg); if (stat /= FOLD_OK) return
+         sum = checkpoint_checksum(step, time, x, p, v, omega)
+      end if
+      call h5_put_real_scalar(out%file, g//"/time", time, "s", "time of the checkpoint", stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5_put_int_scalar(out%file, g//"/step", step, "step number of the checkpoint", stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5_put_int_scalar(out%file, g//"/checksum", sum, CHECKSUM_LONG_NAME, stat, errmsg)
+   end subroutine write_copy
+
+   !> Read and verify the checkpoint group `name` (for output_resume).
+   subroutine read_checkpoint(out, name, ck, legacy_ok)
+      type(run_output_t), intent(in) :: out
+      character(len=*), intent(in) :: name
+      type(checkpoint_t), intent(out) :: ck
+      !> A copy without checksum (fold_run of before the checksum) counts as complete
+      logical, intent(in), optional :: legacy_ok
+      real(dp), allocatable :: buf(:)
+      integer(hsize_t) :: d, n
+      integer(i8) :: stored, sum
+      integer :: stat
+      character(len=msg_len) :: errmsg
+      logical :: hv, ho
+
+      ck%name = name
+      ck%present = h5_exists(out%file, name)
+      if (.not. ck%present) return
+      d = int(out%dim, hsize_t)
+      n = int(out%n, hsize_t)
+      if (.not. h5_exists(out%file, name//"/step")) then
+         ck%why = "step missing (incomplete write)"
+         return
+      end if
+      call h5_read_int(out%file, name//"/step", ck%step, stat, errmsg); if (stat /= FOLD_OK) goto 9
+      call h5_read_real(out%file, name//"/time", ck%time, stat, errmsg); if (stat /= FOLD_OK) goto 9
+      call h5_read_real_array(out%file, name//"/x", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) goto 9
+      ck%x = reshape(buf, [out%dim, out%n])
+      call h5_read_real_array(out%file, name//"/p", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) goto 9
+      ck%p = reshape(buf, [out%dim, out%n])
+      call h5_read_real_array(out%file, name//"/v", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) goto 9
+      ck%v = reshape(buf, [out%dim, out%n])
+      call h5_read_real_array(out%file, name//"/omega", [3_hsize_t, n], buf, stat, errmsg); if (stat /= FOLD_OK) goto 9
+      ck%omega = reshape(buf, [3, out%n])
+      hv = h5_exists(out%file, name//"/v_hydro_prev")
+      ho = h5_exists(out%file, name//"/omega_hydro_prev")
+      if (hv .neqv. ho) then
+         ck%why = "only one of v_hydro_prev, omega_hydro_prev present (incomplete write)"
+         return
+      end if
+      ck%has_prev = hv
+      if (ck%has_prev) then
+         call h5_read_real_array(out%file, name//"/v_hydro_prev", [d, n], buf, stat, errmsg); if (stat /= FOLD_OK) goto 9
+         ck%v_prev = reshape(buf, [out%dim, out%n])
+         call h5_read_real_array(out%file, name//"/omega_hydro_prev", [3_hsize_t, n], buf, stat, errmsg)
+         if (stat /= FOLD_OK) goto 9
+         ck%omega_prev = reshape(buf, [3, out%n])
+      end if
+      ck%has_checksum = h5_exists(out%file, name//"/checksum")
+      if (.not. ck%has_checksum) then
+         ! Only the fold_run of before the checksum wrote /checkpoint without one
+         ! (and no shadow).
+         ck%valid = .false.
+         if (present(legacy_ok)) ck%valid = legacy_ok
+         if (.not. ck%valid) ck%why = "checksum missing (incomplete write)"
+         return
+      end if
+      call h5_read_int(out%file, name//"/checksum", stored, stat, errmsg); if (stat /= FOLD_OK) goto 9
+      if (ck%has_prev) then
+         sum = checkpoint_checksum(ck%step, ck%time, ck%x, ck%p, ck%v, ck%omega, ck%v_prev, ck%omega_prev)
+      else
+         sum = checkpoint_checksum(ck%step, ck%time, ck%x, ck%p, ck%v, ck%omega)
+      end if
+      if (sum /= stored) then
+         write (ck%why, '(a,i0,a)') "checksum mismatch at step ", ck%step, &
+            " (its arrays are not all of that step: torn write)"
+         return
+      end if
+      ck%valid = .true.
+      return
+9     ck%why = errmsg
+   end subroutine read_checkpoint
+
+   !> Names of the variables over `time` of this run.
+   function record_vars(out) result(names)
+      type(run_output_t), intent(in) :: out
+      character(len=24), allocatable :: names(:)
+      names = [character(len=24) :: "time", SCALAR_VARS, "a2", "a4", "a2_family", "a4_family"]
+      if (out%stokes) names = [character(len=24) :: names, STOKES_VARS, "stress"]
+   end function record_vars
+
+   !> Number of complete entries of the variables `vars`: the count attribute when
+   !> present (never more than the shortest variable), else the shortest variable
+   !> (files of a fold_run without the count).
+   subroutine complete_length(file, vars, count_attr, length, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      character(len=*), intent(in) :: vars(:), count_attr
+      integer(hsize_t), intent(out) :: length
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hsize_t) :: nk
+      integer(i8) :: counted
+      logical :: found
+      integer :: k
+
+      length = huge(length)
+      do k = 1, size(vars)
+         call h5_var_length(file, trim(vars(k)), nk, stat, errmsg); if (stat /= FOLD_OK) return
+         length = min(length, nk)
+      end do
+      if (size(vars) == 0) length = 0
+      call h5_read_attr_int(file, count_attr, counted, found, stat, errmsg); if (stat /= FOLD_OK) return
+      if (found) length = min(length, int(max(counted, 0_i8), hsize_t))
+   end subroutine complete_length
+
+   !> The first `n` values of a 1-D integer variable.
+   subroutine read_prefix_int(file, name, n, values, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: n
+      integer(i8), allocatable, intent(out) :: values(:)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hsize_t) :: length
+      integer(i8), allocatable :: all(:)
+      call h5_var_length(file, name, length, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_read_int_array(file, name, [length], all, stat, errmsg); if (stat /= FOLD_OK) return
+      values = all(1:n)
+   end subroutine read_prefix_int
+
 
    subroutine run_attributes(out, mpi_ranks, stat, errmsg)
       type(run_output_t), intent(inout) :: out
