@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
+from xml.sax.saxutils import escape, quoteattr
 
 import h5py
 import numpy as np
@@ -180,27 +180,37 @@ def open_run(path: str | Path) -> xr.Dataset:
     return ds
 
 
-def _hdf_item(h5name: str, dataset: str, dims: tuple[int, ...], number: str, precision: int) -> str:
+def _hdf_item(h5name: str, dataset: str, dims: tuple[int, ...], number: str, precision: int,
+              selection: str = "") -> str:
+    """An XDMF DataItem reading ``dataset`` (optionally a ``selection``) of the HDF5 file.
+
+    The file name is XML-escaped (a ``&`` or ``<`` in it would make the XDMF invalid)."""
     return (f'<DataItem Dimensions="{" ".join(map(str, dims))}" NumberType="{number}" Precision="{precision}" '
-            f'Format="HDF">{h5name}:{dataset}</DataItem>')
+            f'Format="HDF">{escape(h5name)}:{dataset}{selection}</DataItem>')
 
 
 def _slab(h5name: str, dataset: str, index: int, full: tuple[int, ...]) -> str:
-    """One frame ``dataset[index]`` of a ``(frames, n, dim)`` dataset as an XDMF hyperslab."""
-    _, n, d = full
-    return (f'<DataItem ItemType="HyperSlab" Dimensions="{n} {d}" Type="HyperSlab">'
-            f'<DataItem Dimensions="3 3" Format="XML">{index} 0 0 1 1 1 1 {n} {d}</DataItem>'
-            f'{_hdf_item(h5name, dataset, full, "Float", 8)}</DataItem>')
+    """One frame ``dataset[index]`` of a ``(frames, n, dim)`` dataset.
+
+    Written in the hyperslab form of XDMF 3's HDF items, ``file:/dataset|start:stride:
+    count:dims``, which ParaView's default reader (Xdmf3ReaderS) reads; the XDMF 2
+    form (a ``HyperSlab`` DataItem around the HDF item) is skipped by that reader
+    ("unrecognized array type"), leaving no particles on screen."""
+    frames, n, d = full
+    selection = f"|{index} 0 0:1 1 1:1 {n} {d}:{frames} {n} {d}"
+    return _hdf_item(h5name, dataset, (n, d), "Float", 8, selection)
 
 
 def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
     """Write an XDMF 3 file for ParaView beside a run file: one frame per snapshot.
 
     Particles are points (their centres) carrying the axis ``p`` as a vector
-    attribute and ``length``, ``radius``, ``shape``, ``family`` as scalars (a
-    ParaView Glyph filter with a cylinder, scaled by ``length`` and oriented by
-    ``p``, draws the fibres). Without snapshots the one frame is ``/initial``.
-    The HDF5 file is referred to by its name, so keep both files together.
+    attribute and ``length``, ``radius``, ``shape``, ``family`` as scalars;
+    ``scripts/paraview_fibres.py`` draws them as cylinders along their axes (the
+    ParaView Glyph recipe, checked in tests/cli/test_xdmf_paraview.py). Without
+    snapshots the one frame is ``/initial``. The HDF5 file is referred to by its
+    name, so keep both files together. Written for ParaView's default XDMF reader
+    (XDMF 3, Xdmf3ReaderS).
 
     Returns
     -------

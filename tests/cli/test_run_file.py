@@ -122,9 +122,17 @@ def test_xdmf_frames_point_at_existing_datasets(run_file, disks):
     with h5py.File(run_file) as f:
         for item in root.iter("DataItem"):
             if item.get("Format") == "HDF":
-                name, dataset = item.text.split(":")
+                name, _, rest = item.text.partition(":")
+                dataset, _, selection = rest.partition("|")
                 assert name == run_file.name
-                assert f[dataset].shape == tuple(int(v) for v in item.get("Dimensions").split())
+                dims = tuple(int(v) for v in item.get("Dimensions").split())
+                if not selection:
+                    assert f[dataset].shape == dims
+                    continue
+                # XDMF 3 hyperslab: start:stride:count:dims of the whole dataset
+                start, stride, count, whole = (tuple(int(v) for v in part.split()) for part in selection.split(":"))
+                assert whole == f[dataset].shape and stride == (1, 1, 1)
+                assert count == (1,) + dims and start[1:] == (0, 0) and start[0] < whole[0]
 
 
 def test_xdmf_without_snapshots_shows_the_initial_state(run_file):
