@@ -12,6 +12,8 @@ what the fibre–fibre interactions do from what a closure approximation does.
 """
 from __future__ import annotations
 
+import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +47,167 @@ class ChainResult:
     closure_errors: xr.Dataset
     figures: list[Path] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+
+
+def check_closures(closures: str | Sequence[str], dim: int | None = None) -> tuple[str, ...]:
+    """The closure names of ``--closures``, checked before any work (simulation or fit).
+
+    ``closures`` is the comma-separated text of the option or a sequence of names.
+    Every name must be ``"exact"`` (the run's own a4) or a registered closure
+    (:data:`pyfold.closures.CLOSURES`, case-insensitive); with ``dim``, one defined in
+    that dimension. Returns the names, stripped, lower-case, each once, in order.
+    The one rule for closure names of ``pyfold analyse`` and ``pyfold main``.
+
+    Raises
+    ------
+    InputError
+        ``--closures: ...`` naming the bad names and the allowed ones.
+    """
+    from pyfold.closures import CLOSURES, NOT_PROVIDED, available
+
+    items = closures.split(",") if isinstance(closures, str) else list(closures)
+    names = tuple(dict.fromkeys(str(c).strip().lower() for c in items if str(c).strip()))
+    if not names:
+        raise InputError("--closures: give at least one closure name")
+    for name in names:
+        if name in NOT_PROVIDED:
+            raise InputError(f"--closures: {name!r}: {NOT_PROVIDED[name]}")
+    known = ("exact", *sorted(CLOSURES)) if dim is None else ("exact", *available(dim))
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        where = "" if dim is None else f" in {dim}-D"
+        kind = "unknown closure" if all(n not in CLOSURES for n in unknown) else "closure not defined"
+        raise InputError(f"--closures: {kind}{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}"
+                         f"{where}; allowed{where}: {', '.join(known)}")
+    return names
+
+
+#: Variables of /setup/resolved and /initial the fit needs (beyond the records).
+_SETUP_NEEDED = ("dim", "velocity_gradient", "family_names")
+
+
+def orientation_tolerance(dtype, n_particles: int) -> float:
+    """Admissible deviation of a recorded ``a2 = <p p>`` from an orientation tensor.
+
+    The mean of ``n`` unit dyads in floating point of precision ``eps`` has its trace
+    within ``n eps`` of 1 (summation round-off, worst case) and eigenvalues no lower
+    than about that below 0; ten times that, and never below ``1e-10``.
+    """
+    eps = float(np.finfo(np.dtype(dtype) if np.issubdtype(np.dtype(dtype), np.floating) else np.float64).eps)
+    return max(1e-10, 10.0 * max(int(n_particles), 1) * eps)
+
+
+def check_orientation_records(a2: np.ndarray, times: np.ndarray, n_particles: int, source: str = "a2") -> None:
+    """Refuse records that are not orientation tensors: finite, symmetric, trace 1 and
+    positive semi-definite within :func:`orientation_tolerance`; names the first bad
+    record (index and time) and what is wrong with it."""
+    a2 = np.asarray(a2)
+    tol = orientation_tolerance(a2.dtype, n_particles)
+    values = a2.astype(np.float64)
+    finite = np.all(np.isfinite(values), axis=(1, 2))
+    safe = np.where(finite[:, None, None], values, np.eye(values.shape[-1]) / values.shape[-1])
+    asym = np.max(np.abs(safe - np.swapaxes(safe, 1, 2)), axis=(1, 2))
+    trace = np.trace(safe, axis1=1, axis2=2)
+    low = np.linalg.eigvalsh(0.5 * (safe + np.swapaxes(safe, 1, 2))).min(axis=1)
+    bad = ~finite | (asym > tol) | (np.abs(trace - 1.0) > tol) | (low < -tol)
+    if not np.any(bad):
+        return
+    k = int(np.flatnonzero(bad)[0])
+    if not finite[k]:
+        why = "contains NaN or infinity"
+    elif asym[k] > tol:
+        why = f"is not symmetric (|a_ij - a_ji| up to {asym[k]:.3g})"
+    elif abs(trace[k] - 1.0) > tol:
+        why = f"has trace {trace[k]:.12g}, not 1"
+    else:
+        why = f"is not positive semi-definite (smallest eigenvalue {low[k]:.3g})"
+    raise InputError(f"{source}: record {k} (t = {float(times[k]):.6g}) {why}: not an orientation tensor <p p> "
+                     f"(tolerance {tol:.2g} for {n_particles} particles in {a2.dtype} records); the run file is "
+                     "damaged or was not written by fold_run, refusing to fit it")
+
+
+def open_checked_run(run_path: Path, allow_failed: bool = False) -> xr.Dataset:
+    """Open a run for the C_I fit, refusing what cannot be fitted meaningfully.
+
+    Refused (:class:`InputError`): not a run file, no ``/setup`` (or an incomplete
+    one), no ``/initial``, fewer than two whole records of ``a2``/``a4``, a root
+    ``status`` other than ``"ok"`` (unless ``allow_failed``: then a loud warning on
+    stderr and only the records up to the last good state, ``steps_done``), and any
+    record of ``a2`` that is not an orientation tensor (:func:`check_orientation_records`)
+    or an ``a4`` that is not finite.
+    """
+    import h5py
+
+    from pyfold.run_file import check_format
+    from pyfold.runs import open_run
+
+    run_path = Path(run_path)
+    try:
+        with h5py.File(run_path, "r") as f:
+            check_format(f, run_path)
+            setup = f.get("setup")
+            if not isinstance(setup, h5py.Group) or not isinstance(setup.get("resolved"), h5py.Group):
+                raise InputError(f"{run_path}: no /setup/resolved group: the scene and its resolved values are "
+                                 "missing (not written by `pyfold run`, or damaged); nothing to fit against")
+            missing = [k for k in ("scene_toml", "scene_json") if k not in setup]
+            missing += [f"resolved/{k}" for k in _SETUP_NEEDED if k not in setup["resolved"]]
+            if missing:
+                raise InputError(f"{run_path}: /setup is incomplete, missing {', '.join('/setup/' + m for m in missing)}")
+            if not isinstance(f.get("initial"), h5py.Group) or "xi" not in f["initial"]:
+                raise InputError(f"{run_path}: no /initial/xi (the particles' Jeffery shape factor the fit needs)")
+    except OSError as exc:
+        raise InputError(f"{run_path}: not a readable HDF5 file: {exc}") from exc
+
+    ds = open_run(run_path)
+    status = ds.attrs.get("status")
+    if "a2" not in ds or "a4" not in ds or "time" not in ds.dims:
+        raise InputError(f"{run_path}: no records (no a2/a4 over time): fold_run wrote no results (status "
+                         f"{status!r}); nothing to fit")
+    if status != "ok":
+        if not allow_failed:
+            raise InputError(f"{run_path}: the run did not finish: status {status!r}. Its records end at the "
+                             "failure and may be wrong before it; refusing to fit them (give --allow-failed to fit "
+                             "the records up to the last good state anyway)")
+        steps = ds.attrs.get("steps_done")
+        dt = ds.attrs.get("dt")
+        if steps is not None and dt is not None:
+            t_good = float(steps) * float(dt)
+            keep = np.asarray(ds["time"].values) <= t_good * (1.0 + 1e-9) + 1e-300
+            ds = ds.isel(time=np.flatnonzero(keep))
+        else:
+            t_good = float("nan")
+        print(f"pyfold analyse: WARNING: {run_path} did not finish (status {status!r}); --allow-failed: fitting only "
+              f"the {ds.sizes['time']} records up to the last good state (step {steps}, t = {t_good:.6g}). "
+              "The fitted C_I describes a run that blew up: treat it with suspicion.", file=sys.stderr)
+    n_records = ds.sizes.get("time", 0)
+    if n_records < 2:
+        raise InputError(f"{run_path}: {'no records' if n_records == 0 else 'only one record'} of a2 over time "
+                         f"(status {status!r}): fitting C_I needs at least 2")
+    n_particles = ds.sizes.get("particle", 0) or int(np.sum(ds.attrs.get("family_count", 0)))
+    check_orientation_records(ds["a2"].values, ds["time"].values, n_particles, source=f"{run_path}: a2")
+    if not np.all(np.isfinite(ds["a4"].values)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(ds["a4"].values.reshape(n_records, -1)), axis=1))[0])
+        raise InputError(f"{run_path}: a4: record {bad} (t = {float(ds['time'].values[bad]):.6g}) contains NaN or "
+                         "infinity; refusing to fit")
+    return ds
+
+
+def check_output_folder(out: Path) -> Path:
+    """Make sure the results folder ``--out`` can be written, before any fitting:
+    create it (with its parents) and write and remove a probe file in it."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out: must be a folder, got the file {out}")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder {out}: {exc.strerror or exc}") from exc
+    try:
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".pyfold-write-test-"):
+            pass
+    except OSError as exc:
+        raise InputError(f"--out: cannot write in the folder {out}: {exc.strerror or exc}") from exc
+    return out
 
 
 def run_scene(scene: Path, out: Path, ranks: int = 1) -> Path:
@@ -123,12 +286,17 @@ def fit_ci_per_closure(ds: xr.Dataset, L: np.ndarray, closures: Sequence[str], x
 
 
 def fit_and_compare(run_path: Path, outdir: Path, closures: Sequence[str] = DEFAULT_CLOSURES,
-                    quiet: bool = False) -> ChainResult:
-    """The macro half of the chain on a finished run: fits, closure test, figures."""
-    from pyfold.closure_check import closure_errors
-    from pyfold.runs import open_run
+                    quiet: bool = False, run: xr.Dataset | None = None, allow_failed: bool = False) -> ChainResult:
+    """The macro half of the chain on a finished run: fits, closure test, figures.
 
-    ds = open_run(run_path)
+    ``run``: the run already opened by :func:`open_checked_run` (else it is opened
+    and checked here, with ``allow_failed``). Closure names are checked first.
+    """
+    from pyfold.closure_check import closure_errors
+
+    closures = check_closures(closures)
+    ds = run if run is not None else open_checked_run(run_path, allow_failed=allow_failed)
+    closures = check_closures(closures, dim=ds.sizes["i"])
     L = velocity_gradient_of(run_path)
     xi = shape_factor_of(ds)
     seconds = {}

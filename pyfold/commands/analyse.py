@@ -1,4 +1,11 @@
-"""``pyfold analyse RUN.h5``: fit C_I per closure and judge closures on a finished run."""
+"""``pyfold analyse RUN.h5``: fit C_I per closure and judge closures on a finished run.
+
+Everything is checked before the fit starts (exit status 2, the message names the
+cause): the closure names; the run file (a pyfold run with ``/setup`` and
+``/initial``, at least two records, root ``status = "ok"`` unless
+``--allow-failed``, every ``a2`` record an orientation tensor, a finite ``a4``);
+and that ``--out`` can be created and written.
+"""
 from __future__ import annotations
 
 import argparse
@@ -13,6 +20,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="folder for figures and results.nc (default: RUN_analysis/)")
     parser.add_argument("--closures", default=",".join(DEFAULT_CLOSURES),
                         help="comma-separated closures (default: %(default)s)")
+    parser.add_argument("--allow-failed", action="store_true",
+                        help="fit a run whose status is not \"ok\" (a blown-up or killed run): only the records "
+                             "up to its last good state are used, with a warning")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -21,13 +31,12 @@ def run(args: argparse.Namespace) -> int:
     run_path = Path(args.run_file)
     if not run_path.is_file():
         raise InputError(f"RUN.h5: no such file: {run_path}")
-    closures = tuple(c.strip() for c in args.closures.split(",") if c.strip())
-    if not closures:
-        raise InputError("--closures: give at least one closure name")
+    closures = pipeline.check_closures(args.closures)
+    ds = pipeline.open_checked_run(run_path, allow_failed=args.allow_failed)
+    closures = pipeline.check_closures(closures, dim=ds.sizes["i"])
     out = Path(args.out) if args.out else run_path.with_name(run_path.stem + "_analysis")
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out: must be a folder, got the file {out}")
-    chain = pipeline.fit_and_compare(run_path, out, closures=closures)
+    pipeline.check_output_folder(out)
+    chain = pipeline.fit_and_compare(run_path, out, closures=closures, run=ds)
     pipeline.results_dataset(chain).to_netcdf(out / "results.nc", engine="h5netcdf")
     print(f"pyfold analyse: figures and results.nc in {out}")
     return 0

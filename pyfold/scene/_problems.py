@@ -80,6 +80,13 @@ def did_you_mean(word: str, choices: Iterable[str]) -> str:
     return f"allowed keys: {', '.join(choices)}"
 
 
+def _number(value: Any) -> str:
+    """A bound as written in a scene: ``1e-30``, ``0``, ``10000000`` (not 0.000...01)."""
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
 def _describe(value: Any) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
@@ -102,7 +109,9 @@ def add_validation_errors(problems: Problems, error: ValidationError, root: type
         elif kind == "literal_error":
             problems.add(path, f"must be one of {ctx.get('expected')}, got {got}")
         elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-            problems.add(path, f"{item['msg'].replace('Input should be', 'must be')}, got {got}")
+            bound = next(iter(ctx.values()), None)
+            words = kind.replace("_equal", " or equal to").replace("_than", " than")  # greater than or equal to
+            problems.add(path, f"must be {words} {_number(bound)}, got {got}")
         elif kind in ("too_short", "too_long"):
             problems.add(path, f"{item['msg'].replace('List should have', 'must have')}; got {got}")
         elif kind in ("float_type", "float_parsing", "int_type", "int_from_float", "int_parsing", "bool_type",

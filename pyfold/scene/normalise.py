@@ -14,7 +14,8 @@ import numpy as np
 from pyfold.errors import InputError
 from pyfold.scene import shapes
 from pyfold.scene._problems import Problems
-from pyfold.scene.schema import EQUIVALENT_ASPECT_RATIO_DEFAULT, Scene
+from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY,
+                                 Scene)
 
 __all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "HYDRODYNAMICS_CODES", "COLLISION_CODES",
            "SPHERE_INTERACTION_FRACTION"]
@@ -39,6 +40,24 @@ MULTIPLE_TOL = 1e-9
 DEFAULT_ALPHA_OVER_RADIUS = 0.1
 #: Default number of statistics records and of snapshots over a run.
 DEFAULT_RECORDS, DEFAULT_SNAPSHOTS = 100, 10
+#: Largest number of time steps (fold_run counts steps in 32-bit integers).
+MAX_STEPS = 2**31 - 1
+#: Double precision round-off unit.
+_EPS = float(np.finfo(np.float64).eps)
+#: Smallest strain per step max|G_ij| dt: a step must move a particle at the far side
+#: of the cell by at least a thousand round-off units of its position (below ~eps the
+#: update x + G.x dt == x and nothing moves) [-].
+MIN_STRAIN_PER_STEP = 1e3 * _EPS
+#: Largest total strain max|G_ij| t_end: beyond 1/eps the Lees-Edwards offset (or the
+#: deformed lattice) gamma L has lost every digit of a particle position [-].
+MAX_STRAIN = 1.0 / _EPS
+#: Stokes resolution below which `pyfold validate` and `pyfold run` warn: 4-8 voxels per
+#: diameter for quantitative results (docs/physics.md#resolution; at 1-2 voxels per
+#: diameter the effective viscosity is biased by 5-9 %).
+STOKES_QUANTITATIVE_CELLS_PER_DIAMETER = 4
+#: Most time steps the admissibility check of a deforming lattice visits one by one
+#: (the native loop takes ~0.3 s per million); beyond, every k-th step with a margin.
+LATTICE_CHECK_SAMPLES = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -203,6 +222,10 @@ def _gradient(scene: Scene, problems: Problems) -> np.ndarray | None:
         if flow.gradient is None:
             problems.add("flow.gradient", f"required with flow.type = 'general': a {dim} x {dim} traceless array")
             return None
+        if all(v == 0.0 for row in flow.gradient for v in row):
+            problems.add("flow.gradient", "must have a non-zero entry: a scene is a suspension under an imposed "
+                         "flow (orbits, contacts, the effective viscosity sigma:E / (2 E:E) all need one); got all zeros")
+            return None
         rows = flow.gradient
         if len(rows) != dim or any(len(r) != dim for r in rows):
             shape = f"{len(rows)} x {'/'.join(sorted({str(len(r)) for r in rows}))}"
@@ -217,6 +240,11 @@ def _gradient(scene: Scene, problems: Problems) -> np.ndarray | None:
         problems.add("flow.gradient", f"only with flow.type = 'general' (got flow.type = {flow.type!r}); remove it")
     if flow.rate is None:
         problems.add("flow.rate", f"required with flow.type = {flow.type!r}: the rate [1/s]")
+        return None
+    if flow.rate == 0.0:
+        problems.add("flow.rate", f"must be non-zero (0 < |rate| <= 1e+30): flow.type = {flow.type!r} at rate 0 is no "
+                     "flow at all, and the scene's meaning needs one (Jeffery orbits, contacts, the effective "
+                     "viscosity sigma:E / (2 E:E) of a Stokes run); got 0")
         return None
     if flow.type == "simple_shear":
         return np.asarray(kinematics.simple_shear(flow.rate, dim=dim))
@@ -241,7 +269,32 @@ def _check_lattice_duration(scene: Scene, G: np.ndarray, lengths: np.ndarray, go
     rc = geo.contact_search_range([f.shape_code for f in good], [f.radius for f in good],
                                   [f.length for f in good], alpha=alpha)
     cell = geo.Cell(tuple(lengths[:dim]), velocity_gradient=G)
-    t_ok = geo.admissible_t_end(cell, rc, dt, t_end)
+    n_steps = int(round(t_end / dt))
+    n_check = n_steps
+    if scene.flow.type == "planar_elongation" and lengths[0] == lengths[1]:
+        # Kraynik-Reinelt: the lattice repeats with period ln((3 + sqrt 5)/2)/|rate|; one decides
+        n_check = min(n_steps, int(np.log((3.0 + 5.0**0.5) / 2.0) / abs(float(G[0, 0])) / dt) + 2)
+    if n_check <= LATTICE_CHECK_SAMPLES:
+        t_ok = geo.admissible_t_end(cell, rc, dt, t_end)
+    else:
+        # More steps than the native check visits in about a second. Exactly over the
+        # first LATTICE_CHECK_SAMPLES steps (an elongation thins the lattice early) ...
+        horizon = LATTICE_CHECK_SAMPLES * dt
+        t_ok = geo.admissible_t_end(cell, rc, dt, horizon)
+        if t_ok >= horizon:
+            # ... then every stride-th step, with the search range grown by exp(|G|_2 stride dt),
+            # the most the thickness can change between two samples, so the answer stays on the
+            # safe side (t_ok a multiple of stride dt).
+            stride = -(-n_check // LATTICE_CHECK_SAMPLES)
+            strain = float(np.linalg.norm(G, 2)) * stride * dt
+            if strain > 0.05:
+                largest = 0.05 * LATTICE_CHECK_SAMPLES / float(np.linalg.norm(G, 2))
+                problems.add("numerics.t_end", f"flow.type = {scene.flow.type!r} deforms the periodic lattice, whose "
+                             f"thickness must be checked over the whole run: the strain |G|_2 t_end = "
+                             f"{float(np.linalg.norm(G, 2)) * t_end:.3g} over {n_steps} steps is too long to check; "
+                             f"allowed: numerics.t_end <= {largest:.4g}, got {t_end:g}")
+                return
+            t_ok = geo.admissible_t_end(cell, rc * float(np.exp(strain)), stride * dt, t_end)
     if t_ok < 0:
         problems.add("cell.size", f"the cell must be thicker than twice the contact search range 2 x {rc:.4g} "
                      f"(particle extent, alpha and Verlet skin) along every lattice direction; got {cell.lattice().thickness.min():.4g}")
@@ -296,7 +349,13 @@ def _family(scene: Scene, index: int, problems: Problems, cell_volume: float) ->
     if fam.count is not None:
         count = fam.count
     else:
-        count = int(round(fam.volume_fraction * cell_volume / vp))
+        exact = fam.volume_fraction * cell_volume / vp  # finite: lengths are bounded (schema, MAX_LENGTH_RATIO)
+        if not exact < MAX_PARTICLES_PER_FAMILY + 0.5:
+            problems.add(f"{at}.volume_fraction", f"{fam.volume_fraction:g} of this cell is {exact:.3g} particles; "
+                         f"allowed: at most {MAX_PARTICLES_PER_FAMILY} per family (the cap of count), i.e. "
+                         f"volume_fraction <= {MAX_PARTICLES_PER_FAMILY * vp / cell_volume:.3g}")
+            return None
+        count = int(round(exact))
         if count < 1:
             problems.add(f"{at}.volume_fraction", f"{fam.volume_fraction:g} of this cell holds no whole particle "
                          f"(one particle fills {vp / cell_volume:.3g}); allowed: >= {0.5 * vp / cell_volume:.3g}")
@@ -375,6 +434,15 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
     lengths[:dim] = cell.size
     cell_volume = float(np.prod(cell.size))
     walls = cell.boundary == "couette"
+    # Lengths are each within MAGNITUDE_LIMIT of 1 (schema); their ratios are bounded
+    # here, so volumes, counts and grid sizes computed below stay finite.
+    thinnest = min(range(len(scene.particles)), key=lambda i: scene.particles[i].radius)
+    r_min, side = scene.particles[thinnest].radius, max(cell.size)
+    if side > MAX_LENGTH_RATIO * r_min:
+        problems.add("cell.size", f"the longest side {side:g} is {side / r_min:.3g} times the smallest particle radius "
+                     f"particles[{thinnest}].radius = {r_min:g}; allowed: cell.size <= {MAX_LENGTH_RATIO:g} x "
+                     f"the smallest radius = {MAX_LENGTH_RATIO * r_min:g} (or particles[{thinnest}].radius >= "
+                     f"{side / MAX_LENGTH_RATIO:g})")
 
     G = _gradient(scene, problems)
     shear_flow = G is None or _is_simple_shear(G)
@@ -409,8 +477,12 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
                      "the no-slip walls of cell.boundary = 'couette' (a wall-bounded solver is not built); use "
                      "cell.boundary = 'periodic' (Lees-Edwards shear) or hydrodynamics = 'jeffery'")
     st = scene.numerics.stokes
-    grid = stokes_grid(lengths[:dim], 2.0 * min(radii), st.cells_per_diameter)
-    grid_points = int(np.prod(grid))
+    # The Stokes grid is computed only when hydrodynamics can be stokes (requested, or
+    # auto in a periodic simple shear); bounded by max_grid_points before any rounding.
+    stokes_possible = model.hydrodynamics == "stokes" or (model.hydrodynamics == "auto" and shear_flow and not walls)
+    grid = stokes_grid(lengths[:dim], 2.0 * min(radii), st.cells_per_diameter,
+                       max_points=st.max_grid_points) if stokes_possible else None
+    grid_points = int(np.prod(grid, dtype=object)) if grid is not None else 0
     if model.hydrodynamics == "stokes" and grid_points > st.max_grid_points:
         problems.add("numerics.stokes.max_grid_points",
                      f"the Stokes grid {' x '.join(map(str, grid))} = {grid_points} points (cells_per_diameter = "
@@ -457,8 +529,19 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
 
     num = scene.numerics
     n_steps = None
-    if num.dt > num.t_end:
+    scale = float(np.max(np.abs(G))) if G is not None else 0.0  # flow time scale 1/max|G_ij|
+    dt_min = max(num.t_end / MAX_STEPS, MIN_STRAIN_PER_STEP / scale if scale > 0 else 0.0)
+    if scale > 0 and scale * num.t_end > MAX_STRAIN:
+        problems.add("numerics.t_end", f"the total strain max|G_ij| t_end = {scale * num.t_end:.3g} exceeds "
+                     f"1/eps = {MAX_STRAIN:.3g} (positions would lose every digit); allowed: numerics.t_end <= "
+                     f"{MAX_STRAIN / scale:.3g}, got {num.t_end:g}")
+    elif num.dt > num.t_end:
         problems.add("numerics.dt", f"must be <= numerics.t_end = {num.t_end:g}, got {num.dt:g}")
+    elif num.dt < dt_min:
+        problems.add("numerics.dt", f"must be >= {dt_min:.3g}: at most t_end / dt = {MAX_STEPS} steps "
+                     f"(numerics.t_end = {num.t_end:g}) and a strain max|G_ij| dt >= {MIN_STRAIN_PER_STEP:.2g} per "
+                     f"step (flow time scale 1/max|G_ij| = {1.0 / scale if scale > 0 else float('inf'):.3g}); "
+                     f"allowed: {dt_min:.3g} <= numerics.dt <= numerics.t_end = {num.t_end:g}, got {num.dt:g}")
     else:
         n_steps = _multiple_of(num.t_end, num.dt)
         if n_steps is None:
@@ -522,7 +605,7 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
     else:
         reasons.append(f"collisions = {collisions} (requested)")
     hydrodynamics = model.hydrodynamics
-    grid_text = f"Stokes grid {' x '.join(map(str, grid))} = {grid_points} points"
+    grid_text = f"Stokes grid {' x '.join(map(str, grid))} = {grid_points} points" if grid is not None else ""
     if hydrodynamics == "auto":
         hydrodynamics = "jeffery"
         phi = sum(f.volume_fraction for f in good)
@@ -566,6 +649,17 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
             warnings.append(f"{f.name}: a tip moves up to {step:.3g} per step, more than a radius {f.radius:.3g} "
                             "(a fraction of a diameter per step, docs/physics.md#time-step)")
 
+    if hydrodynamics == "stokes":
+        thinnest_d = 2.0 * min(f.radius for f in good)
+        per_diameter = min(n * thinnest_d / L for n, L in zip(grid[:dim], lengths[:dim]))
+        if per_diameter < STOKES_QUANTITATIVE_CELLS_PER_DIAMETER:
+            warnings.append(
+                f"numerics.stokes.cells_per_diameter: the Stokes grid {' x '.join(map(str, grid[:dim]))} resolves the "
+                f"thinnest diameter {thinnest_d:g} by {per_diameter:.3g} voxels, below "
+                f"{STOKES_QUANTITATIVE_CELLS_PER_DIAMETER}: the effective viscosity and rotation rates are biased "
+                f"(5-9 % at 1-2 voxels per diameter); use cells_per_diameter = 4-8 for quantitative results "
+                f"(docs/physics.md#resolution)")
+
     fam_tables = []
     for f in good:
         raw = scene.particles[f.index]
@@ -600,21 +694,33 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
 
 #: FFT sizes FFTW handles with its fastest codelets: 2^a 3^b 5^c 7^d.
 def _fft_size(n: int) -> int:
-    m = max(2, n)
-    while True:
-        r = m
-        for q in (2, 3, 5, 7):
-            while r % q == 0:
-                r //= q
-        if r == 1:
-            return m
-        m += 1
+    """The smallest ``2^a 3^b 5^c 7^d >= max(2, n)``: a bounded search over the
+    exponents (O(log^3 n) products; a power of two below ``2n`` always qualifies)."""
+    n = max(2, int(n))
+    best = 1 << (n - 1).bit_length()
+    p3 = 1
+    while p3 < best:
+        p5 = p3
+        while p5 < best:
+            p7 = p5
+            while p7 < best:
+                m = p7
+                while m < n:
+                    m *= 2
+                best = min(best, m)
+                p7 *= 7
+            p5 *= 5
+        p3 *= 3
+    return best
 
 
-def stokes_grid(lengths, diameter: float, cells_per_diameter: int) -> tuple[int, int, int]:
+def stokes_grid(lengths, diameter: float, cells_per_diameter: int,
+                max_points: int | None = None) -> tuple[int, int, int]:
     """Voxel counts of the Stokes grid: at least ``cells_per_diameter`` voxels across
     ``diameter`` along every axis, each count rounded up to an FFT-friendly size
-    (``2^a 3^b 5^c 7^d``); ``(nx, ny, 1)`` in 2-D.
+    (``2^a 3^b 5^c 7^d``); ``(nx, ny, 1)`` in 2-D. When the unrounded grid already has
+    more than ``max_points`` points (the budget, ``numerics.stokes.max_grid_points``)
+    the unrounded counts are returned: such a grid is refused anyway.
 
     Parameters
     ----------
@@ -626,7 +732,14 @@ def stokes_grid(lengths, diameter: float, cells_per_diameter: int) -> tuple[int,
         Target resolution (4-8 for quantitative results, docs/physics.md#resolution).
     """
     h = diameter / cells_per_diameter
-    counts = [_fft_size(int(np.ceil(float(L) / h * (1.0 - 1e-12)))) for L in lengths]
+    raw = [max(1, int(np.ceil(float(L) / h * (1.0 - 1e-12)))) for L in lengths]
+    total = 1
+    for n in raw:
+        total *= n
+    if max_points is not None and total > max_points:
+        counts = raw
+    else:
+        counts = [_fft_size(n) for n in raw]
     return tuple(counts + [1] * (3 - len(counts)))
 
 

@@ -5,9 +5,11 @@ that tie several keys together (a 2-D cell with a 3-D gradient, walls with an
 elongational flow, a volume fraction beyond random packing, ...) live in
 :mod:`pyfold.scene.checks`, so that every error can name its own key path.
 
-Types are strict: ``"1.0"`` is not a number and ``1.5`` is not an integer; an
-integer is accepted where a real is expected. Units: SI or any consistent set
-(Stokes flow is linear), see ``docs/scenes.md``.
+Types are strict: ``"1.0"`` is not a number and ``1.5`` or ``3.0`` is not an
+integer (every integer key, ``cell.dim`` included); an integer is accepted where a
+real is expected. Units: SI or any consistent set (Stokes flow is linear), see
+``docs/scenes.md``; every dimensional value stays within :data:`MAGNITUDE_LIMIT`
+of 1 so that the arithmetic on it stays finite.
 """
 from __future__ import annotations
 
@@ -27,6 +29,9 @@ __all__ = [
     "Output",
     "Scene",
     "EQUIVALENT_ASPECT_RATIO_DEFAULT",
+    "MAGNITUDE_LIMIT",
+    "MAX_LENGTH_RATIO",
+    "MAX_PARTICLES_PER_FAMILY",
 ]
 
 #: Default rule for the equivalent aspect ratio of a finite cylinder: Cox (1971,
@@ -35,16 +40,48 @@ __all__ = [
 EQUIVALENT_ASPECT_RATIO_DEFAULT = "cox"
 
 
+#: Every dimensional value (lengths [m], rates [1/s], viscosity [Pa s]) must lie within
+#: 30 decades of 1: any consistent unit system works (SI fibres are ~1e-5 m, lengths in
+#: fibre lengths are ~1), and then a volume (L^3, <= 1e90) or a product of a few such
+#: values stays finite and normal in double precision (limits 1e+-308).
+MAGNITUDE_LIMIT = 1e30
+#: its reciprocal, the smallest length or viscosity
+_SMALLEST = 1e-30
+
+#: Largest ratio of the longest cell side to the smallest particle radius (and so of any
+#: two lengths of a scene: every particle must fit in half the cell). 1e6 radii per side
+#: is far beyond any simulation (the Stokes grid, the cell lists, the particle count all
+#: scale with it); it keeps cell / particle volume ratios <= 1e18 and grid sizes finite.
+MAX_LENGTH_RATIO = 1e6
+
+#: Largest number of particles of one family: ``count``, or the count a
+#: ``volume_fraction`` gives (one cap, applied to both).
+MAX_PARTICLES_PER_FAMILY = 10_000_000
+
+
 def _finite(value: float) -> float:
     if not math.isfinite(value):
         raise ValueError("must be a finite number (not nan or inf)")
     return value
 
 
+def _one_of(*allowed: int):
+    def check(value: int) -> int:
+        if value not in allowed:
+            raise ValueError(f"must be {' or '.join(map(str, allowed))}")
+        return value
+    return check
+
+
 Real = Annotated[float, AfterValidator(_finite)]
 PositiveReal = Annotated[float, Field(gt=0), AfterValidator(_finite)]
 NonNegativeReal = Annotated[float, Field(ge=0), AfterValidator(_finite)]
+#: a length [m]: 1e-30 <= value <= MAGNITUDE_LIMIT
+Length = Annotated[float, Field(ge=_SMALLEST, le=MAGNITUDE_LIMIT), AfterValidator(_finite)]
+#: a rate or velocity gradient entry [1/s]: |value| <= MAGNITUDE_LIMIT
+Rate = Annotated[float, Field(ge=-MAGNITUDE_LIMIT, le=MAGNITUDE_LIMIT), AfterValidator(_finite)]
 Vector = Annotated[list[Real], Field(min_length=2, max_length=3)]
+RateVector = Annotated[list[Rate], Field(min_length=2, max_length=3)]
 
 
 class _Table(BaseModel):
@@ -56,9 +93,10 @@ class _Table(BaseModel):
 class Cell(_Table):
     """The computational cell."""
 
-    dim: Literal[2, 3] = 3
+    #: 2 or 3 (a strict integer: 3.0 is rejected like every non-integer for an integer key)
+    dim: Annotated[int, AfterValidator(_one_of(2, 3))] = 3
     #: Side lengths (Lx, Ly[, Lz]), one per dimension [m]
-    size: Annotated[list[PositiveReal], Field(min_length=2, max_length=3)]
+    size: Annotated[list[Length], Field(min_length=2, max_length=3)]
     #: "periodic" on every side, or "couette": no-slip walls at y = 0 and y = Ly
     #: moving at -U and +U (U = rate * Ly / 2), periodic in x (and z)
     boundary: Literal["periodic", "couette"] = "periodic"
@@ -70,16 +108,16 @@ class Flow(_Table):
     type: Literal["simple_shear", "planar_elongation", "uniaxial_elongation", "general"] = "simple_shear"
     #: simple shear: G_xy = rate; planar elongation: G = diag(rate, -rate[, 0]);
     #: uniaxial elongation: G = diag(rate, -rate/2, -rate/2) [1/s]
-    rate: Real | None = None
+    rate: Rate | None = None
     #: the full velocity gradient G_ij = du_i/dx_j (dim x dim, traceless), type = "general" only [1/s]
-    gradient: Annotated[list[Vector], Field(min_length=2, max_length=3)] | None = None
+    gradient: Annotated[list[RateVector], Field(min_length=2, max_length=3)] | None = None
 
 
 class Fluid(_Table):
     """The suspending Newtonian fluid."""
 
     #: dynamic viscosity [Pa s]
-    viscosity: PositiveReal = 1.0
+    viscosity: Annotated[float, Field(ge=_SMALLEST, le=MAGNITUDE_LIMIT), AfterValidator(_finite)] = 1.0
 
 
 class ParticleFamily(_Table):
@@ -89,13 +127,13 @@ class ParticleFamily(_Table):
     name: Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.+-]+$")] | None = None
     shape: Literal["fibre", "sphere", "spheroid"]
     #: fibre cross-section radius, sphere radius, spheroid minor semi-axis [m]
-    radius: PositiveReal
+    radius: Length
     #: fibre (cylinder) length or spheroid major axis; not for spheres [m]
-    length: PositiveReal | None = None
+    length: Length | None = None
     #: length / (2 radius), an alternative to `length`; not for spheres [-]
-    aspect_ratio: PositiveReal | None = None
+    aspect_ratio: Annotated[float, Field(gt=0, le=MAX_LENGTH_RATIO), AfterValidator(_finite)] | None = None
     #: number of particles (give exactly one of count, volume_fraction)
-    count: Annotated[int, Field(ge=1, le=10_000_000)] | None = None
+    count: Annotated[int, Field(ge=1, le=MAX_PARTICLES_PER_FAMILY)] | None = None
     #: fraction of the cell volume (area in 2-D) the family fills [-]
     volume_fraction: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] | None = None
     orientation: Literal["isotropic", "aligned", "planar_random", "given"] = "isotropic"

@@ -72,7 +72,7 @@ MALFORMED = [
     ("fraction beyond random sphere packing", _both(_set("particles", [dict(SPHERES, count=None, volume_fraction=0.66)]),
                                                     lambda s: s["particles"][0].pop("count")),
      ["particles[0].volume_fraction", "Berryman"]),
-    ("negative radius", _set("particles[0].radius", -0.05), ["particles[0].radius", "greater than 0"]),
+    ("negative radius", _set("particles[0].radius", -0.05), ["particles[0].radius", "greater than or equal to 1e-30"]),
     ("radius given as text", _set("particles[0].radius", "0.05"), ["particles[0].radius", "must be a number"]),
     ("aspect ratio <= 1", _both(_set("particles", [SPHERES, {"shape": "spheroid", "radius": 0.1, "aspect_ratio": 0.8,
                                                              "count": 2}])),
