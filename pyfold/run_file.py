@@ -10,6 +10,7 @@ without variable-length machinery.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -161,6 +162,9 @@ def check_format(f: h5py.File, path: str | Path) -> str:
     version = _text(f.attrs.get("format_version", b""))
     if fmt != FORMAT:
         raise InputError(f"{path}: not a pyfold run file (format attribute {fmt!r}, expected {FORMAT!r})")
+    if not re.fullmatch(r"[0-9]+\.[0-9]+", version):
+        raise InputError(f"{path}: run file format_version {version!r} is not of the form MAJOR.MINOR "
+                         f"(this pyfold writes {FORMAT_VERSION})")
     if version.split(".")[0] != FORMAT_VERSION.split(".")[0]:
         raise InputError(f"{path}: run file format_version {version!r}; this pyfold reads "
                          f"{FORMAT_VERSION.split('.')[0]}.x")

@@ -255,6 +255,23 @@ def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
     return xmf
 
 
+def gap_summary(min_gap: np.ndarray, alpha: float) -> str:
+    """The smallest surface gap of the run [m], in units of the security zone when
+    ``alpha > 0``; a negative gap (an overlap) is printed as such, however small,
+    and flagged. Records with no pair in range hold a huge sentinel (Fortran ``huge``)."""
+    gap = np.asarray(min_gap, dtype=np.float64)
+    gap = gap[np.isfinite(gap) & (np.abs(gap) < 1e300)]
+    if not gap.size:
+        return "smallest gap: no particle pairs within range"
+    g = float(gap.min())
+    text = f"smallest gap over the run: {g:.6g} m"
+    if alpha > 0.0:
+        text += f" = {g / alpha:.6g} alpha"
+    if g < 0.0:
+        text += "  -- NEGATIVE: particles overlapped"
+    return text
+
+
 def run_summary(path: str | Path) -> str:
     """A few lines: status, steps, regime and choices, smallest gap / alpha, final a2."""
     ds = open_run(path)
@@ -262,11 +279,8 @@ def run_summary(path: str | Path) -> str:
         a = ds.attrs
         lines = [f"status: {a.get('status', 'unknown')}, steps done: {a.get('steps_done', '?')} of {a.get('n_steps', '?')}",
                  f"regime: {a.get('regime', '?')}; {a.get('hydrodynamics_reason', '')}"]
-        if "min_gap_over_alpha" in ds and ds.sizes.get("time", 0) > 0:
-            gap = ds["min_gap_over_alpha"].values
-            gap = gap[np.isfinite(gap) & (np.abs(gap) < 1e300)]
-            lines.append(f"smallest gap / alpha over the run: {gap.min():.4g}" if gap.size else
-                         "smallest gap / alpha: no particle pairs within range")
+        if "min_gap" in ds and ds.sizes.get("time", 0) > 0:
+            lines.append(gap_summary(ds["min_gap"].values, float(a.get("alpha", 0.0))))
         if "effective_viscosity" in ds and ds.sizes.get("time", 0) > 0:
             eta = ds["effective_viscosity"].values
             lines.append(f"Stokes: effective viscosity {eta.mean():.6g} Pa s (mean over the records, "

@@ -151,3 +151,22 @@ def test_open_run_refuses_other_files_and_major_versions(tmp_path, run_file):
         f.attrs["format_version"] = fixed_string("2.0")
     with pytest.raises(InputError, match="format_version '2.0'"):
         pyfold.open_run(run_file)
+
+
+@pytest.mark.parametrize("version", ["1.x-garbage", "1", "1.0.0", "", "one.two"])
+def test_open_run_refuses_a_malformed_format_version(run_file, version):
+    with h5py.File(run_file, "a") as f:
+        f.attrs["format_version"] = fixed_string(version)
+    with pytest.raises(InputError, match="format_version .* not of the form MAJOR.MINOR"):
+        pyfold.open_run(run_file)
+
+
+def test_gap_summary_shows_a_negative_gap_as_negative_even_with_alpha_zero():
+    from pyfold.runs import gap_summary
+
+    huge = np.finfo(np.float64).max  # a record with no pair in range
+    text = gap_summary(np.array([huge, 1e-3, -4e-14]), alpha=0.0)
+    assert "-4e-14 m" in text and "NEGATIVE" in text and "alpha" not in text
+    text = gap_summary(np.array([2e-3, 5e-3]), alpha=1e-3)
+    assert "0.002 m = 2 alpha" in text and "NEGATIVE" not in text
+    assert "no particle pairs" in gap_summary(np.array([huge]), alpha=1e-3)
