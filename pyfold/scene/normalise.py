@@ -40,6 +40,10 @@ MULTIPLE_TOL = 1e-9
 DEFAULT_ALPHA_OVER_RADIUS = 0.1
 #: Default number of statistics records and of snapshots over a run.
 DEFAULT_RECORDS, DEFAULT_SNAPSHOTS = 100, 10
+#: Restart checkpoints of a run by default: one every 1/20 of it, so a killed long run
+#: loses at most 5 % of its steps (a checkpoint writes the particle state twice,
+#: fold_output.f90: cheap next to the steps between two of them).
+DEFAULT_CHECKPOINTS = 20
 #: Largest number of time steps (fold_run counts steps in 32-bit integers).
 MAX_STEPS = 2**31 - 1
 #: Double precision round-off unit.
@@ -555,7 +559,7 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
     every: dict[str, int] = {}
     if n_steps is not None:
         defaults = {"interval": max(1, n_steps // DEFAULT_RECORDS), "snapshot_interval": max(1, n_steps // DEFAULT_SNAPSHOTS),
-                    "checkpoint_interval": 0}
+                    "checkpoint_interval": max(1, n_steps // DEFAULT_CHECKPOINTS)}
         for key, default in defaults.items():
             value = getattr(out, key)
             if value is None:

@@ -213,8 +213,9 @@ class Output(_Table):
     #: interval between particle snapshots (positions, axes); 0 = none
     #: (default: t_end / 10 rounded down to a multiple of dt) [s]
     snapshot_interval: NonNegativeReal | None = None
-    #: interval between restart checkpoints; 0 = none [s]
-    checkpoint_interval: NonNegativeReal = 0.0
+    #: interval between restart checkpoints; 0 = none
+    #: (default: t_end / 20 rounded down to a multiple of dt) [s]
+    checkpoint_interval: NonNegativeReal | None = None
 
 
 class Scene(_Table):

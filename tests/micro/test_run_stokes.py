@@ -128,11 +128,15 @@ def test_np2_equals_np1_to_solver_tolerance(tmp_path):
         runs.append(xr.open_dataset(path, engine="h5netcdf"))
     one, two = runs
     # FFTW-MPI slabs vs serial FFTW: the same CG to tol = 1e-10 up to round-off in the
-    # transforms, so fields agree to ~tol. The first solve starts from zero on both:
-    # same iterations; later solves start from the previous solution (warm start),
-    # which differs by ~tol, so their counts may differ by a few
+    # transforms, so the fields agree to ~tol (the assertions below). The iteration
+    # counts are not a rounding-exact quantity: slab and serial transforms (and, with
+    # measured plans, whichever algorithms FFTW timed fastest) round differently, and
+    # finite-precision CG at kappa = 1e3 turns that into a few iterations more or less
+    # (190 vs 183 seen under FFTW_MEASURE); warm starts differ by ~tol as well. Both
+    # must converge, with counts of the same size.
     its1, its2 = one.stokes_iterations.values, two.stokes_iterations.values
-    assert its1[0] == its2[0] and np.all(np.abs(its1 - its2) <= 0.05 * its1)
+    assert np.all(one.stokes_residual.values <= 1e-10) and np.all(two.stokes_residual.values <= 1e-10)
+    assert np.all(np.abs(its1 - its2) <= 0.1 * its1)
     np.testing.assert_allclose(two.stress.values, one.stress.values, rtol=0, atol=1e-8)
     np.testing.assert_allclose(two.effective_viscosity.values, one.effective_viscosity.values, rtol=1e-9)
     np.testing.assert_allclose(two.a2.values, one.a2.values, rtol=0, atol=1e-9)

@@ -74,7 +74,7 @@ def test_spheroid_and_sphere_xi_exact():
 def test_defaults_filled_and_resolved_values():
     r = scene([dict(FIBRE, count=10)])
     assert r.alpha == pytest.approx(0.002)  # a tenth of the smallest radius
-    assert r.n_steps == 100 and r.output_every == 1 and r.snapshot_every == 10 and r.checkpoint_every == 0
+    assert r.n_steps == 100 and r.output_every == 1 and r.snapshot_every == 10 and r.checkpoint_every == 5
     assert r.scene.numerics.seed == 0 and r.scene.numerics.stokes.kappa == 1e3
     assert r.scene.particles[0].name == "family0" and r.scene.particles[0].equivalent_aspect_ratio == "cox"
     G = np.zeros((3, 3))
