@@ -3,13 +3,21 @@
 Each command lives in ``pyfold/commands/<name>.py`` and exposes
 ``add_arguments(parser)`` and ``run(args) -> int``. Exit status: 0 success,
 2 bad input (argument or scene; the message names the key and the allowed
-range), 1 any other failure (solver blow-up, I/O), with the cause printed.
+range), 1 any other failure (solver blow-up, I/O), with the cause printed;
+interrupted: 130 (SIGINT, Ctrl-C), 143 (SIGTERM), 129 (SIGHUP), i.e. 128 + the
+signal number. While a command runs, these three signals raise
+:class:`Interrupted` (a KeyboardInterrupt) in the main thread, so every command
+cleans up on the way out (``pyfold run`` terminates its fold_run / mpirun process
+group and keeps the partial run file for ``--resume``).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import signal
 import sys
+import threading
 
 from pyfold import __version__
 from pyfold.errors import InputError, PyfoldError
@@ -25,6 +33,49 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 EXIT_OK, EXIT_FAILURE, EXIT_INPUT = 0, 1, 2
 
+#: Signals turned into :class:`Interrupted` while a command runs.
+HANDLED_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+class Interrupted(KeyboardInterrupt):
+    """A command was interrupted by a signal (``signum``); exit status 128 + signum."""
+
+    def __init__(self, signum: int):
+        super().__init__(f"interrupted by {signal.Signals(signum).name}")
+        self.signum = signum
+
+
+_depth = 0  # nested main() calls (pyfold main runs `pyfold run` through main())
+
+
+@contextlib.contextmanager
+def _signals_raise():
+    """Make SIGINT, SIGTERM and SIGHUP raise Interrupted (once: a second signal while
+    the first is being handled is ignored, so the clean-up finishes), then restore
+    the previous handlers. Only in the main thread of the outermost main()."""
+    if _depth > 1 or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    raised = []
+
+    def handler(signum, frame):
+        if raised:
+            return
+        raised.append(signum)
+        raise Interrupted(signum)
+
+    previous = {}
+    for sig in HANDLED_SIGNALS:
+        try:
+            previous[sig] = signal.signal(sig, handler)
+        except (ValueError, OSError):  # pragma: no cover
+            pass
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old if old is not None else signal.SIG_DFL)
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pyfold", description=__doc__.splitlines()[0])
@@ -39,16 +90,29 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    global _depth
     args = build_parser().parse_args(argv)
+    _depth += 1
     try:
-        return int(args._run(args) or EXIT_OK)
+        with _signals_raise():
+            return int(args._run(args) or EXIT_OK)
     except InputError as exc:
         print(f"pyfold {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
     except PyfoldError as exc:
         print(f"pyfold {args.command}: failed: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    except KeyboardInterrupt as exc:
+        if _depth > 1:  # the outer command cleans up and sets the status
+            raise
+        signum = exc.signum if isinstance(exc, Interrupted) else signal.SIGINT
+        print(f"pyfold {args.command}: interrupted ({signal.Signals(signum).name})", file=sys.stderr)
+        return 128 + int(signum)
+    finally:
+        _depth -= 1
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    from pyfold.cli import main as _main  # the one module instance nested commands (pyfold main) call too
+
+    sys.exit(_main())

@@ -17,8 +17,19 @@
 !>    the drawn orientations are kept exactly. It stops when no gap is below alpha.
 !>    This is an overlap-removal ("shake") step: the result is no longer a pure RSA
 !>    ensemble, but it reaches fractions RSA cannot (e.g. the seed's 2-D disks at 50 %).
+!>    The sweeps give up early when they stall: the total overlap O (sum over the pairs
+!>    closer than alpha of the deficit) decays, when they succeed, roughly geometrically
+!>    (halving every 20-700 sweeps in the tests); from the decay over the last
+!>    STALL_WINDOW sweeps, the sweeps still needed to bring O down to alpha/100 are
+!>    extrapolated, and when the total would exceed 4 relax_sweeps (or O did not
+!>    decrease at all) the relaxation stops. A placement that succeeds is the same as
+!>    without this test unless it would have crawled along such a plateau first.
 !> If the target cannot be reached, stat = FOLD_INPUT_ERROR and the message gives the
 !> fraction RSA reached. The stream is seeded (fold_random): same seed, same placement.
+!> Progress: with the environment variable PYFOLD_PLACEMENT_PROGRESS set (non-empty),
+!> lines `PLACEMENT rsa <particles tried> <n> <placed> <fraction placed> <target>` and
+!> `PLACEMENT relax <sweep> <max sweeps> <pairs closer than alpha> <total overlap>`
+!> go to stderr at most once a second (pyfold.scene.initial shows them).
 module fold_placement
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
@@ -27,6 +38,7 @@ module fold_placement
    use fold_particles, only: particle_set_t, particle_half_segment, particle_volume, FOLD_FIBRE, FOLD_SPHEROID
    use fold_segment, only: capsule_contact
    use fold_random, only: rng_t, rng_seed, rng_uniform
+   use, intrinsic :: iso_fortran_env, only: error_unit
    implicit none
    private
 
@@ -40,6 +52,8 @@ module fold_placement
    public :: place_particles, random_orientation
 
    real(dp), parameter :: pi = acos(-1.0_dp)
+   !> Sweeps over which the decay of the total overlap is measured (stall test)
+   integer(ip), parameter, public :: STALL_WINDOW = 200
 
 contains
 
@@ -110,7 +124,11 @@ contains
       integer(ip), allocatable :: order(:), cand(:)
       logical, allocatable :: placed(:)
       real(dp), allocatable :: hseg(:), vol(:), best_x(:, :)
-      real(dp) :: rc, xtry(3), u, dmin, best, vdummy(3), phi_target, phi_rsa
+      real(dp) :: rc, xtry(3), u, dmin, best, vdummy(3), phi_target, phi_rsa, vol_placed
+      logical :: report, stalled
+      integer(i8) :: clock_rate, clock_last
+      integer :: env_len, env_stat
+      character(len=8) :: env_buf
 
       dim = parts%dim
       n = parts%n
@@ -155,6 +173,10 @@ contains
          return
       end if
 
+      call get_environment_variable("PYFOLD_PLACEMENT_PROGRESS", env_buf, env_len, env_stat)
+      report = (env_stat == 0 .or. env_stat == -1) .and. env_len > 0
+      call system_clock(clock_last, clock_rate)
+      stalled = .false.
       allocate (hseg(n), vol(n), order(n), placed(n), cand(n), best_x(dim, n))
       hseg = particle_half_segment(parts%shape, parts%radius, parts%length)
       vol = particle_volume(dim, parts%shape, parts%radius, parts%length)
@@ -177,6 +199,7 @@ contains
       order = sort_by_extent(hseg + parts%radius)
 
       placed = .false.
+      vol_placed = 0.0_dp
       do m = 1, n
          k = order(m)
          best = -huge(1.0_dp)
@@ -189,7 +212,7 @@ contains
             ! uniform in the primary cell (u L in the shear box, origin + B u on a deformed lattice)
             xtry(1:dim) = cell_from_fractional(cell, xtry(1:dim))
             parts%x(:, k) = xtry(1:dim)
-            dmin = worst_clearance(k)
+            dmin = worst_clearance(k, best)
             if (dmin > best) then
                best = dmin
                best_x(:, k) = xtry(1:dim)
@@ -200,7 +223,15 @@ contains
             parts%x(:, k) = best_x(:, k)
             placed(k) = .true.
             n_rsa = n_rsa + 1
+            vol_placed = vol_placed + vol(k)
             call cell_list_insert(cl, cell, k, parts%x(:, k))
+         end if
+         if (report) then
+            if (due()) then
+               write (error_unit, '(a,i0,1x,i0,1x,i0,1x,es13.6,1x,es13.6)') "PLACEMENT rsa ", m, n, n_rsa, &
+                  vol_placed/cell_volume(cell), phi_target
+               flush (error_unit)
+            end if
          end if
       end do
       phi_rsa = sum(vol, mask=placed)/cell_volume(cell)
@@ -217,16 +248,36 @@ contains
          if (stat == FOLD_OK) return
       end if
       stat = FOLD_INPUT_ERROR
-      write (errmsg, '(a,a,a,a,a,i0,a,i0,a,i0,a,i0,a)') "placement: could not reach volume fraction ", &
-         fmt_fraction(phi_target), ": random sequential addition reached ", fmt_fraction(phi_rsa), " (", n_rsa, &
-         " of ", n, " particles, ", max_attempts, " attempts each) and ", relax_sweeps, &
-         " relaxation sweeps did not remove the overlaps; lower the volume fraction or alpha"
+      if (stalled) then
+         write (errmsg, '(a,a,a,a,a,i0,a,i0,a,i0,a,i0,a,i0,a)') "placement: could not reach volume fraction ", &
+            fmt_fraction(phi_target), ": random sequential addition reached ", fmt_fraction(phi_rsa), " (", n_rsa, &
+            " of ", n, " particles, ", max_attempts, " attempts each) and the relaxation stalled at sweep ", &
+            sweeps_used, " (at the decay of the overlaps over the last ", STALL_WINDOW, &
+            " sweeps it would not end within four times the allowed sweeps); lower the volume fraction or alpha"
+      else
+         write (errmsg, '(a,a,a,a,a,i0,a,i0,a,i0,a,i0,a)') "placement: could not reach volume fraction ", &
+            fmt_fraction(phi_target), ": random sequential addition reached ", fmt_fraction(phi_rsa), " (", n_rsa, &
+            " of ", n, " particles, ", max_attempts, " attempts each) and ", relax_sweeps, &
+            " relaxation sweeps did not remove the overlaps; lower the volume fraction or alpha"
+      end if
 
    contains
 
-      !> min over placed neighbours and walls of (gap - required gap) for particle k at parts%x(:, k)
-      function worst_clearance(k) result(dm)
+      !> True at most once a second (progress lines)
+      logical function due()
+         integer(i8) :: now
+         call system_clock(now)
+         due = real(now - clock_last, dp) >= real(clock_rate, dp)
+         if (due) clock_last = now
+      end function due
+
+      !> min over placed neighbours and walls of (gap - required gap) for particle k at parts%x(:, k).
+      !> Once it is negative and <= cutoff (the best clearance of the earlier attempts) the
+      !> attempt can neither be accepted nor become the best, so the scan stops there: the
+      !> value returned is then an upper bound, and the placement is the same as with a full scan.
+      function worst_clearance(k, cutoff) result(dm)
          integer(ip), intent(in) :: k
+         real(dp), intent(in) :: cutoff
          real(dp) :: dm, r(dim), dist, nrm(dim), s, t, ylo, yhi
          integer(ip) :: j
          dm = huge(1.0_dp)
@@ -234,6 +285,7 @@ contains
             ylo = parts%x(2, k) - hseg(k)*abs(parts%p(2, k)) - parts%radius(k)
             yhi = cell%lengths(2) - (parts%x(2, k) + hseg(k)*abs(parts%p(2, k))) - parts%radius(k)
             dm = min(ylo, yhi) - 0.5_dp*alpha
+            if (dm < 0.0_dp .and. dm <= cutoff) return
          end if
          call cell_list_candidates(cl, cell, parts%x(:, k), cand, nc)
          do c = 1, nc
@@ -243,6 +295,7 @@ contains
             call capsule_contact(r, parts%p(:, k), hseg(k), parts%radius(k), parts%p(:, j), hseg(j), &
                                  parts%radius(j), dist, nrm, s, t)
             dm = min(dm, dist - alpha)
+            if (dm < 0.0_dp .and. dm <= cutoff) return
          end do
       end function worst_clearance
 
@@ -251,7 +304,8 @@ contains
          integer(ip), intent(out) :: sweeps
          type(cell_list_t) :: cla
          real(dp), allocatable :: disp(:, :)
-         real(dp) :: target, r(dim), dist, nrm(dim), s, t, deficit, y_lo, y_hi, tol
+         real(dp) :: target, r(dim), dist, nrm(dim), s, t, deficit, y_lo, y_hi, tol, overlap, floor, rate
+         real(dp) :: history(0:STALL_WINDOW)
          integer(ip) :: i, j, nbad, sw
 
          allocate (disp(dim, n))
@@ -259,16 +313,21 @@ contains
          target = alpha + max(0.05_dp*alpha, 1.0e-3_dp*minval(parts%radius))
          tol = 64.0_dp*epsilon(1.0_dp)*maxval(cell%lengths(1:dim))
          sweeps = 0
+         floor = max(0.01_dp*alpha, 1.0e-6_dp*minval(parts%radius))
          do sw = 1, relax_sweeps + 1
             call cell_list_build(cla, cell, parts%x, rc, stat, errmsg)
             if (stat /= FOLD_OK) return
             disp = 0.0_dp
             nbad = 0
+            overlap = 0.0_dp
             do i = 1, n
                if (cell%walls) then
                   y_lo = parts%x(2, i) - hseg(i)*abs(parts%p(2, i)) - parts%radius(i)
                   y_hi = cell%lengths(2) - (parts%x(2, i) + hseg(i)*abs(parts%p(2, i))) - parts%radius(i)
-                  if (min(y_lo, y_hi) < 0.5_dp*alpha - tol) nbad = nbad + 1
+                  if (min(y_lo, y_hi) < 0.5_dp*alpha - tol) then
+                     nbad = nbad + 1
+                     overlap = overlap + (0.5_dp*alpha - min(y_lo, y_hi))
+                  end if
                   if (y_lo < 0.5_dp*target) disp(2, i) = disp(2, i) + (0.5_dp*target - y_lo)
                   if (y_hi < 0.5_dp*target) disp(2, i) = disp(2, i) - (0.5_dp*target - y_hi)
                end if
@@ -280,7 +339,10 @@ contains
                   call cell_min_image(cell, r)
                   call capsule_contact(r, parts%p(:, i), hseg(i), parts%radius(i), parts%p(:, j), hseg(j), &
                                        parts%radius(j), dist, nrm, s, t)
-                  if (dist < alpha - tol) nbad = nbad + 1
+                  if (dist < alpha - tol) then
+                     nbad = nbad + 1
+                     overlap = overlap + (alpha - dist)
+                  end if
                   if (dist < target) then
                      deficit = target - dist
                      disp(:, i) = disp(:, i) + 0.5_dp*deficit*nrm
@@ -292,6 +354,26 @@ contains
                stat = FOLD_OK
                return
             end if
+            if (report) then
+               if (due()) then
+                  write (error_unit, '(a,i0,1x,i0,1x,i0,1x,es13.6)') "PLACEMENT relax ", sw - 1, relax_sweeps, &
+                     nbad, overlap
+                  flush (error_unit)
+               end if
+            end if
+            ! stall test: history(mod(sw, W+1)) holds the overlap of sweep sw
+            if (sw > STALL_WINDOW) then
+               associate (before => history(mod(sw - STALL_WINDOW, STALL_WINDOW + 1)))
+                  if (overlap >= before) then
+                     stalled = .true.
+                  else if (overlap > floor) then
+                     rate = log(before/overlap)/real(STALL_WINDOW, dp)
+                     stalled = real(sw, dp) + log(overlap/floor)/rate > 4.0_dp*real(relax_sweeps, dp)
+                  end if
+               end associate
+               if (stalled) exit
+            end if
+            history(mod(sw, STALL_WINDOW + 1)) = overlap
             if (sw > relax_sweeps) exit
             sweeps = sw
             do i = 1, n

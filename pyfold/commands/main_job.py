@@ -36,19 +36,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene", default=None,
                         help=f"scene to simulate (default: the bundled {DEFAULT_SCENE.name})")
     parser.add_argument("--np", type=int, default=1, metavar="N", help="MPI ranks of the simulation (default 1)")
-    parser.add_argument("--closures", default=",".join(DEFAULT_CLOSURES),
-                        help="comma-separated closures to fit C_I with and to judge (default: %(default)s)")
+    parser.add_argument("--closures", default=None,
+                        help="comma-separated closures to fit C_I with and to judge: 'exact' or names of "
+                             f"pyfold.closures.available(dim) (default: {','.join(DEFAULT_CLOSURES)}, "
+                             "those defined in the scene's dimension)")
+
+
+def _scene_dim(scene: Path) -> int:
+    """The scene's dimension (2 or 3), from the complete validation (a bad scene stops here)."""
+    from pyfold.scene import load_scene
+
+    return load_scene(scene).dim
 
 
 def run(args: argparse.Namespace) -> int:
     scene = Path(args.scene) if args.scene else DEFAULT_SCENE
     if not scene.is_file():
         raise InputError(f"--scene: no such scene file: {scene}")
-    if args.np < 1:
-        raise InputError(f"--np: must be >= 1, got {args.np}")
-    closures = tuple(c.strip() for c in args.closures.split(",") if c.strip())
-    if not closures:
-        raise InputError("--closures: give at least one closure name")
+    from pyfold.commands.run import check_ranks
+
+    check_ranks(args.np)
+    dim = _scene_dim(scene)
+    if args.closures is None:
+        from pyfold.closures import available
+
+        closures = tuple(c for c in DEFAULT_CLOSURES if c == "exact" or c in available(dim))
+    else:
+        from pyfold.pipeline import check_closures
+
+        closures = check_closures(args.closures, dim)
     parent = Path(args.out)
     if parent.exists() and not parent.is_dir():
         raise InputError(f"--out: must be a folder (or not exist yet), got the file {parent}")

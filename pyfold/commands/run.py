@@ -1,13 +1,31 @@
-"""``pyfold run SCENE.toml [-o OUT.h5] [--np N] [--force]``: the direct simulation of a scene.
+"""``pyfold run SCENE.toml [-o OUT.h5] [--np N] [--force | --resume]``: the direct simulation of a scene.
 
 Validate the scene completely -> write ``OUT.h5.partial`` (``/setup`` +
 ``/initial``) -> run ``fold_run`` on it (under ``mpirun -np N --oversubscribe``
 when N > 1) with a progress bar fed by its ``PROGRESS`` lines -> rename to
 ``OUT.h5`` -> write ``OUT.xmf`` (ParaView) -> print a summary.
 
-An existing ``OUT.h5`` is refused before any work unless ``--force``; even then
-it stays intact until the new file is complete (atomic rename). Exit status:
-0 success; 2 bad scene or run file (from ``fold_run`` too); 1 failure. On a
+Nothing is overwritten without ``--force``, and every refusal comes before any
+work: ``-o`` must end in ``.h5`` (or ``.hdf5``, ``.nc``: the run also writes
+``OUT.xmf`` beside it, and ``OUT.h5.partial`` while it runs), an existing
+``OUT.h5`` or ``OUT.xmf`` is refused, and so is an existing ``OUT.h5.partial``
+(an interrupted run: continue it with ``--resume``, or start again with
+``--force``). Even with ``--force`` an existing ``OUT.h5`` stays intact until
+the new file is complete (atomic rename).
+
+``--resume`` continues ``OUT.h5.partial`` (or a failed ``OUT.h5``, whose
+``status`` is not ``ok``) from its last checkpoint with ``fold_run --resume``,
+then finishes like a run (rename, ``OUT.xmf`` rewritten, summary).
+
+``--np`` is bounded by :func:`rank_bound` (``OVERSUBSCRIBE_FACTOR`` ranks per
+usable core; more only with ``--oversubscribe``, never more than
+``MAX_RANKS``). ``fold_run`` (or ``mpirun``) runs in its own session; when
+pyfold ends for any reason (an exception, SIGINT, SIGTERM, SIGHUP: see
+:mod:`pyfold.cli`, or interpreter exit) its whole process group is terminated
+and waited for, and ``OUT.h5.partial`` is kept for ``--resume``.
+
+Exit status: 0 success; 2 bad scene, option or run file (from ``fold_run``
+too); 1 failure; 130 / 143 / 129 interrupted by SIGINT / SIGTERM / SIGHUP. On a
 ``fold_run`` failure (exit 1: blow-up, unresolvable overlap, I/O) the file with
 the results up to the last good state and ``status = "failed: ..."`` is kept
 as ``OUT.h5``.
@@ -15,13 +33,17 @@ as ``OUT.h5``.
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
+import tempfile
 import threading
+import time
 from collections import deque
 from pathlib import Path
 
@@ -29,14 +51,59 @@ from pyfold.errors import InputError, PyfoldError
 
 #: Environment variable naming the fold_run executable explicitly.
 FOLD_RUN_ENV = "PYFOLD_FOLD_RUN"
+#: Suffixes accepted for ``-o`` (the XDMF companion is ``OUT`` with suffix ``.xmf``).
+RUN_SUFFIXES = (".h5", ".hdf5", ".nc")
+#: MPI ranks allowed per usable core without ``--oversubscribe``.
+OVERSUBSCRIBE_FACTOR = 4
+#: Absolute ceiling of ``--np``, also with ``--oversubscribe``.
+MAX_RANKS = 4096
+#: Seconds a terminated fold_run / mpirun group gets to exit before SIGKILL.
+TERMINATE_GRACE = 3.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", metavar="SCENE.toml", help="scene file (see docs/scenes.md)")
     parser.add_argument("-o", "--output", metavar="OUT.h5", default=None,
-                        help="run file to write (default: the scene's name with .h5, in the current folder)")
-    parser.add_argument("--np", type=int, default=1, metavar="N", help="MPI ranks (default 1: no mpirun)")
-    parser.add_argument("--force", action="store_true", help="replace an existing OUT.h5 (only once the new run ends)")
+                        help="run file to write, ending in .h5 (.hdf5, .nc); OUT.xmf is written beside it "
+                             "(default: the scene's name with .h5, in the current folder)")
+    parser.add_argument("--np", type=int, default=1, metavar="N",
+                        help=f"MPI ranks (default 1: no mpirun; at most {OVERSUBSCRIBE_FACTOR} per usable core "
+                             "without --oversubscribe)")
+    parser.add_argument("--oversubscribe", action="store_true",
+                        help=f"allow --np beyond {OVERSUBSCRIBE_FACTOR} ranks per usable core (up to {MAX_RANKS})")
+    parser.add_argument("--force", action="store_true",
+                        help="replace an existing OUT.h5 / OUT.xmf (only once the new run ends), or start again "
+                             "over an interrupted OUT.h5.partial")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue OUT.h5.partial (or a failed OUT.h5) from its last checkpoint")
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (its CPU affinity, else ``os.cpu_count()``)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def rank_bound(oversubscribe: bool = False) -> int:
+    """The largest ``--np`` accepted: ``OVERSUBSCRIBE_FACTOR`` x usable cores, or
+    ``MAX_RANKS`` with ``--oversubscribe``."""
+    return MAX_RANKS if oversubscribe else OVERSUBSCRIBE_FACTOR * usable_cores()
+
+
+def check_ranks(ranks: int, oversubscribe: bool = False, option: str = "--np") -> None:
+    """Refuse a rank count that is not >= 1 or beyond :func:`rank_bound` (InputError naming ``option``)."""
+    if ranks < 1:
+        raise InputError(f"{option}: must be an integer >= 1, got {ranks}")
+    bound = rank_bound(oversubscribe)
+    if ranks > bound:
+        if oversubscribe:
+            raise InputError(f"{option}: {ranks} ranks is beyond the ceiling of {MAX_RANKS} (also with --oversubscribe)")
+        cores = usable_cores()
+        raise InputError(f"{option}: {ranks} ranks is beyond the bound of {bound} ({OVERSUBSCRIBE_FACTOR} per usable "
+                         f"core, {cores} core{'s' if cores != 1 else ''} here); pass --oversubscribe to run more "
+                         f"(up to {MAX_RANKS})")
 
 
 def find_fold_run() -> Path:
@@ -79,17 +146,69 @@ def find_fold_run() -> Path:
                       + f", and on PATH); build pyfold (scripts/bootstrap) or set ${FOLD_RUN_ENV}")
 
 
-def _launch_command(fold_run: Path, run_file: Path, ranks: int) -> tuple[list[str], dict[str, str]]:
+def _launch_command(fold_run: Path, run_file: Path, ranks: int,
+                    resume: bool = False) -> tuple[list[str], dict[str, str]]:
     env = dict(os.environ)
+    tail = [str(run_file)] + (["--resume"] if resume else [])
     if ranks == 1:
-        return [str(fold_run), str(run_file)], env
+        return [str(fold_run)] + tail, env
     mpirun = shutil.which("mpirun") or shutil.which("mpiexec")
     if mpirun is None:
         raise PyfoldError("--np > 1 needs mpirun (Open MPI) on PATH")
     if hasattr(os, "geteuid") and os.geteuid() == 0:  # Open MPI refuses root without these
         env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
         env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-    return [mpirun, "-np", str(ranks), "--oversubscribe", str(fold_run), str(run_file)], env
+    return [mpirun, "-np", str(ranks), "--oversubscribe", str(fold_run)] + tail, env
+
+
+#: Process groups of fold_run / mpirun still running (killed at interpreter exit).
+_LIVE: set[subprocess.Popen] = set()
+_LIVE_LOCK = threading.Lock()
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - a recycled group id of another user
+        return False
+    return True
+
+
+def terminate_group(proc: subprocess.Popen, grace: float = TERMINATE_GRACE) -> None:
+    """Terminate the whole process group (session) ``proc`` leads and wait for it:
+    SIGTERM, then SIGKILL after ``grace`` seconds. The leader is reaped; the group
+    counts as gone when no member is left (zombies of ranks already reparented to
+    init are waited for at most 5 s more)."""
+    pgid = proc.pid
+    try:
+        for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, 5.0)):
+            try:
+                os.killpg(pgid, sig)
+            except ProcessLookupError:
+                return
+            deadline = time.monotonic() + wait
+            while time.monotonic() < deadline:
+                proc.poll()  # reaps the leader, so an exited leader leaves the group
+                if not _group_alive(pgid):
+                    return
+                time.sleep(0.02)
+    finally:
+        try:
+            proc.wait(timeout=1.0)
+        except subprocess.TimeoutExpired:  # pragma: no cover - unkillable (D state)
+            pass
+        with _LIVE_LOCK:
+            _LIVE.discard(proc)
+
+
+@atexit.register
+def _terminate_live_groups() -> None:
+    with _LIVE_LOCK:
+        live = list(_LIVE)
+    for proc in live:
+        terminate_group(proc)
 
 
 def _stream(pipe, sink: deque, echo) -> None:
@@ -100,7 +219,12 @@ def _stream(pipe, sink: deque, echo) -> None:
 
 
 def _execute(command: list[str], env: dict[str, str], n_steps: int) -> tuple[int, list[str]]:
-    """Run fold_run; PROGRESS lines drive a rich progress bar, other lines are shown.
+    """Run fold_run in its own session; PROGRESS lines drive a rich progress bar,
+    other lines are shown.
+
+    Any exception while it runs (KeyboardInterrupt, a signal turned into an
+    exception by :mod:`pyfold.cli`) terminates its whole process group (mpirun and
+    every rank), waits for it, and propagates.
 
     Returns the exit code and the last lines it printed (stdout and stderr).
     """
@@ -113,12 +237,16 @@ def _execute(command: list[str], env: dict[str, str], n_steps: int) -> tuple[int
                   TextColumn("t = {task.fields[t]}"), TimeElapsedColumn(), TimeRemainingColumn(),
                   console=console, transient=False) as progress:
         task = progress.add_task("run", total=n_steps, t="0")
-        proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                bufsize=1)
-        err_thread = threading.Thread(target=_stream, args=(proc.stderr, tail, lambda s: progress.console.print(
-            s, markup=False, highlight=False)), daemon=True)
-        err_thread.start()
+        proc = None
+        err_thread = None
         try:
+            proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                    bufsize=1, start_new_session=True)
+            with _LIVE_LOCK:
+                _LIVE.add(proc)
+            err_thread = threading.Thread(target=_stream, args=(proc.stderr, tail, lambda s: progress.console.print(
+                s, markup=False, highlight=False)), daemon=True)
+            err_thread.start()
             for line in iter(proc.stdout.readline, ""):
                 line = line.rstrip("\n")
                 fields = line.split()
@@ -132,14 +260,17 @@ def _execute(command: list[str], env: dict[str, str], n_steps: int) -> tuple[int
                 progress.console.print(line, markup=False, highlight=False)
             rc = proc.wait()
         except BaseException:
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            if proc is not None:
+                terminate_group(proc)
             raise
         finally:
-            err_thread.join(timeout=10)
+            if proc is not None:
+                if proc.returncode is not None and _group_alive(proc.pid):
+                    terminate_group(proc)  # ranks left behind by an mpirun that exited
+                with _LIVE_LOCK:
+                    _LIVE.discard(proc)
+            if err_thread is not None:
+                err_thread.join(timeout=10)
     return rc, list(tail)
 
 
@@ -149,34 +280,138 @@ def _cause(tail: list[str]) -> str:
     return "\n".join(errors[-5:]) if errors else "(no message)"
 
 
+def _status(path: Path) -> str | None:
+    """The root attribute ``status`` of a run file (None: none, or not readable as HDF5)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            status = f.attrs.get("status")
+    except OSError:
+        return None
+    if status is None:
+        return None
+    return (status.decode(errors="replace") if isinstance(status, bytes) else str(status)).strip()
+
+
+def _check_output_folder(out: Path) -> None:
+    """``-o``'s folder must exist and take new files (probed: permissions, read-only mounts)."""
+    folder = out.parent
+    if not folder.is_dir():
+        if folder.exists() or any(p.exists() and not p.is_dir() for p in folder.parents):
+            raise InputError(f"-o: cannot write {out}: {next(p for p in [folder, *folder.parents] if p.exists())} "
+                             "is a file, not a folder")
+        raise InputError(f"-o: cannot write {out}: the folder {folder} does not exist")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".pyfold-write-test-", dir=folder)
+    except OSError as exc:
+        raise InputError(f"-o: cannot write {out}: the folder {folder} does not take new files "
+                         f"({exc.strerror or exc}); choose a writable location") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _plan_output(args: argparse.Namespace) -> tuple[Path, Path, Path, Path | None]:
+    """Check ``-o`` and what lies beside it, before any work.
+
+    Returns ``(out, partial, xmf, resume_from)``; ``resume_from`` is the file
+    ``--resume`` continues (``partial``, or a failed ``out``), None for a new run.
+    """
+    out = Path(args.output) if args.output else Path(Path(args.scene).stem + ".h5")
+    if out.suffix.lower() not in RUN_SUFFIXES:
+        raise InputError(f"-o: {out} must end in {', '.join(RUN_SUFFIXES)} (the run writes its XDMF to "
+                         f"{out.with_suffix('.xmf').name} and {out.name}.partial beside it), got "
+                         f"{out.suffix or 'no suffix'!r}")
+    partial = out.with_name(out.name + ".partial")
+    xmf = out.with_suffix(".xmf")
+    for path in (out, partial, xmf):
+        if path.exists() and not path.is_file():
+            raise InputError(f"-o: {path} exists and is not a file")
+    _check_output_folder(out)
+
+    resume_from = None
+    if args.resume:
+        if partial.exists():
+            resume_from = partial
+            if out.exists() and not args.force:
+                raise InputError(f"-o: {out} exists; resuming {partial.name} would replace it when complete: "
+                                 "pass --force to allow that")
+        elif out.exists():
+            status = _status(out)
+            if status is None or status == "ok":
+                raise InputError(f"--resume: nothing to resume: {out} is "
+                                 + ("complete (status ok)" if status == "ok" else "not a run file with a status")
+                                 + f" and there is no {partial.name}")
+            resume_from = out  # failed: its XDMF beside it is the run's own
+        else:
+            raise InputError(f"--resume: nothing to resume: neither {partial} nor a failed {out} exists")
+        if xmf.exists() and not args.force and resume_from is partial and not out.exists():
+            raise InputError(f"-o: {xmf} exists (the run writes its XDMF there); pass --force to replace it")
+        return out, partial, xmf, resume_from
+
+    if out.exists() and not args.force:
+        raise InputError(f"-o: {out} exists; pass --force to replace it (it stays intact until the new run is complete)")
+    if xmf.exists() and not args.force:
+        raise InputError(f"-o: {xmf} exists (the run writes its XDMF there, beside {out.name}); pass --force to "
+                         "replace it, or choose another -o")
+    if partial.exists() and not args.force:
+        raise InputError(f"-o: {partial} exists: an interrupted (or still running) run of {out.name}; "
+                         f"pass --resume to continue it from its last checkpoint, or --force to start again")
+    return out, partial, xmf, None
+
+
 def run(args: argparse.Namespace) -> int:
     from pyfold.scene import load_scene
 
-    if args.np < 1:
-        raise InputError(f"--np: must be an integer >= 1, got {args.np}")
-    out = Path(args.output) if args.output else Path(Path(args.scene).stem + ".h5")
-    if out.exists() and not args.force:
-        raise InputError(f"-o: {out} exists; pass --force to replace it (it stays intact until the new run is complete)")
-    if out.exists() and not out.is_file():
-        raise InputError(f"-o: {out} exists and is not a file")
-    if not out.parent.is_dir():
-        raise InputError(f"-o: folder {out.parent} does not exist")
-    partial = out.with_name(out.name + ".partial")
+    check_ranks(args.np, getattr(args, "oversubscribe", False))
+    if not hasattr(args, "resume"):
+        args.resume = False
+    out, partial, xmf, resume_from = _plan_output(args)
 
     resolved = load_scene(args.scene)
     for warning in resolved.warnings:
         print(f"pyfold run: warning: {warning}", file=sys.stderr)
     fold_run = find_fold_run()
-    command, env = _launch_command(fold_run, partial, args.np)
+    command, env = _launch_command(fold_run, partial, args.np, resume=resume_from is not None)
+    argv = getattr(args, "argv", None) or ([args.scene, "-o", str(out), "--np", str(args.np)]
+                                          + (["--force"] if args.force else []))
+    resume_hint = f"pyfold run {shlex.quote(str(args.scene))} -o {shlex.quote(str(out))} --resume"
 
-    from pyfold.run_file import write_run_file
-    from pyfold.scene.initial import initial_state
+    if resume_from is None:
+        from pyfold.run_file import write_run_file
+        from pyfold.scene.initial import initial_state
 
-    initial = initial_state(resolved)
-    cli = "pyfold run " + " ".join(shlex.quote(a) for a in getattr(args, "argv", None) or
-                                   [args.scene, "-o", str(out), "--np", str(args.np)] + (["--force"] if args.force else []))
-    write_run_file(partial, resolved, initial, cli)
-    rc, tail = _execute(command, env, resolved.n_steps)
+        initial = initial_state(resolved)
+        cli = "pyfold run " + " ".join(shlex.quote(a) for a in argv)
+        try:
+            write_run_file(partial, resolved, initial, cli)
+        except BaseException as exc:
+            partial.unlink(missing_ok=True)  # half-written: nothing to resume
+            if isinstance(exc, OSError):
+                raise InputError(f"-o: cannot write {partial}: {exc}") from None
+            raise
+        n_steps = resolved.n_steps
+    else:
+        from pyfold.run_file import read_setup
+
+        try:
+            setup = read_setup(resume_from)
+        except (OSError, KeyError) as exc:
+            raise InputError(f"--resume: {resume_from} is not a readable run file: {exc}") from None
+        if setup.scene_toml != Path(args.scene).read_text(encoding="utf-8"):
+            print(f"pyfold run: warning: {args.scene} differs from the scene {resume_from} was made from; "
+                  "--resume continues the run recorded in the file", file=sys.stderr)
+        n_steps = int(setup.resolved.get("n_steps", resolved.n_steps))
+        if resume_from != partial:
+            os.replace(resume_from, partial)  # a failed OUT.h5: continued as OUT.h5.partial
+        print(f"pyfold run: resuming {partial} from its last checkpoint", file=sys.stderr)
+    try:
+        rc, tail = _execute(command, env, n_steps)
+    except BaseException:
+        if partial.exists():
+            print(f"pyfold run: interrupted; the run so far is kept in {partial}; continue it with: {resume_hint}",
+                  file=sys.stderr)
+        raise
 
     if rc == 2:
         raise InputError(f"fold_run rejected the run file {partial} (kept for inspection):\n{_cause(tail)}")
@@ -187,15 +422,15 @@ def run(args: argparse.Namespace) -> int:
     os.replace(partial, out)
     from pyfold.runs import run_summary, write_xdmf
 
-    xmf = None
+    written = None
     try:
-        xmf = write_xdmf(out)
+        written = write_xdmf(out, xmf)
     except PyfoldError as exc:
         print(f"pyfold run: warning: no XDMF written: {exc}", file=sys.stderr)
     if rc != 0:
         raise PyfoldError(f"fold_run exited with status {rc}; results up to the last good state in {out}:\n"
                           f"{_cause(tail)}")
-    print(f"pyfold run: {out}" + (f" (ParaView: {xmf})" if xmf else ""))
+    print(f"pyfold run: {out}" + (f" (ParaView: {written})" if written else ""))
     print(resolved.summary().splitlines()[0])
     print(run_summary(out))
     return 0

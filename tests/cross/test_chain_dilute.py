@@ -41,7 +41,7 @@ def test_analyse_fits_ci_zero_with_the_runs_own_a4_and_judges_closures(dilute_ru
     [
         (["analyse", "/nonexistent/run.h5"], "RUN.h5: no such file"),
         (["main", "--scene", "/nonexistent/scene.toml"], "--scene: no such scene file"),
-        (["main", "--np", "0"], "--np: must be >= 1"),
+        (["main", "--np", "0"], "--np: must be an integer >= 1"),
         (["main", "--closures", ","], "--closures: give at least one closure name"),
     ],
 )
