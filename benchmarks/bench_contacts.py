@@ -36,7 +36,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "micro"))
-from test_run_common import fold_run_path, write_run_file, xi_of  # noqa: E402
+from test_run_common import write_run_file, xi_of  # noqa: E402
+
+from pyfold.commands.run import find_fold_run  # noqa: E402
 
 # Parameters
 N_L3 = 2.0
@@ -113,9 +115,7 @@ def main() -> None:
     args = ap.parse_args()
     global CLOCK
     CLOCK = args.clock
-    built = fold_run_path()
-    if built is None:
-        sys.exit("fold_run not built")
+    built = find_fold_run()  # PyfoldError with the places it looked in when not built
 
     # Run
     with tempfile.TemporaryDirectory() as d:

@@ -220,7 +220,11 @@ def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
     path = Path(path)
     xmf = Path(xmf) if xmf is not None else path.with_suffix(".xmf")
     h5name = path.name
-    with h5py.File(path, "r") as f:
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:  # e.g. left unreadable by a full disk: a message, not a traceback
+        raise PyfoldError(f"{path} cannot be opened as an HDF5 file: {exc}") from None
+    with f:
         check_format(f, path)
         if "initial" not in f or "x" not in f["initial"]:
             raise PyfoldError(f"{path}: no /initial/x to show")

@@ -1,4 +1,5 @@
-"""Every ``from pyfold... import name`` in the project names something that exists.
+"""Every ``from pyfold... import name`` (and every import from a test helper module such as
+``test_run_common``) in the project names something that exists.
 
 A test helper or a rarely run path (a study, a benchmark, an ``except ImportError``
 fallback) can import a name that was renamed or never defined; the import then fails
@@ -29,12 +30,20 @@ def project_python_files() -> list[Path]:
     return sorted(f for f in files if f.exists() and f.relative_to(ROOT).parts[0] in CHECKED)
 
 
+def helper_modules() -> dict[str, Path]:
+    """The test-suite helper modules that tests, benchmarks and studies import by bare
+    name after putting their folder on ``sys.path`` (``test_run_common``, ...)."""
+    return {f.stem: f for f in (ROOT / "tests").rglob("*.py") if not f.name.startswith("test_") or f.stem == "test_run_common"}
+
+
 def pyfold_imports(path: Path) -> list[tuple[int, str, str | None]]:
-    """(line, module, name) of each absolute pyfold import; name is None for ``import m``."""
+    """(line, module, name) of each absolute pyfold import, and of each import from a
+    test helper module; name is None for ``import m``."""
+    helpers = helper_modules()
     out = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
         if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module \
-                and node.module.split(".")[0] == "pyfold":
+                and (node.module.split(".")[0] == "pyfold" or node.module in helpers):
             out += [(node.lineno, node.module, alias.name) for alias in node.names if alias.name != "*"]
         elif isinstance(node, ast.Import):
             out += [(node.lineno, alias.name, None) for alias in node.names if alias.name.split(".")[0] == "pyfold"]
@@ -42,6 +51,20 @@ def pyfold_imports(path: Path) -> list[tuple[int, str, str | None]]:
 
 
 def unresolved(module: str, name: str | None) -> str | None:
+    helpers = helper_modules()
+    if module in helpers:
+        # a helper module: read its top-level names statically (no import side effects)
+        tree = ast.parse(helpers[module].read_text(encoding="utf-8"))
+        defined = set()
+        for node in tree.body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                defined.add(node.name)
+            elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                defined |= {t.id for t in targets if isinstance(t, ast.Name)}
+            elif isinstance(node, (ast.Import, ast.ImportFrom)):
+                defined |= {(a.asname or a.name).split(".")[0] for a in node.names}
+        return None if name in defined else f"{module} ({helpers[module].relative_to(ROOT)}) defines no {name!r}"
     try:
         mod = importlib.import_module(module)
     except ImportError as exc:
@@ -72,3 +95,5 @@ def test_the_import_check_catches_a_missing_name():
     assert unresolved("pyfold.no_such_module", "x")
     assert unresolved("pyfold.native", "stats") is None  # a submodule
     assert unresolved("pyfold.commands.run", "find_fold_run") is None
+    assert unresolved("test_run_common", "fold_run_path")  # removed: found as pyfold run finds it
+    assert unresolved("test_run_common", "write_run_file") is None

@@ -10,17 +10,40 @@
 !> messages start with `fold_run:`. This is the only program unit that stops the program.
 program fold_run
    use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
+   use, intrinsic :: iso_c_binding, only: c_int, c_intptr_t
    use mpi_f08
    use fold_status, only: FOLD_OK
    use fold_version, only: fold_version_string, fold_git_revision
    use fold_driver, only: run_outcome_t, run_driver
+   use fold_h5, only: h5_wedged
    implicit none
+
+   interface
+      !> sighandler_t signal(int signum, sighandler_t handler), handlers passed as integers
+      integer(c_intptr_t) function c_signal(signum, handler) bind(C, name="signal")
+         import :: c_int, c_intptr_t
+         integer(c_int), value :: signum
+         integer(c_intptr_t), value :: handler
+      end function c_signal
+      !> void _exit(int status): ends the process without exit handlers
+      subroutine c_exit(status) bind(C, name="_exit")
+         import :: c_int
+         integer(c_int), value :: status
+      end subroutine c_exit
+   end interface
+   !> SIGXFSZ (Linux) and SIG_IGN
+   integer(c_int), parameter :: SIGXFSZ = 25_c_int
+   integer(c_intptr_t), parameter :: SIG_IGN = 1_c_intptr_t
 
    type(run_outcome_t) :: outcome
    character(len=4096) :: arg, path
    logical :: resume
    integer :: rank, nargs, k, code
 
+   ! A file-size limit (ulimit -f) makes a write fail with EFBIG instead of killing
+   ! the process with SIGXFSZ (the Fortran runtime's handler would print a backtrace):
+   ! the run then stops like on a full disk, with exit 1 and the file's last good state.
+   if (c_signal(SIGXFSZ, SIG_IGN) == -1_c_intptr_t) continue
    call MPI_Init()
    call MPI_Comm_rank(MPI_COMM_WORLD, rank)
    path = ""
@@ -59,6 +82,13 @@ program fold_run
    end if
    flush (output_unit)
    flush (error_unit)
+   if (h5_wedged()) then
+      ! A file HDF5 could not close: terminating the library (MPI_Finalize runs its
+      ! exit hook) would crash on it (HDF5 < 1.14.1). Leave without exit handlers.
+      write (error_unit, '(a)') "fold_run: the run file could not be closed; ending without MPI_Finalize"
+      flush (error_unit)
+      call c_exit(int(max(code, 1), c_int))
+   end if
    call MPI_Finalize()
    if (code /= 0) stop code, quiet=.true.
 

@@ -31,12 +31,16 @@
 !> the rank sum of contact corrections (round-off). Rank 0 alone writes the file and
 !> broadcasts the status of each write, so an I/O failure stops every rank.
 !>
-!> Failure (contact cap with on_cap = stop, NaN, I/O, Stokes solver not converged:
+!> Failure (contact cap with on_cap = stop, NaN, Stokes solver not converged:
 !> the message gives the residual reached, the iterations and kappa): the state at the start of the
 !> failing step (the last good state) is restored and written as the last record,
 !> a snapshot and /checkpoint; the root attribute `status` says "failed: step N,
-!> t = T: cause" and `steps_done` = N - 1. Nothing here stops the program: the
-!> outcome is returned to `fold_run`.
+!> t = T: cause" and `steps_done` = N - 1. I/O failure (the first failed HDF5 call
+!> while writing the outputs of step N, fail_io): nothing more is written but the
+!> status "failed: step N, t = T: I/O: ..." (best effort, in a reopened file: see
+!> fold_output::output_failed_status); the whole records, snapshots and the last
+!> complete checkpoint stay as they were, `steps_done` = the step of the last whole
+!> record. Nothing here stops the program: the outcome is returned to `fold_run`.
 module fold_driver
    use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
    use mpi_f08
@@ -57,7 +61,8 @@ module fold_driver
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_init, stokes_context_destroy, &
                                stokes_rigid_velocities, FOLD_AB2
    use fold_output, only: run_output_t, run_record_t, record_init, output_open, output_resume, output_record, &
-                          output_snapshot, output_checkpoint, output_status, output_close
+                          output_snapshot, output_checkpoint, output_status, output_close, output_failed_status, &
+                          output_abandon
    implicit none
    private
 
@@ -100,6 +105,8 @@ contains
       integer :: rank, nranks, stat, s2
       character(len=msg_len) :: errmsg, m2
       integer(i8) :: step, step0, last_record, last_snapshot, progress_every
+      !> Rank 0: step of the last record / checkpoint completely written (-1: none yet)
+      integer(i8) :: whole_record, whole_checkpoint
       integer(ip) :: first, last
       integer, allocatable :: cnt_v(:), dsp_v(:), cnt_w(:), dsp_w(:)
       real(dp) :: t
@@ -175,6 +182,8 @@ contains
       call MPI_Barrier(MPI_COMM_WORLD)
       step0 = 0
       t = 0.0_dp
+      whole_record = -1
+      whole_checkpoint = -1
       if (rank == 0) then
          if (resume) then
             if (stokes) then
@@ -189,11 +198,19 @@ contains
       end if
       call share_status(stat, errmsg)
       if (stat /= FOLD_OK) then
-         if (rank == 0) call output_close(out, s2, m2)
+         if (rank == 0) then
+            if (stat == FOLD_IO_ERROR) then
+               call output_abandon(out, s2, m2)  ! a write failed: close without writing more
+            else
+               call output_close(out, s2, m2)
+            end if
+         end if
+         if (stat == FOLD_IO_ERROR) errmsg = "I/O: preparing the results in "//path//" failed: "//trim(errmsg)
          call finish_early(stat == FOLD_INPUT_ERROR)
          return
       end if
       if (resume) then
+         whole_checkpoint = step0
          call MPI_Bcast(step0, 1, MPI_INTEGER8, 0, MPI_COMM_WORLD)
          call MPI_Bcast(t, 1, MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
          call MPI_Bcast(parts%x, size(parts%x), MPI_DOUBLE_PRECISION, 0, MPI_COMM_WORLD)
@@ -229,7 +246,7 @@ contains
       if (.not. resume) then
          call write_outputs(0_i8, 0.0_dp, .true.)
          if (stat /= FOLD_OK) then
-            call fail(0_i8, "I/O: "//trim(errmsg), FOLD_IO_ERROR)
+            call fail_io(0_i8, errmsg)
             return
          end if
       end if
@@ -341,7 +358,7 @@ contains
 
          call write_outputs(step, t, step == setup%nsteps)
          if (stat /= FOLD_OK) then
-            call fail(step + 1, "I/O: "//trim(errmsg), FOLD_IO_ERROR)
+            call fail_io(step, errmsg)
             return
          end if
          if (rank == 0 .and. (mod(step, progress_every) == 0 .or. step == setup%nsteps)) then
@@ -352,10 +369,11 @@ contains
 
       if (rank == 0) then
          call output_status(out, "ok", setup%nsteps, stat, errmsg)
-         call output_close(out, s2, m2)
-         if (stat == FOLD_OK .and. s2 /= FOLD_OK) then
-            stat = s2
-            errmsg = m2
+         if (stat == FOLD_OK) then
+            call output_close(out, stat, errmsg)
+         else
+            ! a failed flush: close without writing more (status stays "running")
+            call output_abandon(out, s2, m2)
          end if
       end if
       call share_status(stat, errmsg)
@@ -363,7 +381,12 @@ contains
       outcome%stat = stat
       outcome%steps_done = setup%nsteps
       outcome%time = t
-      if (stat /= FOLD_OK) outcome%errmsg = "I/O: "//trim(errmsg)
+      if (stat /= FOLD_OK) then
+         ! every step is computed and written; only the final status or the close failed
+         write (m2, '(a,i0,a)') "I/O: recording the end of the run (step ", setup%nsteps, ") failed: "
+         outcome%errmsg = trim(m2)//" "//trim(errmsg)// &
+                          "; the records and the checkpoint are whole, but the status attribute may still read 'running'"
+      end if
       call h5_stop()
 
    contains
@@ -380,14 +403,20 @@ contains
             if (mod(st, setup%output_every) == 0 .or. final) then
                call fill_record(rec, st, time, parts, setup%n_families)
                call output_record(out, rec, stat, errmsg)
-               if (stat == FOLD_OK) call reset_record(rec)
+               if (stat == FOLD_OK) then
+                  call reset_record(rec)
+                  whole_record = st
+               end if
             end if
             if (stat == FOLD_OK .and. setup%snapshot_every > 0) then
                if (mod(st, setup%snapshot_every) == 0 .or. final) &
                   call output_snapshot(out, st, time, parts, stat, errmsg)
             end if
             if (stat == FOLD_OK .and. setup%checkpoint_every > 0) then
-               if (mod(st, setup%checkpoint_every) == 0 .or. final) call checkpoint(st, time, stat, errmsg)
+               if (mod(st, setup%checkpoint_every) == 0 .or. final) then
+                  call checkpoint(st, time, stat, errmsg)
+                  if (stat == FOLD_OK) whole_checkpoint = st
+               end if
             end if
          end if
          if (mod(st, setup%output_every) == 0 .or. final) then
@@ -475,16 +504,19 @@ contains
          write (text, '(a,i0,a,es23.16,a,a)') "failed: step ", failed_step, ", t = ", &
             real(failed_step, dp)*setup%dt, ": ", trim(cause)
          ws = FOLD_OK
+         m2 = ""
          if (rank == 0 .and. out%file >= 0) then
-            ! After an I/O failure the file may refuse more writes; try anyway.
+            ! Each write only after the previous one succeeded: a file that refuses one
+            ! (full disk) is not written into further, apart from the status (best effort).
             if (last_record /= good_step .and. good_step >= 0) then
                call fill_record(rec, good_step, good_t, parts, setup%n_families)
                call output_record(out, rec, ws, m2)
             end if
-            if (last_snapshot /= good_step .and. good_step >= 0) call output_snapshot(out, good_step, good_t, parts, ws, m2)
-            if (good_step >= 0) call checkpoint(good_step, good_t, ws, m2)
-            call output_status(out, trim(text), max(good_step, 0_i8), ws, m2)
-            call output_close(out, ws, m2)
+            if (ws == FOLD_OK .and. last_snapshot /= good_step .and. good_step >= 0) &
+               call output_snapshot(out, good_step, good_t, parts, ws, m2)
+            if (ws == FOLD_OK .and. good_step >= 0) call checkpoint(good_step, good_t, ws, m2)
+            if (ws /= FOLD_OK) text = trim(text)//"; writing the last good state failed too: I/O: "//trim(m2)
+            call record_status(text, max(good_step, 0_i8), ws == FOLD_OK)
          end if
          outcome%stat = code
          outcome%errmsg = text
@@ -493,6 +525,73 @@ contains
          if (stokes) call stokes_context_destroy(ctx)
          call h5_stop()
       end subroutine fail
+
+      !> Stop after the outputs of step `st` could not be written (`cause`: the first
+      !> failed HDF5 call, naming the dataset). Nothing more is written into the file but
+      !> the status (best effort: on a full disk that may fail too, and stderr says so):
+      !> the whole records and snapshots (records_complete, snapshots_complete) and the
+      !> last complete checkpoint stay as they are, so readers and --resume see the
+      !> last good state. steps_done = the step of the last whole record.
+      subroutine fail_io(st, cause)
+         integer(i8), intent(in) :: st
+         character(len=*), intent(in) :: cause
+         character(len=msg_len) :: text
+         integer(i8) :: kept
+
+         write (text, '(a,i0,a,es23.16,a,i0,a,a)') "failed: step ", st, ", t = ", real(st, dp)*setup%dt, &
+            ": I/O: writing the outputs of step ", st, " failed: ", trim(cause)
+         kept = max(whole_record, 0_i8)
+         if (rank == 0) then
+            if (whole_record >= 0) then
+               write (m2, '(a,i0)') "; the file keeps the whole records up to step ", whole_record
+            else if (resume) then
+               m2 = "; the file keeps the whole records written before this resume"
+               kept = step0
+            else
+               m2 = "; no record of this run is complete in the file"
+            end if
+            if (whole_checkpoint >= 0) write (m2, '(a,a,i0,a)') trim(m2), " and the checkpoint of step ", &
+               whole_checkpoint, " (continue with --resume once there is space)"
+            text = trim(text)//trim(m2)
+            if (out%file >= 0) call record_status(text, kept, .false.)
+         end if
+         call MPI_Bcast(text, msg_len, MPI_CHARACTER, 0, MPI_COMM_WORLD)
+         outcome%stat = FOLD_IO_ERROR
+         outcome%errmsg = text
+         call MPI_Bcast(kept, 1, MPI_INTEGER8, 0, MPI_COMM_WORLD)
+         outcome%steps_done = kept
+         outcome%time = real(outcome%steps_done, dp)*setup%dt
+         if (stokes) call stokes_context_destroy(ctx)
+         call h5_stop()
+      end subroutine fail_io
+
+      !> Rank 0: set `status` and `steps_done`, flush and close the file; stderr says so
+      !> when that failed (the status then reads "running", or is missing).
+      subroutine record_status(text, done, clean)
+         character(len=*), intent(in) :: text
+         integer(i8), intent(in) :: done
+         !> Every write so far succeeded (else the file is closed without writing more
+         !> into it and reopened for the status: output_failed_status)
+         logical, intent(in) :: clean
+         integer :: ss, sc
+         character(len=msg_len) :: ms, mc
+         if (clean) then
+            call output_status(out, trim(text), done, ss, ms)
+            if (ss == FOLD_OK) then
+               call output_close(out, ss, ms)
+            else
+               call output_abandon(out, sc, mc)  ! the flush failed: close without writing more
+               if (sc /= FOLD_OK) ms = trim(ms)//"; "//trim(mc)
+            end if
+         else
+            call output_failed_status(out, path, trim(text), done, ss, ms)
+         end if
+         if (ss /= FOLD_OK) then
+            write (error_unit, '(a)') "fold_run: the failure could not be recorded in "//path// &
+               " (status attribute: I/O: "//trim(ms)//"); its status attribute may still read 'running'"
+            flush (error_unit)
+         end if
+      end subroutine record_status
 
       !> Return before any step: rejected run file or unusable output file.
       subroutine finish_early(input_problem)

@@ -4,6 +4,14 @@
 !> missing or wrong, FOLD_IO_ERROR for a file or HDF5 call that fails)
 !> and an `errmsg` that names the object (full path, e.g. `/setup/resolved/dt`).
 !>
+!> Every HDF5 call's status is checked, also of the close calls: with HDF5's caches
+!> (chunk cache, sieve buffer, metadata cache) a write can succeed in memory and its
+!> data reach the disk only at h5dclose_f / h5fflush_f, so on a full disk it is often
+!> a close or a flush that fails. A routine reports the *first* failure of its calls
+!> (later clean-up calls never overwrite it), and the message ends with the system's
+!> cause taken from the HDF5 error stack when there is one (e.g. "(No space left on
+!> device)", "(File too large)"; see h5_cause).
+!>
 !> Array order: HDF5's Fortran API reverses the C dimension order, so a Fortran
 !> array `a(d, n, nt)` is seen by h5py/xarray as `(nt, n, d)`. All shapes passed
 !> here are in Fortran order; the *last* Fortran dimension is the one that can
@@ -14,7 +22,8 @@
 !> to each of its dimensions, which is what netCDF-4 and `h5netcdf` read as
 !> named dimensions (`xarray.open_dataset(path, engine="h5netcdf")`).
 module fold_h5
-   use, intrinsic :: iso_c_binding, only: c_ptr, c_loc, c_char, c_null_char, c_int64_t
+   use, intrinsic :: iso_c_binding, only: c_ptr, c_loc, c_char, c_null_char, c_int64_t, c_int, c_size_t, &
+                                          c_funptr, c_funloc, c_null_ptr, c_associated, c_f_pointer
    use hdf5
    use h5ds, only: h5dsset_scale_f, h5dsattach_scale_f
    use fold_kinds, only: dp, ip, i8, msg_len
@@ -32,6 +41,73 @@ module fold_h5
    public :: h5_var_length, h5_var_truncate
    public :: h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
    public :: h5_put_real_array, h5_put_real_scalar, h5_put_int_scalar
+   public :: h5_cause, h5_abandon_file, h5_wedged
+
+   !> One entry of the HDF5 error stack (H5E_error2_t of H5Epublic.h).
+   type, bind(C) :: h5e_entry_t
+      integer(c_int64_t) :: cls_id, maj_num, min_num
+      integer(c_int) :: line
+      type(c_ptr) :: func_name, file_name, desc
+   end type h5e_entry_t
+
+   !> struct rlimit of Linux (rlim_t = unsigned long)
+   type, bind(C) :: rlimit_t
+      integer(c_int64_t) :: cur, max
+   end type rlimit_t
+   !> RLIMIT_FSIZE of Linux
+   integer(c_int), parameter :: RLIMIT_FSIZE = 1_c_int
+
+   interface
+      !> herr_t H5Ewalk2(hid_t err_stack, H5E_direction_t direction, H5E_walk2_t func, void *client_data)
+      integer(c_int) function c_h5ewalk2(stack, direction, func, data) bind(C, name="H5Ewalk2")
+         import :: c_int, c_int64_t, c_funptr, c_ptr
+         integer(c_int64_t), value :: stack
+         integer(c_int), value :: direction
+         type(c_funptr), value :: func
+         type(c_ptr), value :: data
+      end function c_h5ewalk2
+      integer(c_size_t) function c_strlen(text) bind(C, name="strlen")
+         import :: c_size_t, c_ptr
+         type(c_ptr), value :: text
+      end function c_strlen
+      !> herr_t H5Fget_vfd_handle(hid_t file_id, hid_t fapl, void **file_handle)
+      integer(c_int) function c_h5fget_vfd_handle(file, fapl, handle) bind(C, name="H5Fget_vfd_handle")
+         import :: c_int, c_int64_t, c_ptr
+         integer(c_int64_t), value :: file, fapl
+         type(c_ptr), intent(out) :: handle
+      end function c_h5fget_vfd_handle
+      !> int memfd_create(const char *name, unsigned int flags) (Linux, glibc >= 2.27)
+      integer(c_int) function c_memfd_create(name, flags) bind(C, name="memfd_create")
+         import :: c_int, c_char
+         character(kind=c_char), intent(in) :: name(*)
+         integer(c_int), value :: flags
+      end function c_memfd_create
+      integer(c_int) function c_dup2(old, new) bind(C, name="dup2")
+         import :: c_int
+         integer(c_int), value :: old, new
+      end function c_dup2
+      integer(c_int) function c_close(fd) bind(C, name="close")
+         import :: c_int
+         integer(c_int), value :: fd
+      end function c_close
+      integer(c_int) function c_getrlimit(resource, limit) bind(C, name="getrlimit")
+         import :: c_int, rlimit_t
+         integer(c_int), value :: resource
+         type(rlimit_t), intent(out) :: limit
+      end function c_getrlimit
+      integer(c_int) function c_setrlimit(resource, limit) bind(C, name="setrlimit")
+         import :: c_int, rlimit_t
+         integer(c_int), value :: resource
+         type(rlimit_t), intent(in) :: limit
+      end function c_setrlimit
+   end interface
+
+   !> Cause found by the current walk of the error stack (see h5_cause)
+   character(len=200), save :: walk_cause = ""
+   !> A file could not be closed (h5_abandon_file failed): terminating the HDF5
+   !> library would crash on it, so h5_stop leaves it alone (see h5_wedged)
+   logical, save :: wedged = .false.
+
 
    !> Element types of h5_var_create
    integer, parameter, public :: FOLD_H5_REAL = 1, FOLD_H5_INT = 2
@@ -49,13 +125,23 @@ contains
       call h5open_f(err)
       if (.not. ok(err, "h5open_f: cannot initialise the HDF5 library", stat, errmsg)) return
       call h5eset_auto_f(0, err)
+      call check_err(err, "h5eset_auto_f: cannot silence the HDF5 error printing", stat, errmsg)
    end subroutine h5_start
 
-   !> Close the HDF5 library.
+   !> Close the HDF5 library (not when a file could not be closed: see h5_wedged).
    subroutine h5_stop()
       integer :: err
+      if (wedged) return
       call h5close_f(err)
    end subroutine h5_stop
+
+   !> True when a file could not be closed even by h5_abandon_file: HDF5 1.10 keeps
+   !> a freed file under its identifier, and terminating the library (h5close_f,
+   !> MPI_Finalize, exit handlers) would crash on it. The program must then end
+   !> without terminating the library (fold_run: _exit after its messages).
+   logical function h5_wedged()
+      h5_wedged = wedged
+   end function h5_wedged
 
    !> Open an existing file read-only (`writable = .false.`) or read-write.
    subroutine h5_open_file(path, writable, file, stat, errmsg)
@@ -96,8 +182,73 @@ contains
       if (file < 0) return
       call h5fclose_f(file, err)
       file = -1
-      if (.not. ok(err, "h5fclose_f failed", stat, errmsg)) return
+      if (.not. ok(err, "closing the file failed (h5fclose_f: its last changes may not be on disk)", &
+                   stat, errmsg)) wedged = .true.
    end subroutine h5_close_file
+
+   !> Close a file whose writes fail (full disk) without writing anything more into it:
+   !> the file on disk stays as the last successful write left it, as after a kill.
+   !>
+   !> HDF5's close flushes its caches; when that flush fails, HDF5 1.10 (before
+   !> 1.14.1, HDFGroup/hdf5#2291) frees the file but keeps its identifier, and the
+   !> library's termination (h5close_f, MPI_Finalize) then crashes on it (SIGSEGV).
+   !> So the file driver's descriptor is first redirected (dup2) to an anonymous
+   !> in-memory file (memfd_create): the close flushes into that and succeeds. Only
+   !> for the sec2 driver (the default, one process writing). stat reports when the
+   !> redirection or the close failed; then the library is wedged (h5_wedged). A
+   !> file-size limit (ulimit -f) applies to the memory file too: its soft limit is
+   !> raised to the hard limit for the close, and restored after it.
+   subroutine h5_abandon_file(file, stat, errmsg)
+      integer(hid_t), intent(inout) :: file
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      type(c_ptr) :: handle
+      integer(c_int), pointer :: fd
+      integer(c_int) :: mem, rc
+      integer :: err
+      type(rlimit_t) :: limit, raised
+      logical :: have_limit
+
+      stat = FOLD_OK
+      errmsg = ""
+      if (file < 0) return
+      rc = c_h5fget_vfd_handle(int(file, c_int64_t), 0_c_int64_t, handle)
+      if (rc < 0 .or. .not. c_associated(handle)) then
+         stat = FOLD_IO_ERROR
+         errmsg = "cannot abandon the file: H5Fget_vfd_handle failed"//h5_cause()
+         wedged = .true.
+         return
+      end if
+      call c_f_pointer(handle, fd)
+      mem = c_memfd_create("fold_run_abandoned"//c_null_char, 0_c_int)
+      if (mem < 0) then
+         stat = FOLD_IO_ERROR
+         errmsg = "cannot abandon the file: memfd_create failed"
+         wedged = .true.
+         return
+      end if
+      rc = c_dup2(mem, fd)
+      if (c_close(mem) < 0) continue  ! fd keeps the memory file open
+      if (rc < 0) then
+         stat = FOLD_IO_ERROR
+         errmsg = "cannot abandon the file: dup2 failed"
+         wedged = .true.
+         return
+      end if
+      have_limit = c_getrlimit(RLIMIT_FSIZE, limit) == 0
+      if (have_limit) then
+         raised = limit
+         raised%cur = limit%max
+         if (c_setrlimit(RLIMIT_FSIZE, raised) /= 0) have_limit = .false.
+      end if
+      call h5fclose_f(file, err)
+      file = -1
+      if (have_limit) then
+         if (c_setrlimit(RLIMIT_FSIZE, limit) /= 0) continue
+      end if
+      call check_err(err, "closing the abandoned file failed (h5fclose_f)", stat, errmsg)
+      if (stat /= FOLD_OK) wedged = .true.
+   end subroutine h5_abandon_file
 
    !> Push everything written so far to disk (a crash then keeps it).
    subroutine h5_flush(file, stat, errmsg)
@@ -106,7 +257,7 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       integer :: err
       call h5fflush_f(file, H5F_SCOPE_GLOBAL_F, err)
-      if (.not. ok(err, "h5fflush_f failed", stat, errmsg)) return
+      if (.not. ok(err, "flushing the file failed (h5fflush_f)", stat, errmsg)) return
    end subroutine h5_flush
 
    ! ------------------------------------------------------------------ queries
@@ -156,14 +307,16 @@ contains
             write (errmsg, '(a,a,i0)') name, ": rank > 7 not supported, got ", rank
          else if (rank > 0) then
             call h5sget_simple_extent_dims_f(space, shape(1:rank), maxdims(1:rank), err)
-            if (err < 0) then
-               stat = FOLD_IO_ERROR
-               errmsg = name//": cannot read its extents"
-            end if
+            if (err < 0) call check_err(err, name//": cannot read its extents", stat, errmsg)
+         else if (rank < 0) then
+            call check_err(rank, name//": cannot read its rank", stat, errmsg)
+            rank = 0
          end if
          call h5sclose_f(space, err)
+         call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
       end if
       call h5dclose_f(dset, err)
+      call keep_first(err, name//": h5dclose_f failed", stat, errmsg)
    end subroutine h5_shape
 
    ! ------------------------------------------------------------------ reading
@@ -222,6 +375,7 @@ contains
          call check_err(err, name//": read failed", stat, errmsg)
       end if
       call h5dclose_f(dset, err)
+      call keep_first(err, name//": h5dclose_f failed", stat, errmsg)
    end subroutine h5_read_int_array
 
    !> Read a real (or integer, converted) dataset of the expected Fortran-order shape.
@@ -248,6 +402,7 @@ contains
          call check_err(err, name//": read failed", stat, errmsg)
       end if
       call h5dclose_f(dset, err)
+      call keep_first(err, name//": h5dclose_f failed", stat, errmsg)
    end subroutine h5_read_real_array
 
    ! ------------------------------------------------------------------ attributes
@@ -269,16 +424,26 @@ contains
       if (.not. ok(err, "attribute "//name//": h5tcopy_f failed", stat, errmsg)) return
       ! H5T_VARIABLE is (size_t)-1 in C; the 1.10 Fortran API has no named constant.
       call h5tset_size_f(vtype, -1_size_t, err)
-      call h5tset_cset_f(vtype, H5T_CSET_UTF8_F, err)
-      call h5screate_f(H5S_SCALAR_F, space, err)
-      call replace_attr(loc, name, vtype, space, attr, stat, errmsg)
-      if (stat == FOLD_OK) then
-         call h5awrite_f(attr, vtype, c_loc(ptr), err)
-         call check_err(err, "attribute "//name//": write failed", stat, errmsg)
-         call h5aclose_f(attr, err)
+      if (ok(err, "attribute "//name//": h5tset_size_f failed", stat, errmsg)) then
+         call h5tset_cset_f(vtype, H5T_CSET_UTF8_F, err)
+         call check_err(err, "attribute "//name//": h5tset_cset_f failed", stat, errmsg)
       end if
-      call h5sclose_f(space, err)
+      if (stat == FOLD_OK) then
+         call h5screate_f(H5S_SCALAR_F, space, err)
+         if (ok(err, "attribute "//name//": h5screate_f failed", stat, errmsg)) then
+            call replace_attr(loc, name, vtype, space, attr, stat, errmsg)
+            if (stat == FOLD_OK) then
+               call h5awrite_f(attr, vtype, c_loc(ptr), err)
+               call check_err(err, "attribute "//name//": write failed", stat, errmsg)
+               call h5aclose_f(attr, err)
+               call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
+            end if
+            call h5sclose_f(space, err)
+            call keep_first(err, "attribute "//name//": h5sclose_f failed", stat, errmsg)
+         end if
+      end if
       call h5tclose_f(vtype, err)
+      call keep_first(err, "attribute "//name//": h5tclose_f failed", stat, errmsg)
    end subroutine h5_attr_string
 
    !> Write a 64-bit integer scalar attribute. An existing attribute's value is
@@ -297,23 +462,27 @@ contains
       v = value
       itype = h5kind_to_type(c_int64_t, H5_INTEGER_KIND)
       call h5aexists_f(loc, name, there, err)
-      if (err >= 0 .and. there) then
+      if (.not. ok(err, "attribute "//name//": cannot query", stat, errmsg)) return
+      if (there) then
          call h5aopen_f(loc, name, attr, err)
-         if (err >= 0) then
-            call h5awrite_f(attr, itype, c_loc(v), err)
-            call check_err(err, "attribute "//name//": write failed", stat, errmsg)
-            call h5aclose_f(attr, err)
-            return
-         end if
+         if (.not. ok(err, "attribute "//name//": cannot open", stat, errmsg)) return
+         call h5awrite_f(attr, itype, c_loc(v), err)
+         call check_err(err, "attribute "//name//": write failed", stat, errmsg)
+         call h5aclose_f(attr, err)
+         call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
+         return
       end if
       call h5screate_f(H5S_SCALAR_F, space, err)
+      if (.not. ok(err, "attribute "//name//": h5screate_f failed", stat, errmsg)) return
       call replace_attr(loc, name, itype, space, attr, stat, errmsg)
       if (stat == FOLD_OK) then
          call h5awrite_f(attr, itype, c_loc(v), err)
          call check_err(err, "attribute "//name//": write failed", stat, errmsg)
          call h5aclose_f(attr, err)
+         call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
       end if
       call h5sclose_f(space, err)
+      call keep_first(err, "attribute "//name//": h5sclose_f failed", stat, errmsg)
    end subroutine h5_attr_int
 
    !> Write (replace) a real scalar attribute.
@@ -328,13 +497,16 @@ contains
       integer :: err
       v = value
       call h5screate_f(H5S_SCALAR_F, space, err)
+      if (.not. ok(err, "attribute "//name//": h5screate_f failed", stat, errmsg)) return
       call replace_attr(loc, name, H5T_NATIVE_DOUBLE, space, attr, stat, errmsg)
       if (stat == FOLD_OK) then
          call h5awrite_f(attr, H5T_NATIVE_DOUBLE, c_loc(v), err)
          call check_err(err, "attribute "//name//": write failed", stat, errmsg)
          call h5aclose_f(attr, err)
+         call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
       end if
       call h5sclose_f(space, err)
+      call keep_first(err, "attribute "//name//": h5sclose_f failed", stat, errmsg)
    end subroutine h5_attr_real
 
    !> Read a scalar integer attribute; `found` = .false. (and stat = FOLD_OK) when absent.
@@ -360,6 +532,7 @@ contains
       call h5aread_f(attr, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), ptr, err)
       call check_err(err, "attribute "//name//": read failed", stat, errmsg)
       call h5aclose_f(attr, err)
+      call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
    end subroutine h5_read_attr_int
 
    ! ------------------------------------------------------------------ groups, links
@@ -378,6 +551,7 @@ contains
       call h5gcreate_f(loc, name, grp, err)
       if (.not. ok(err, name//": cannot create group", stat, errmsg)) return
       call h5gclose_f(grp, err)
+      call keep_first(err, name//": h5gclose_f failed", stat, errmsg)
    end subroutine h5_make_group
 
    !> Unlink an object if it exists (used to replace a checkpoint).
@@ -413,11 +587,13 @@ contains
       call h5screate_simple_f(size(shape), shape, space, err)
       if (.not. ok(err, name//": dataspace", stat, errmsg)) return
       call h5dcreate_f(loc, name, H5T_NATIVE_DOUBLE, space, dset, err)
+      call check_err(err, name//": cannot create dataset", stat, errmsg)
       call h5sclose_f(space, err)
-      if (.not. ok(err, name//": cannot create dataset", stat, errmsg)) return
+      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+      if (stat /= FOLD_OK) return
       call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(buf), err)
       if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, units, long_name, stat, errmsg)
-      call h5dclose_f(dset, err)
+      call close_dataset(dset, name, stat, errmsg)
    end subroutine h5_write_real_array
 
    !> Write a scalar real dataset (replacing any previous one).
@@ -435,12 +611,15 @@ contains
       call h5_delete(loc, name, stat, errmsg)
       if (stat /= FOLD_OK) return
       call h5screate_f(H5S_SCALAR_F, space, err)
+      if (.not. ok(err, name//": dataspace", stat, errmsg)) return
       call h5dcreate_f(loc, name, H5T_NATIVE_DOUBLE, space, dset, err)
+      call check_err(err, name//": cannot create dataset", stat, errmsg)
       call h5sclose_f(space, err)
-      if (.not. ok(err, name//": cannot create dataset", stat, errmsg)) return
+      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+      if (stat /= FOLD_OK) return
       call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(v), err)
       if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, units, long_name, stat, errmsg)
-      call h5dclose_f(dset, err)
+      call close_dataset(dset, name, stat, errmsg)
    end subroutine h5_write_real_scalar
 
    !> Write a scalar 64-bit integer dataset (replacing any previous one).
@@ -459,12 +638,15 @@ contains
       call h5_delete(loc, name, stat, errmsg)
       if (stat /= FOLD_OK) return
       call h5screate_f(H5S_SCALAR_F, space, err)
+      if (.not. ok(err, name//": dataspace", stat, errmsg)) return
       call h5dcreate_f(loc, name, itype, space, dset, err)
+      call check_err(err, name//": cannot create dataset", stat, errmsg)
       call h5sclose_f(space, err)
-      if (.not. ok(err, name//": cannot create dataset", stat, errmsg)) return
+      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+      if (stat /= FOLD_OK) return
       call h5dwrite_f(dset, itype, c_loc(v), err)
       if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, "1", long_name, stat, errmsg)
-      call h5dclose_f(dset, err)
+      call close_dataset(dset, name, stat, errmsg)
    end subroutine h5_write_int_scalar
 
    !> Like h5_write_real_array, but a dataset that exists with the same shape and a
@@ -483,7 +665,7 @@ contains
       if (open_same(loc, name, shape, H5T_FLOAT_F, dset)) then
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(buf), err)
          call check_err(err, name//": write failed", stat, errmsg)
-         call h5dclose_f(dset, err)
+         call close_dataset(dset, name, stat, errmsg)
       else
          call h5_write_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
       end if
@@ -504,7 +686,7 @@ contains
       if (open_same(loc, name, [integer(hsize_t) ::], H5T_FLOAT_F, dset)) then
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(v), err)
          call check_err(err, name//": write failed", stat, errmsg)
-         call h5dclose_f(dset, err)
+         call close_dataset(dset, name, stat, errmsg)
       else
          call h5_write_real_scalar(loc, name, value, units, long_name, stat, errmsg)
       end if
@@ -525,7 +707,7 @@ contains
       if (open_same(loc, name, [integer(hsize_t) ::], H5T_INTEGER_F, dset)) then
          call h5dwrite_f(dset, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(v), err)
          call check_err(err, name//": write failed", stat, errmsg)
-         call h5dclose_f(dset, err)
+         call close_dataset(dset, name, stat, errmsg)
       else
          call h5_write_int_scalar(loc, name, value, long_name, stat, errmsg)
       end if
@@ -550,7 +732,7 @@ contains
       if (size(values) > 0) then
          call h5dwrite_f(dset, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(values), err)
          if (.not. ok(err, name//": write failed", stat, errmsg)) then
-            call h5dclose_f(dset, err)
+            call close_dataset(dset, name, stat, errmsg)
             return
          end if
       end if
@@ -573,7 +755,7 @@ contains
       if (size(values) > 0) then
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(values), err)
          if (.not. ok(err, name//": write failed", stat, errmsg)) then
-            call h5dclose_f(dset, err)
+            call close_dataset(dset, name, stat, errmsg)
             return
          end if
       end if
@@ -611,9 +793,9 @@ contains
          ! The H5DS Fortran binding takes the C (row-major) dimension index + 1.
          call h5dsattach_scale_f(dset, scale, r - k + 1, err)
          call check_err(err, name//": cannot attach dimension "//trim(dimnames(k)), stat, errmsg)
-         call h5dclose_f(scale, err)
+         call close_dataset(scale, trim(dimnames(k)), stat, errmsg)
       end do
-      call h5dclose_f(dset, err)
+      call close_dataset(dset, name, stat, errmsg)
    end subroutine h5_var_create
 
    !> Current length of the last (growing) dimension of a variable.
@@ -647,7 +829,7 @@ contains
       if (.not. open_dataset(loc, name, dset, stat, errmsg)) return
       call h5dset_extent_f(dset, shape(1:rank), err)
       call check_err(err, name//": cannot change its extent", stat, errmsg)
-      call h5dclose_f(dset, err)
+      call close_dataset(dset, name, stat, errmsg)
    end subroutine h5_var_truncate
 
    !> Write one record (all but the last dimension) at position `record` (1-based)
@@ -676,7 +858,9 @@ contains
 
    ! ------------------------------------------------------------------ internals
 
-   !> Turn an HDF5 error code into stat/errmsg; true when the call succeeded.
+   !> Turn an HDF5 error code into stat/errmsg; true when the call succeeded. The
+   !> message is `what` followed by the system's cause (h5_cause), so call this right
+   !> after the failing HDF5 call, before any other HDF5 call clears the error stack.
    logical function ok(err, what, stat, errmsg)
       integer, intent(in) :: err
       character(len=*), intent(in) :: what
@@ -688,9 +872,85 @@ contains
          errmsg = ""
       else
          stat = FOLD_IO_ERROR
-         errmsg = what
+         errmsg = what//h5_cause()
       end if
    end function ok
+
+   !> Record a failed call unless an earlier call of the same routine failed already
+   !> (clean-up calls after a failure never replace its message).
+   subroutine keep_first(err, what, stat, errmsg)
+      integer, intent(in) :: err
+      character(len=*), intent(in) :: what
+      integer, intent(inout) :: stat
+      character(len=msg_len), intent(inout) :: errmsg
+      if (err >= 0 .or. stat /= FOLD_OK) return
+      stat = FOLD_IO_ERROR
+      errmsg = what//h5_cause()
+   end subroutine keep_first
+
+   !> Close a dataset, reporting a failure (the data held in HDF5's chunk cache or
+   !> sieve buffer is written at this point) unless an earlier failure is reported.
+   subroutine close_dataset(dset, name, stat, errmsg)
+      integer(hid_t), intent(in) :: dset
+      character(len=*), intent(in) :: name
+      integer, intent(inout) :: stat
+      character(len=msg_len), intent(inout) :: errmsg
+      integer :: err
+      if (dset < 0) return
+      call h5dclose_f(dset, err)
+      call keep_first(err, name//": closing the dataset failed (h5dclose_f: its data did not reach the file)", &
+                      stat, errmsg)
+   end subroutine close_dataset
+
+   !> The system's cause of the last failed HDF5 call, from the library's error stack:
+   !> " (No space left on device)" for a write the file system refused (the text of
+   !> errno that HDF5's file driver records), else the innermost HDF5 message, e.g.
+   !> " (HDF5: ...)"; "" when the stack is empty.
+   function h5_cause() result(cause)
+      character(len=:), allocatable :: cause
+      integer(c_int) :: rc
+      walk_cause = ""
+      ! H5E_DEFAULT = 0, H5E_WALK_UPWARD = 0 (innermost entry first)
+      rc = c_h5ewalk2(0_c_int64_t, 0_c_int, c_funloc(walk_entry), c_null_ptr)
+      if (rc < 0 .or. len_trim(walk_cause) == 0) then
+         cause = ""
+      else
+         cause = " ("//trim(walk_cause)//")"
+      end if
+   end function h5_cause
+
+   !> H5Ewalk2 callback: keep the first errno text ("error message = '...'") of the
+   !> stack, else its innermost description.
+   integer(c_int) function walk_entry(n, entry, data) bind(C)
+      integer(c_int), value :: n
+      type(h5e_entry_t), intent(in) :: entry
+      type(c_ptr), value :: data
+      character(kind=c_char), pointer :: chars(:)
+      character(len=:), allocatable :: text
+      integer :: k, lo, hi
+      integer(c_size_t) :: length
+      character(len=*), parameter :: KEY = "error message = '"
+
+      walk_entry = 0
+      if (c_associated(data)) continue  ! (no client data)
+      if (.not. c_associated(entry%desc)) return
+      length = c_strlen(entry%desc)
+      call c_f_pointer(entry%desc, chars, [length])
+      allocate (character(len=length) :: text)
+      do k = 1, int(length)
+         text(k:k) = chars(k)
+      end do
+      lo = index(text, KEY)
+      if (lo > 0) then
+         hi = index(text(lo + len(KEY):), "'")
+         if (hi > 1) then
+            walk_cause = text(lo + len(KEY):lo + len(KEY) + hi - 2)
+            walk_entry = 1  ! stop the walk: this is the system's cause
+            return
+         end if
+      end if
+      if (n == 0 .and. len_trim(walk_cause) == 0) walk_cause = "HDF5: "//text
+   end function walk_entry
 
    !> Like ok() for calls whose failure is the last thing a routine reports.
    subroutine check_err(err, what, stat, errmsg)
@@ -758,8 +1018,17 @@ contains
       end if
       if (.not. open_dataset(loc, name, dset, stat, errmsg)) return
       call h5dget_type_f(dset, ftype, err)
-      call h5tget_class_f(ftype, tclass, err)
-      call h5tclose_f(ftype, err)
+      if (ok(err, name//": cannot read its type", stat, errmsg)) then
+         call h5tget_class_f(ftype, tclass, err)
+         call check_err(err, name//": cannot read its type class", stat, errmsg)
+         call h5tclose_f(ftype, err)
+         call keep_first(err, name//": h5tclose_f failed", stat, errmsg)
+      end if
+      if (stat /= FOLD_OK) then
+         call h5dclose_f(dset, err)
+         dset = -1
+         return
+      end if
       checked_dataset = .true.
    end function checked_dataset
 
@@ -784,9 +1053,14 @@ contains
       if (any(got(1:rank) /= shape)) return
       call h5dopen_f(loc, name, dset, err)
       if (err < 0) return
+      have = -1
       call h5dget_type_f(dset, ftype, err)
-      call h5tget_class_f(ftype, have, err)
-      call h5tclose_f(ftype, err)
+      if (err >= 0) then
+         call h5tget_class_f(ftype, have, err)
+         if (err < 0) have = -1
+         call h5tclose_f(ftype, err)
+         if (err < 0) have = -1
+      end if
       open_same = have == tclass
       if (.not. open_same) call h5dclose_f(dset, err)
    end function open_same
@@ -800,8 +1074,13 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       logical :: there
       integer :: err
+      attr = -1
       call h5aexists_f(loc, name, there, err)
-      if (there) call h5adelete_f(loc, name, err)
+      if (.not. ok(err, "attribute "//name//": cannot query", stat, errmsg)) return
+      if (there) then
+         call h5adelete_f(loc, name, err)
+         if (.not. ok(err, "attribute "//name//": cannot delete the old value", stat, errmsg)) return
+      end if
       call h5acreate_f(loc, name, atype, space, attr, err)
       if (.not. ok(err, "attribute "//name//": cannot create", stat, errmsg)) return
    end subroutine replace_attr
@@ -842,6 +1121,7 @@ contains
          dtype = h5kind_to_type(c_int64_t, H5_INTEGER_KIND)
       end if
       call h5pcreate_f(H5P_DATASET_CREATE_F, dcpl, err)
+      if (.not. ok(err, name//": h5pcreate_f failed", stat, errmsg)) return
       if (unlimited) then
          dims(r) = 0
          maxdims(r) = H5S_UNLIMITED_F
@@ -861,9 +1141,15 @@ contains
          return
       end if
       call h5dcreate_f(loc, name, dtype, space, dset, err, dcpl)
+      call check_err(err, name//": cannot create dataset (does it exist already?)", stat, errmsg)
       call h5sclose_f(space, err)
+      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
       call h5pclose_f(dcpl, err)
-      if (.not. ok(err, name//": cannot create dataset (does it exist already?)", stat, errmsg)) return
+      call keep_first(err, name//": h5pclose_f failed", stat, errmsg)
+      if (stat /= FOLD_OK .and. dset >= 0) then
+         call h5dclose_f(dset, err)
+         dset = -1
+      end if
    end subroutine create_extendible
 
    subroutine finish_scale(dset, name, units, long_name, stat, errmsg)
@@ -875,10 +1161,25 @@ contains
       call h5dsset_scale_f(dset, err, name)
       if (ok(err, name//": cannot make it a dimension scale", stat, errmsg)) &
          call annotate(dset, name, units, long_name, stat, errmsg)
-      call h5dclose_f(dset, err)
+      call close_dataset(dset, name, stat, errmsg)
    end subroutine finish_scale
 
+   !> write_one_record, with a failure message naming the dataset by its full path
+   !> (variables are created at the root: "a2: ..." becomes "/a2: ...").
    subroutine write_record(loc, name, record, mtype, ptr, count, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: record
+      integer(hid_t), intent(in) :: mtype
+      type(c_ptr), intent(in) :: ptr
+      integer(hsize_t), intent(in) :: count
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call write_one_record(loc, name, record, mtype, ptr, count, stat, errmsg)
+      if (stat /= FOLD_OK .and. name(1:1) /= "/") errmsg = "/"//trim(errmsg)
+   end subroutine write_record
+
+   subroutine write_one_record(loc, name, record, mtype, ptr, count, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
       integer(hsize_t), intent(in) :: record
@@ -903,22 +1204,33 @@ contains
          shape(rank) = record
          call h5dset_extent_f(dset, shape(1:rank), err)
          if (.not. ok(err, name//": cannot extend", stat, errmsg)) then
-            call h5dclose_f(dset, err)
+            call close_dataset(dset, name, stat, errmsg)
             return
          end if
       end if
       call h5dget_space_f(dset, fspace, err)
+      if (.not. ok(err, name//": cannot read its dataspace", stat, errmsg)) then
+         call close_dataset(dset, name, stat, errmsg)
+         return
+      end if
       offset = 0
       offset(rank) = record - 1
       block(1:rank) = shape(1:rank)
       block(rank) = 1
       call h5sselect_hyperslab_f(fspace, H5S_SELECT_SET_F, offset(1:rank), block(1:rank), err)
-      call h5screate_simple_f(1, [count], mspace, err)
-      call h5dwrite_f(dset, mtype, ptr, err, mspace, fspace)
-      call check_err(err, name//": write failed", stat, errmsg)
-      call h5sclose_f(mspace, err)
+      if (ok(err, name//": cannot select the record", stat, errmsg)) then
+         call h5screate_simple_f(1, [count], mspace, err)
+         if (ok(err, name//": cannot create the memory dataspace", stat, errmsg)) then
+            call h5dwrite_f(dset, mtype, ptr, err, mspace, fspace)
+            call check_err(err, name//": write failed", stat, errmsg)
+            call h5sclose_f(mspace, err)
+            call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+         end if
+      end if
       call h5sclose_f(fspace, err)
-      call h5dclose_f(dset, err)
-   end subroutine write_record
+      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+      ! The data may reach the file only here (chunk cache): a full disk fails the close.
+      call close_dataset(dset, name, stat, errmsg)
+   end subroutine write_one_record
 
 end module fold_h5

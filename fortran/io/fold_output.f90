@@ -35,7 +35,7 @@ module fold_output
    use fold_version, only: fold_version_string, fold_git_revision
    use fold_particles, only: particle_set_t
    use, intrinsic :: iso_fortran_env, only: error_unit
-   use fold_h5, only: hid_t, hsize_t, FOLD_H5_REAL, FOLD_H5_INT, h5_open_file, h5_close_file, h5_flush, &
+   use fold_h5, only: hid_t, hsize_t, FOLD_H5_REAL, FOLD_H5_INT, h5_open_file, h5_close_file, h5_flush, h5_abandon_file, &
                       h5_put_real_array, h5_put_real_scalar, h5_put_int_scalar, &
                       h5_exists, h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array, &
                       h5_attr_string, h5_attr_int, h5_read_attr_int, h5_make_group, h5_delete, &
@@ -98,7 +98,7 @@ module fold_output
    end type run_output_t
 
    public :: output_open, output_resume, output_record, output_snapshot, output_checkpoint, output_status, &
-             output_close, record_init, checkpoint_checksum
+             output_close, output_abandon, output_failed_status, record_init, checkpoint_checksum
 
    character(len=*), parameter :: SCALAR_VARS(9) = [character(len=24) :: "step", "n_corrections", &
       "contact_iterations", "pairs_left", "capped_steps", "min_gap", "min_gap_over_alpha", &
@@ -231,7 +231,8 @@ contains
       call read_checkpoint(out, CKPT, main, legacy_ok=.not. shadow%present)
       if (.not. main%present .and. .not. shadow%present) then
          stat = FOLD_INPUT_ERROR
-         errmsg = CKPT//"/step: missing, nothing to resume from (set checkpoint_every > 0)"
+         errmsg = CKPT//"/step: missing, nothing to resume from (stopped before its first checkpoint was "// &
+                  "written, or checkpoint_every = 0)"
          return
       end if
       nullify (pick)
@@ -446,6 +447,31 @@ contains
       call h5_flush(out%file, stat, errmsg)
    end subroutine output_status
 
+   !> After a write failure: close the file without writing more into it
+   !> (output_abandon), then reopen it and set `status` and `steps_done` alone (the
+   !> reopened file has nothing else to flush: two small attribute messages in the
+   !> root's object header, the text in the global heap, where the previous status
+   !> left room) and close it. Best effort: on a full disk this can fail too (stat,
+   !> errmsg say why; a failed flush is followed by output_abandon again).
+   subroutine output_failed_status(out, path, status, steps_done, stat, errmsg)
+      type(run_output_t), intent(inout) :: out
+      character(len=*), intent(in) :: path, status
+      integer(i8), intent(in) :: steps_done
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: s2
+      character(len=msg_len) :: m2
+      call output_abandon(out, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_open_file(path, .true., out%file, stat, errmsg); if (stat /= FOLD_OK) return
+      call output_status(out, status, steps_done, stat, errmsg)
+      if (stat /= FOLD_OK) then
+         call output_abandon(out, s2, m2)
+         if (s2 /= FOLD_OK) errmsg = trim(errmsg)//"; "//trim(m2)
+         return
+      end if
+      call output_close(out, stat, errmsg)
+   end subroutine output_failed_status
+
    !> Close the file.
    subroutine output_close(out, stat, errmsg)
       type(run_output_t), intent(inout) :: out
@@ -453,6 +479,15 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       call h5_close_file(out%file, stat, errmsg)
    end subroutine output_close
+
+   !> Close a file that refuses writes (full disk) without writing more into it
+   !> (h5_abandon_file): it stays as its last successful flush left it.
+   subroutine output_abandon(out, stat, errmsg)
+      type(run_output_t), intent(inout) :: out
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call h5_abandon_file(out%file, stat, errmsg)
+   end subroutine output_abandon
 
    ! ------------------------------------------------------------------ internals
 

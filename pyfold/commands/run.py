@@ -416,7 +416,8 @@ def run(args: argparse.Namespace) -> int:
     if rc == 2:
         raise InputError(f"fold_run rejected the run file {partial} (kept for inspection):\n{_cause(tail)}")
     if rc != 0:
-        _mark_failed(partial, rc)
+        failed = [ln.strip().split("fold_run: ", 1)[1] for ln in tail if ln.strip().startswith("fold_run: failed:")]
+        _mark_failed(partial, rc, failed[-1] if failed else "")
     if out.exists() and not args.force:  # appeared while we ran: never overwrite it
         raise PyfoldError(f"{out} appeared during the run; the results stay in {partial}")
     os.replace(partial, out)
@@ -428,16 +429,30 @@ def run(args: argparse.Namespace) -> int:
     except PyfoldError as exc:
         print(f"pyfold run: warning: no XDMF written: {exc}", file=sys.stderr)
     if rc != 0:
+        cause = _cause(tail)
+        try:
+            import h5py
+
+            with h5py.File(out, "r"):
+                readable = True
+        except OSError:
+            readable = False
+        if not readable:
+            raise PyfoldError(f"fold_run exited with status {rc} and left {out} unreadable: no results were kept:\n"
+                              f"{cause}")
+        hint = (f"\nfree some space, then continue from the last checkpoint with: {resume_hint}"
+                if "I/O" in cause else "")
         raise PyfoldError(f"fold_run exited with status {rc}; results up to the last good state in {out}:\n"
-                          f"{_cause(tail)}")
+                          f"{cause}{hint}")
     print(f"pyfold run: {out}" + (f" (ParaView: {written})" if written else ""))
     print(resolved.summary().splitlines()[0])
     print(run_summary(out))
     return 0
 
 
-def _mark_failed(path: Path, rc: int) -> None:
-    """Give a file left by a crashed fold_run a status, if it recorded none."""
+def _mark_failed(path: Path, rc: int, cause: str = "") -> None:
+    """Give a file left by a crashed fold_run a status, if it recorded none: its own
+    ``fold_run: failed: ...`` line from stderr when there is one."""
     import h5py
 
     from pyfold.run_file import fixed_string
@@ -447,6 +462,7 @@ def _mark_failed(path: Path, rc: int) -> None:
             status = f.attrs.get("status")
             if status is None or (bytes(status).decode(errors="replace") if not isinstance(status, str)
                                   else status).strip() in ("", "running", "ok"):
-                f.attrs["status"] = fixed_string(f"failed: fold_run exited with status {rc} without recording a cause")
+                f.attrs["status"] = fixed_string(
+                    cause or f"failed: fold_run exited with status {rc} without recording a cause")
     except OSError:  # pragma: no cover - a file fold_run left unreadable
         pass
