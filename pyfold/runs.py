@@ -283,6 +283,7 @@ def run_summary(path: str | Path) -> str:
         a = ds.attrs
         lines = [f"status: {a.get('status', 'unknown')}, steps done: {a.get('steps_done', '?')} of {a.get('n_steps', '?')}",
                  f"regime: {a.get('regime', '?')}; {a.get('hydrodynamics_reason', '')}"]
+        lines += [f"warning: {w}" for w in str(a.get("scene_warnings", "")).splitlines() if w.strip()]
         if "min_gap" in ds and ds.sizes.get("time", 0) > 0:
             lines.append(gap_summary(ds["min_gap"].values, float(a.get("alpha", 0.0))))
         if "effective_viscosity" in ds and ds.sizes.get("time", 0) > 0:

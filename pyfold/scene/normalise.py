@@ -145,6 +145,7 @@ class ResolvedScene:
             "seed": (np.int32(self.seed), "1", "random seed"),
             "hydrodynamics": (np.int32(HYDRODYNAMICS_CODES[self.hydrodynamics]), "1", "0 jeffery, 1 stokes"),
             "hydrodynamics_reason": (self.reason, "", "what was chosen for hydrodynamics and collisions, and why"),
+            "scene_warnings": ("\n".join(self.warnings), "", "what pyfold validate warned about (one per line)"),
             "collisions": (np.int32(COLLISION_CODES[self.collisions]), "1", "0 none, 1 naive, 2 strategy"),
             "alpha": (self.alpha, "m", "security zone alpha"),
             "contact_max_iter": (np.int32(self.contact_max_iter), "1", "cap on contact iterations per step"),

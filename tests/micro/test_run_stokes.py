@@ -307,3 +307,21 @@ def test_resume_continues_with_the_adams_bashforth_history(tmp_path):
         np.testing.assert_allclose(b["stress"][()], a["stress"][()], rtol=0, atol=1e-8)
         # the run moved: the comparison is not trivially satisfied
         assert np.abs(a["p"][-1] - a["p"][0]).max() > 1e-3
+
+
+def test_coarse_grid_warning_is_kept_in_the_run_file_and_its_summary(tmp_path, capsys):
+    # validation warns below 4 voxels per diameter; the warning must survive the run
+    # (the summary printed at its end, and the file read later), not only scroll past
+    require_fold_run()
+    import pyfold
+    from pyfold.cli import main
+    from pyfold.runs import run_summary
+
+    scene = _scene(tmp_path, "coarse", **{"numerics.stokes": {"cells_per_diameter": 2, "fft_plan": FFT_PLAN},
+                                          "numerics.t_end": 0.05, "output.snapshot_interval": 0.05,
+                                          "output.checkpoint_interval": 0.05})
+    out = tmp_path / "coarse.h5"
+    assert main(["run", str(scene), "-o", str(out)]) == 0
+    assert "cells_per_diameter" in pyfold.open_run(out).attrs["scene_warnings"]
+    assert "warning: numerics.stokes.cells_per_diameter" in run_summary(out)
+    assert "warning: numerics.stokes.cells_per_diameter" in capsys.readouterr().out
