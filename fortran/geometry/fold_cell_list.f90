@@ -10,7 +10,8 @@
 !> Simulation of Liquids, 2nd ed., section 5.3 and appendix on Lees-Edwards cells).
 !> Directions with fewer than three bins are scanned whole. The candidates are a
 !> superset of the neighbours; callers test the minimum-image distance, which is
-!> unique when every periodic edge exceeds 2 rc (checked in cell_list_setup).
+!> unique when every periodic edge exceeds 2 rc (checked in cell_list_setup, unless
+!> at most one particle is inserted: no pair, no check, any particle size).
 !>
 !> Deforming lattice (elongational and general flows, `fold_cell`): the bins are
 !> taken in the fractional coordinates f = B^-1 (x - origin) mod 1 of the reduced
@@ -71,7 +72,9 @@ module fold_cell_list
 contains
 
    !> Size the bins for range rc and capacity nmax; checks that every periodic edge
-   !> is longer than 2 rc so that at most one image of a particle is within rc.
+   !> is longer than 2 rc so that at most one image of a particle is within rc
+   !> (skipped for nmax <= 1: a single particle has no pair; its own images move with
+   !> it and never collide, so it may be as large as the cell allows).
    subroutine cell_list_setup(cl, cell, rc, nmax, stat, errmsg)
       type(cell_list_t), intent(out) :: cl
       type(cell_t), intent(in) :: cell
@@ -87,6 +90,20 @@ contains
       errmsg = ""
       if (.not. (rc > 0.0_dp)) then
          write (errmsg, '(a,es10.3)') "cell_list: interaction range must be > 0, got ", rc
+         return
+      end if
+      if (nmax <= 1) then
+         ! at most one particle: there is no pair, so no minimum image to make unique.
+         ! A particle never interacts with its own periodic images (a rigid particle
+         ! and its images move together), so any particle size is allowed: one bin.
+         cl%rc = rc
+         cl%nb = 1
+         cl%w = 1.0_dp
+         if (.not. cell_deforming(cell)) cl%w(1:cell%dim) = cell%lengths(1:cell%dim)
+         allocate (cl%head(1), cl%next(max(nmax, 0)))
+         cl%head = 0
+         cl%next = 0
+         stat = FOLD_OK
          return
       end if
       if (cell_deforming(cell)) then

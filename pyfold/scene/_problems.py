@@ -92,35 +92,68 @@ def _describe(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
+def _is_union_tag(part: Any) -> bool:
+    """pydantic names the branch of a union in ``loc`` (``list[...]``, ``constrained-str``,
+    ``function-after[...]``): not a key of the scene."""
+    return isinstance(part, str) and (any(c in part for c in "[(") or part in ("constrained-str", "str", "list"))
+
+
 def add_validation_errors(problems: Problems, error: ValidationError, root: type[BaseModel]) -> None:
-    """Translate pydantic's errors into key-path messages stating the allowed range."""
+    """Translate pydantic's errors into key-path messages stating the allowed range.
+
+    A value matching no branch of a union (``positions``: an array of rows or a file name)
+    gets one line naming every accepted form."""
+    union: dict[str, list[str]] = {}
     for item in error.errors(include_url=False):
         loc = tuple(item["loc"])
-        kind = item["type"]
-        path = key_path(loc)
-        got = _describe(item.get("input"))
-        ctx = item.get("ctx") or {}
-        if kind == "extra_forbidden":
-            model = _model_at(root, loc)
-            hint = did_you_mean(str(loc[-1]), model.model_fields) if model is not None else ""
-            problems.add(path, f"unknown key; {hint}")
-        elif kind == "missing":
-            problems.add(path, "required key is missing")
-        elif kind == "literal_error":
-            problems.add(path, f"must be one of {ctx.get('expected')}, got {got}")
-        elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-            bound = next(iter(ctx.values()), None)
-            words = kind.replace("_equal", " or equal to").replace("_than", " than")  # greater than or equal to
-            problems.add(path, f"must be {words} {_number(bound)}, got {got}")
-        elif kind in ("too_short", "too_long"):
-            problems.add(path, f"{item['msg'].replace('List should have', 'must have')}; got {got}")
-        elif kind in ("float_type", "float_parsing", "int_type", "int_from_float", "int_parsing", "bool_type",
-                      "string_type", "list_type", "model_type", "dict_type"):
-            expected = {
-                "float": "a number", "int": "an integer", "bool": "true or false", "string": "a string",
-                "list": "an array", "model": "a table", "dict": "a table",
-            }[kind.split("_")[0]]
-            problems.add(path, f"must be {expected}, got {got}")
+        if item["type"] != "extra_forbidden" and any(_is_union_tag(part) for part in loc):
+            clean = tuple(part for part in loc if not _is_union_tag(part))
+            branch = Problems()
+            add_validation_errors_item(branch, {**item, "loc": clean}, root)
+            for path, message in branch.items:
+                union.setdefault(path, []).append(message)
+            continue
+        add_validation_errors_item(problems, item, root)
+    for path, messages in union.items():
+        if any(other.startswith(path + "[") or other.startswith(path + ".") for other in union):
+            continue  # the value has the shape of a branch whose entries are reported: that branch's errors only
+        if len(messages) > 1 and all(m.startswith("must be ") for m in messages):
+            got = messages[0].rsplit(", got ", 1)[-1] if ", got " in messages[0] else ""
+            forms = [m.removeprefix("must be ").rsplit(", got ", 1)[0] for m in messages]
+            problems.add(path, f"must be {' or '.join(dict.fromkeys(forms))}{', got ' + got if got else ''}")
         else:
-            message = item["msg"].removeprefix("Value error, ")
-            problems.add(path, f"{message}, got {got}")
+            for message in dict.fromkeys(messages):
+                problems.add(path, message)
+
+
+def add_validation_errors_item(problems: Problems, item: dict, root: type[BaseModel]) -> None:
+    """One pydantic error as a key-path message."""
+    loc = tuple(item["loc"])
+    kind = item["type"]
+    path = key_path(loc)
+    got = _describe(item.get("input"))
+    ctx = item.get("ctx") or {}
+    if kind == "extra_forbidden":
+        model = _model_at(root, loc)
+        hint = did_you_mean(str(loc[-1]), model.model_fields) if model is not None else ""
+        problems.add(path, f"unknown key; {hint}")
+    elif kind == "missing":
+        problems.add(path, "required key is missing")
+    elif kind == "literal_error":
+        problems.add(path, f"must be one of {ctx.get('expected')}, got {got}")
+    elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        bound = next(iter(ctx.values()), None)
+        words = kind.replace("_equal", " or equal to").replace("_than", " than")  # greater than or equal to
+        problems.add(path, f"must be {words} {_number(bound)}, got {got}")
+    elif kind in ("too_short", "too_long"):
+        problems.add(path, f"{item['msg'].replace('List should have', 'must have')}; got {got}")
+    elif kind in ("float_type", "float_parsing", "int_type", "int_from_float", "int_parsing", "bool_type",
+                  "string_type", "list_type", "model_type", "dict_type"):
+        expected = {
+            "float": "a number", "int": "an integer", "bool": "true or false", "string": "a string",
+            "list": "an array", "model": "a table", "dict": "a table",
+        }[kind.split("_")[0]]
+        problems.add(path, f"must be {expected}, got {got}")
+    else:
+        message = item["msg"].removeprefix("Value error, ")
+        problems.add(path, f"{message}, got {got}")

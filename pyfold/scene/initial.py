@@ -6,6 +6,8 @@ sequential addition, then, for dense targets, relaxation sweeps that push
 overlapping pairs apart, so every surface gap is >= alpha (alpha/2 to walls). It
 is seeded: the same scene gives the same initial state, so the run file holds
 the full initial state and a run is reproducible from the scene's seed.
+Families with given ``positions`` skip the kernel: the state is exactly the given one
+(validation checked its gaps; mixing given and random families is refused there).
 
 The kernel is one uninterruptible native call (it holds the GIL, and it cannot
 be resumed: every call starts again from the seed), and a dense target can keep it
@@ -56,7 +58,10 @@ def particle_arrays(resolved: ResolvedScene) -> dict[str, np.ndarray]:
     counts = [f.count for f in fams]
     modes, axes = [], []
     for f in fams:
-        if f.orientation == "isotropic" or (f.orientation == "planar_random" and dim == 2):
+        if f.positions is not None:  # given positions: the axes are fixed already (given or drawn by normalise)
+            modes.append(np.full(f.count, ORIENT_GIVEN))
+            axes.append(np.broadcast_to(f.axes, (f.count, dim)))
+        elif f.orientation == "isotropic" or (f.orientation == "planar_random" and dim == 2):
             modes.append(np.full(f.count, ORIENT_ISOTROPIC))
             axes.append(np.zeros((f.count, dim)))
         elif f.orientation == "planar_random":  # uniform in the x-y plane: the plane normal to z
@@ -94,11 +99,20 @@ def initial_state(resolved: ResolvedScene, progress: TextIO | None = None) -> In
     PyfoldError
         The native extension is not built, or the child died.
     """
+    a = particle_arrays(resolved)
+    fams = resolved.families
+    if fams and all(f.positions is not None for f in fams):
+        # given positions (and axes, given or drawn by the family's rule in normalise, whose
+        # gaps validation checked): no placement, the state exactly as given
+        x = np.concatenate([np.asarray(f.positions, dtype=np.float64) for f in fams])
+        p = np.ascontiguousarray(a["axis"], dtype=np.float64)
+        return InitialState(x=x, p=p, shape=a["shape"], family=a["family"], radius=a["radius"],
+                            length=a["length"], xi=a["xi"])
+
     from pyfold.native import load
     from pyfold.native.geometry import Cell, place_particles
 
     load("_fold_geometry")  # imported before the fork: the child imports nothing
-    a = particle_arrays(resolved)
     # the full gradient: a non-shear flow places in its deforming lattice at t = 0
     cell = Cell(tuple(resolved.cell_lengths[: resolved.dim]), walls=resolved.walls,
                 velocity_gradient=resolved.velocity_gradient)
@@ -108,7 +122,6 @@ def initial_state(resolved: ResolvedScene, progress: TextIO | None = None) -> In
                                orientation=a["orient_mode"], axis=a["axis"], max_attempts=MAX_ATTEMPTS,
                                relax_sweeps=RELAX_SWEEPS)
 
-    fams = resolved.families
     phi = sum(f.volume_fraction for f in fams)
     what = (f"{resolved.n_particles} particles in {len(fams)} families" if len(fams) > 1
             else f"{fams[0].count} {fams[0].shape}s" if fams else "no particles")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -79,7 +80,8 @@ class Family:
     count: int
     volume_fraction: float  # actual fraction of the cell the count fills [-]
     orientation: str
-    axes: np.ndarray | None = None  # given or aligned axes, normalised
+    axes: np.ndarray | None = None  # given or aligned axes, normalised; (count, dim) when positions are given
+    positions: np.ndarray | None = None  # given centres (count, dim) [m]: no random placement
 
     @property
     def shape_code(self) -> int:
@@ -310,7 +312,105 @@ def _check_lattice_duration(scene: Scene, G: np.ndarray, lengths: np.ndarray, go
                      f"numerics.t_end <= {t_ok:g} (or enlarge cell.size), got {t_end:g}")
 
 
-def _family(scene: Scene, index: int, problems: Problems, cell_volume: float) -> Family | None:
+#: Files accepted for positions / orientations (one row per particle).
+GIVEN_POSITION_SUFFIXES = (".csv", ".npy")
+
+
+def _table(value, path: str, dim: int, base_dir: Path, problems: Problems, unit: bool = False) -> np.ndarray | None:
+    """An (n, dim) array of finite reals, inline (a TOML array of rows) or read from a .csv
+    (comma-separated, an optional header line) or .npy file relative to ``base_dir``.
+    ``unit``: rows are axes, must be non-zero and are normalised."""
+    if isinstance(value, str):
+        file = Path(value) if Path(value).is_absolute() else base_dir / value
+        suffix = file.suffix.lower()
+        if suffix not in GIVEN_POSITION_SUFFIXES:
+            problems.add(path, f"a file must be .csv or .npy (one row per particle), got {value!r}")
+            return None
+        try:
+            if suffix == ".npy":
+                arr = np.load(file, allow_pickle=False)
+            else:
+                lines = [ln for ln in file.read_text(encoding="utf-8").splitlines() if ln.strip()]
+                try:  # a first line that is not numbers is a header
+                    [float(v) for v in lines[0].split(",")] if lines else None
+                    skip = 0
+                except ValueError:
+                    skip = 1
+                rows = [[float(v) for v in ln.split(",")] for ln in lines[skip:]]
+                if any(len(r) != len(rows[0]) for r in rows):
+                    problems.add(path, f"{file}: rows of different lengths")
+                    return None
+                arr = np.asarray(rows, dtype=np.float64)
+        except FileNotFoundError:
+            problems.add(path, f"no such file: {file} (relative paths are taken from the scene file's folder)")
+            return None
+        except (OSError, ValueError, UnicodeDecodeError) as exc:
+            problems.add(path, f"cannot read {file} as {suffix[1:]} numbers: {exc}")
+            return None
+        if arr.dtype.kind not in "fiu":
+            problems.add(path, f"{file}: expected real numbers, got dtype {arr.dtype}")
+            return None
+        arr = np.asarray(arr, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[0] < 1 or arr.shape[1] != dim:
+            problems.add(path, f"{file}: expected one row of {dim} numbers (cell.dim = {dim}) per particle, at least "
+                         f"one row; got shape {arr.shape}")
+            return None
+        if not np.all(np.isfinite(arr)):
+            row = int(np.argmax(~np.all(np.isfinite(arr), axis=1)))
+            problems.add(path, f"{file}: row {row} is not finite: {arr[row].tolist()}")
+            return None
+        where = f"{file}: "
+    else:
+        bad = [i for i, v in enumerate(value) if len(v) != dim]
+        if bad:
+            problems.add(path, f"each row must have {dim} components (cell.dim = {dim}); row {bad[0]} has "
+                         f"{len(value[bad[0]])}")
+            return None
+        if not value:
+            problems.add(path, "must have at least one row")
+            return None
+        arr = np.asarray(value, dtype=np.float64)
+        where = ""
+    if unit:
+        norms = np.linalg.norm(arr, axis=1)
+        if np.any(~(norms > 0.0)):
+            problems.add(path, f"{where}axes must be non-zero vectors; row {int(np.argmin(norms))} is zero")
+            return None
+        arr = arr / norms[:, None]
+    return arr
+
+
+def _outside_cell(positions: np.ndarray, cell) -> tuple[int, int, float, float] | None:
+    """First ``(row, axis, value, side)`` with a coordinate outside ``[0, side)``."""
+    sides = np.asarray(cell.size, dtype=np.float64)
+    bad = (positions < 0.0) | (positions >= sides)
+    if not bad.any():
+        return None
+    row = int(np.argmax(bad.any(axis=1)))
+    axis = int(np.argmax(bad[row]))
+    return row, axis, float(positions[row, axis]), float(sides[axis])
+
+
+def _draw_axes(orientation: str, axes, count: int, dim: int, seed: int, index: int) -> np.ndarray:
+    """Axes of a family with given positions but no given orientations, by its rule:
+    aligned (the direction), isotropic (uniform on the sphere / circle), planar_random
+    (uniform in the x-y plane); numpy PCG64 seeded by (numerics.seed, family index)."""
+    if orientation == "aligned":
+        return np.tile(np.asarray(axes, dtype=np.float64).reshape(-1, dim)[0], (count, 1))
+    rng = np.random.default_rng([seed, index])
+    if orientation == "planar_random" and dim == 3:
+        phi = rng.uniform(0.0, 2.0 * np.pi, count)
+        return np.stack([np.cos(phi), np.sin(phi), np.zeros(count)], axis=1)
+    v = rng.standard_normal((count, dim))
+    n = np.linalg.norm(v, axis=1)
+    while np.any(n == 0.0):  # pragma: no cover - probability 0
+        v[n == 0.0] = rng.standard_normal((int(np.sum(n == 0.0)), dim))
+        n = np.linalg.norm(v, axis=1)
+    return v / n[:, None]
+
+
+def _family(scene: Scene, index: int, problems: Problems, cell_volume: float,
+            base_dir: Path = Path(".")) -> Family | None:
     fam = scene.particles[index]
     dim = scene.cell.dim
     at = f"particles[{index}]"
@@ -347,11 +447,43 @@ def _family(scene: Scene, index: int, problems: Problems, cell_volume: float) ->
         ok = False
 
     vp = shapes.particle_volume(dim, fam.shape, fam.radius, length)
-    if (fam.count is None) == (fam.volume_fraction is None):
+    positions = None
+    if fam.positions is not None:
+        positions = _table(fam.positions, f"{at}.positions", dim, base_dir, problems)
+        if positions is None:
+            return None
+        count = len(positions)
+        if fam.count is not None and fam.volume_fraction is not None:
+            problems.add(f"{at}.count", "give at most one of count, volume_fraction (got both); with positions "
+                         "neither is needed: the count is the number of rows")
+            return None
+        if fam.count is not None and fam.count != count:
+            problems.add(f"{at}.count", f"must equal the number of rows of {at}.positions ({count}), got {fam.count}; "
+                         "or leave it out")
+            return None
+        if fam.volume_fraction is not None:
+            implied = int(round(fam.volume_fraction * cell_volume / vp))
+            if implied != count:
+                problems.add(f"{at}.volume_fraction", f"{fam.volume_fraction:g} of this cell is {implied} particles, "
+                             f"but {at}.positions has {count} rows; allowed: the fraction of {count} particles, "
+                             f"{count * vp / cell_volume:.6g} (or leave it out)")
+                return None
+        if count > MAX_PARTICLES_PER_FAMILY:
+            problems.add(f"{at}.positions", f"{count} rows; allowed: at most {MAX_PARTICLES_PER_FAMILY} per family")
+            return None
+        bad = _outside_cell(positions, scene.cell)
+        if bad is not None:
+            row, axis, value, side = bad
+            problems.add(f"{at}.positions", f"row {row}: {'xyz'[axis]} = {value:.17g} is outside the cell; allowed: "
+                         f"0 <= {'xyz'[axis]} < {side:g} (cell.size; positions are not wrapped)")
+            return None
+    elif (fam.count is None) == (fam.volume_fraction is None):
         problems.add(f"{at}.count", "give exactly one of count, volume_fraction "
                      f"(got {'both' if fam.count is not None else 'neither'})")
         return None
-    if fam.count is not None:
+    if positions is not None:
+        pass  # count = the number of rows (checked above)
+    elif fam.count is not None:
         count = fam.count
     else:
         exact = fam.volume_fraction * cell_volume / vp  # finite: lengths are bounded (schema, MAX_LENGTH_RATIO)
@@ -366,21 +498,28 @@ def _family(scene: Scene, index: int, problems: Problems, cell_volume: float) ->
                          f"(one particle fills {vp / cell_volume:.3g}); allowed: >= {0.5 * vp / cell_volume:.3g}")
             return None
     axes = None
-    if fam.orientation == "given":
+    orientation = fam.orientation
+    if fam.orientations is not None and "orientation" not in fam.model_fields_set:
+        orientation = "given"  # orientations given, orientation left out: they are the rule
+    if orientation == "given":
         if fam.orientations is None:
             problems.add(f"{at}.orientations", "required with orientation = 'given': one axis per particle")
             ok = False
-        elif fam.count is None:
-            problems.add(f"{at}.count", "orientation = 'given' needs count (not volume_fraction)")
-            ok = False
-        elif len(fam.orientations) != count:
-            problems.add(f"{at}.orientations", f"must hold count = {count} axes, got {len(fam.orientations)}")
+        elif fam.count is None and positions is None:
+            problems.add(f"{at}.count", "orientation = 'given' needs count or positions (not volume_fraction)")
             ok = False
         else:
-            axes = _axes(fam.orientations, f"{at}.orientations", dim, problems)
-            ok = ok and axes is not None
+            rows = _table(fam.orientations, f"{at}.orientations", dim, base_dir, problems, unit=True)
+            if rows is None:
+                ok = False
+            elif len(rows) != count:
+                what = f"the {count} rows of {at}.positions" if positions is not None else f"count = {count}"
+                problems.add(f"{at}.orientations", f"must hold one axis per particle ({what}), got {len(rows)}")
+                ok = False
+            else:
+                axes = rows
     elif fam.orientations is not None:
-        problems.add(f"{at}.orientations", "only with orientation = 'given'")
+        problems.add(f"{at}.orientations", "only with orientation = 'given' (or with orientation left out)")
         ok = False
     if fam.orientation == "aligned":
         direction = fam.direction if fam.direction is not None else [1.0] + [0.0] * (dim - 1)
@@ -392,9 +531,84 @@ def _family(scene: Scene, index: int, problems: Problems, cell_volume: float) ->
         ok = False
     if not ok:
         return None
+    if positions is not None and orientation != "given":
+        # the family's rule, drawn here (numpy PCG64 from numerics.seed and the family index),
+        # so that validation checks the gaps of exactly the state fold_run starts from
+        axes = _draw_axes(orientation, axes, count, dim, scene.numerics.seed, index)
     return Family(index=index, name=fam.name or f"family{index}", shape=fam.shape, radius=fam.radius,
                   length=length, aspect_ratio=beta, equivalent_aspect_ratio=beta_e, xi=xi, count=count,
-                  volume_fraction=count * vp / cell_volume, orientation=fam.orientation, axes=axes)
+                  volume_fraction=count * vp / cell_volume, orientation=orientation, axes=axes,
+                  positions=positions)
+
+
+#: Tolerance of the gap rule for given positions: every surface gap >= alpha - GAP_TOL_ULPS
+#: eps max(L_i), the tolerance of the placement kernel's relaxation (fold_placement.f90).
+GAP_TOL_ULPS = 64.0
+
+
+def _voxel_span_violation(grid, lengths, dim: int, good, g_xy: float, t_end: float):
+    """The Stokes voxeliser's rule (fortran/grid/fold_voxelise.f90): along every lattice
+    direction d, twice the particle's span in voxels, n_d sum_j |A^-1_dj| e_j (e the
+    half extent of its bounding box), must stay <= n_d - 2. Bounded over the run: e_j <= the
+    largest half extent of any orientation (sphere R, fibre L/2 + R, spheroid L/2) and the
+    Lees-Edwards offset |s| <= min(|G_xy| Ly t_end, Lx/2). Returns ``(axis, 2 span, n)`` of
+    the first violated direction, or None."""
+    e = max(f.radius if f.shape == "sphere" else 0.5 * f.length + (f.radius if f.shape == "fibre" else 0.0)
+            for f in good)
+    s_max = min(abs(g_xy) * float(lengths[1]) * t_end, 0.5 * float(lengths[0]))
+    for ax in range(dim):
+        n = int(grid[ax])
+        inv_sum = 1.0 / float(lengths[ax])
+        if ax == 0:
+            inv_sum += s_max / (float(lengths[0]) * float(lengths[1]))
+        span2 = 2.0 * n * inv_sum * e
+        if span2 > n - 2.0:
+            return ax, span2, n
+    return None
+
+
+def _check_given_gaps(good, lengths, dim: int, walls: bool, G, alpha: float, problems: Problems) -> None:
+    """Every surface gap of a given configuration >= alpha (alpha/2 to Couette walls), with
+    the placement kernel's pair search and capsule distance (native geometry binding)."""
+    from pyfold.native import geometry as geo
+
+    x = np.concatenate([f.positions for f in good])
+    p = np.concatenate([np.broadcast_to(f.axes, (f.count, dim)) for f in good])
+    fam = np.repeat([f.index for f in good], [f.count for f in good])
+    row = np.concatenate([np.arange(f.count) for f in good])
+    h = np.repeat([shapes.half_segment(f.shape, f.radius, f.length) for f in good], [f.count for f in good])
+    rad = np.repeat([f.radius for f in good], [f.count for f in good])
+    tol = GAP_TOL_ULPS * _EPS * float(np.max(lengths[:dim]))
+    where = lambda k: f"particles[{fam[k]}].positions row {row[k]}"  # noqa: E731
+    if walls:
+        lo = x[:, 1] - h * np.abs(p[:, 1]) - rad
+        hi = lengths[1] - (x[:, 1] + h * np.abs(p[:, 1])) - rad
+        gap = np.minimum(lo, hi)
+        bad = np.nonzero(gap < 0.5 * alpha - tol)[0]
+        if bad.size:
+            k = int(bad[0])
+            problems.add(f"particles[{fam[k]}].positions", f"row {row[k]} is {gap[k]:.6g} from a wall; allowed: >= "
+                         f"alpha/2 = {0.5 * alpha:.6g} (the placement's rule)")
+            return
+    if len(x) < 2:
+        return
+    cell = geo.Cell(tuple(lengths[:dim]), walls=walls, velocity_gradient=G)
+    rc = (2.0 * float(np.max(h + rad)) + alpha) * (1.0 + 1e-9)  # fold_placement's search range
+    pairs = geo.neighbour_pairs(x, cell, rc)
+    if len(pairs) == 0:
+        return
+    i, j = pairs[:, 0], pairs[:, 1]
+    r = geo.min_image(x[i] - x[j], cell)
+    dist = geo.capsule_contact(r, p[i], h[i], rad[i], p[j], h[j], rad[j])["dist"]
+    bad = np.nonzero(dist < alpha - tol)[0]
+    if bad.size:
+        k = int(bad[0])  # pairs are sorted: the first offending pair
+        a, b = int(i[k]), int(j[k])
+        other = f"row {row[b]}" if fam[a] == fam[b] else where(b)
+        problems.add(f"particles[{fam[a]}].positions",
+                     f"row {row[a]} and {other} are {dist[k]:.6g} apart (surface gap"
+                     f"{', overlapping' if dist[k] < 0 else ''}); allowed: every gap >= alpha = {alpha:.6g} "
+                     f"({bad.size} pair{'s' if bad.size > 1 else ''} closer)")
 
 
 def _axes(vectors, path: str, dim: int, problems: Problems) -> np.ndarray | None:
@@ -411,7 +625,7 @@ def _axes(vectors, path: str, dim: int, problems: Problems) -> np.ndarray | None
     return arr / norms[:, None]
 
 
-def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
+def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None = None) -> ResolvedScene:
     """Check every rule that ties keys together and resolve the scene.
 
     Parameters
@@ -420,6 +634,9 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
         A scene whose fields passed the schema (types, ranges, known keys).
     source : str
         Name used in the error message (the file name).
+    base_dir : path, optional
+        Folder of the files a scene names (``positions``, ``orientations``); default the
+        folder of ``source`` when it is a file, else the working directory.
 
     Returns
     -------
@@ -460,7 +677,9 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
                      f"{' with G = ' + str(G.tolist()) if scene.flow.type == 'general' else ''}; "
                      "use cell.boundary = 'periodic' for elongational flows")
 
-    families = [_family(scene, i, problems, cell_volume) for i in range(len(scene.particles))]
+    if base_dir is None:
+        base_dir = Path(source).parent if Path(source).is_file() else Path(".")
+    families = [_family(scene, i, problems, cell_volume, Path(base_dir)) for i in range(len(scene.particles))]
     names = [f.name for f in families if f is not None]
     for i, f in enumerate(families):
         if f is not None and names.count(f.name) > 1:
@@ -494,26 +713,63 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
                      f"{st.cells_per_diameter} across the thinnest diameter {2.0 * min(radii):g}) exceeds "
                      f"max_grid_points = {st.max_grid_points}; raise it (memory ~ {_grid_megabytes(grid, dim):.0f} MB), "
                      f"lower numerics.stokes.cells_per_diameter or the cell size")
+    voxel_text = ""
+    if grid is not None and grid_points <= st.max_grid_points and good and G is not None and shear_flow:
+        span = _voxel_span_violation(grid, lengths, dim, good, float(G[0, 1]), scene.numerics.t_end)
+        if span is not None:
+            ax, voxels, n_ax = span
+            better = next((c for c in range(st.cells_per_diameter + 1, 65)
+                           if _voxel_span_violation(stokes_grid(lengths[:dim], 2.0 * min(radii), c), lengths, dim,
+                                                    good, float(G[0, 1]), scene.numerics.t_end) is None), None)
+            voxel_text = (f"a particle spans up to {voxels:.3g} voxels along lattice direction {ax + 1} of the "
+                          f"{' x '.join(map(str, grid[:dim]))} Stokes grid, more than {n_ax} - 2 (the voxeliser keeps "
+                          "a particle two voxels clear of its own periodic image, fortran/grid/fold_voxelise.f90; "
+                          "the sheared lattice widens the span by the Lees-Edwards offset)")
+            hint = (f"allowed: cells_per_diameter >= {better}" if better is not None else
+                    "no cells_per_diameter up to 64 suffices: use smaller particles or a larger cell")
+            if model.hydrodynamics == "stokes":
+                problems.add("numerics.stokes.cells_per_diameter", f"{voxel_text}; {hint}, got {st.cells_per_diameter}")
     if model.lubrication and not any(f.shape == "sphere" for f in good):
         problems.add("model.lubrication", "the lubrication force (docs/physics.md#lubrication-between-spheres) is defined between spheres; "
                      "this scene has no sphere family")
 
-    # Each particle (grown by alpha) must not meet its own periodic image, and the
-    # minimum image of a pair must be unique: extent + alpha <= half the period.
+    # fold_run's rule (shapes.cell_range_violation, the one statement of it): with two or
+    # more particles every periodic edge must exceed twice the contact search range, so the
+    # minimum image of a pair is unique. A single particle has no pair: any size.
+    n_total = sum(f.count for f in good)
+    range_violation = shapes.cell_range_violation(lengths, dim, walls, [(f.shape, f.radius, f.length) for f in good], alpha,
+                                        n_total)
+    if range_violation is not None:
+        ax, edge, rc = range_violation
+        widest = max(good, key=lambda f: shapes.half_segment(f.shape, f.radius, f.length) + f.radius)
+        key = f"particles[{widest.index}].{'radius' if widest.shape == 'sphere' else 'length'}"
+        problems.add(key, f"the interaction range rc = {rc:.6g} of the contact search (largest particle extent "
+                     f"{2.0 * (shapes.half_segment(widest.shape, widest.radius, widest.length) + widest.radius):g} "
+                     f"+ 2 alpha + largest radius) must be below half the smallest periodic side ({'xyz'[ax]}: "
+                     f"{edge:g} / 2 = {0.5 * edge:g}; fold_run needs every periodic edge > 2 rc when particles can "
+                     f"pair, {n_total} particles here); enlarge cell.size or use smaller particles "
+                     "(a single particle per cell may be as large as the cell allows)")
     for f in good:
         extent = f.length + (2.0 * f.radius if f.shape == "fibre" else 0.0)
         key = f"particles[{f.index}].{'radius' if f.shape == 'sphere' else 'length'}"
-        periodic = [(ax, lengths[ax]) for ax in range(dim) if not (walls and ax == 1)]
-        ax, period = min(periodic, key=lambda t: t[1])
-        if extent + alpha > 0.5 * period:
-            problems.add(key, f"particle extent {extent:g} + alpha {alpha:g} must be <= half the smallest periodic "
-                         f"side ({'xyz'[ax]}: {period:g} / 2 = {0.5 * period:g}); enlarge cell.size or use shorter particles")
         if walls and extent + alpha >= lengths[1]:
             problems.add(key, f"particle extent {extent:g} + alpha {alpha:g} must be < the wall gap Ly = {lengths[1]:g}")
+
+    given = [f for f in good if f.positions is not None]
+    if given and len(given) != len(good):
+        random_ = [f for f in good if f.positions is None]
+        problems.add(f"particles[{random_[0].index}].positions", "families with given positions "
+                     f"({', '.join(f'particles[{f.index}]' for f in given)}) cannot be mixed with randomly placed ones "
+                     f"({', '.join(f'particles[{f.index}]' for f in random_)}): the placement kernel places every "
+                     "particle of a scene at random; give positions for every family")
+    elif given and range_violation is None and G is not None:
+        _check_given_gaps(good, lengths, dim, walls, G, alpha, problems)
 
     # Random placement (honouring alpha) cannot exceed the random-packing limits.
     total_inflated, limits = 0.0, []
     for f in good:
+        if f.positions is not None:
+            continue  # given configurations (ordered arrays may be denser): their gaps are checked
         grown_length = f.length + alpha if f.shape != "sphere" else 2.0 * f.radius + alpha
         inflated = f.count * shapes.particle_volume(dim, f.shape, f.radius + 0.5 * alpha, grown_length) / cell_volume
         total_inflated += inflated
@@ -578,7 +834,7 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
             else:
                 every[key] = k
 
-    if not shear_flow and not walls and n_steps is not None and good:
+    if not shear_flow and not walls and n_steps is not None and good and shapes.range_rule_applies(n_total):
         _check_lattice_duration(scene, G, lengths, good, alpha, num.dt, num.t_end, problems)
 
     problems.raise_if_any(source)
@@ -628,6 +884,9 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
             reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but the FFT "
                            "Stokes solver is periodic and this cell has Couette walls; hydrodynamic interactions "
                            "are neglected, an approximation in this regime")
+        elif voxel_text:
+            reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but {voxel_text}; "
+                           "hydrodynamic interactions are neglected, an approximation in this regime")
         elif grid_points > st.max_grid_points:
             reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but the "
                            f"{grid_text} exceeds numerics.stokes.max_grid_points = {st.max_grid_points}; "
@@ -673,6 +932,8 @@ def normalise(scene: Scene, source: str = "scene") -> ResolvedScene:
             update["equivalent_aspect_ratio"] = raw.equivalent_aspect_ratio or EQUIVALENT_ASPECT_RATIO_DEFAULT
         if raw.orientation == "aligned":
             update["direction"] = [float(v) for v in f.axes[0]]
+        if f.orientation != raw.orientation:
+            update["orientation"] = f.orientation
         fam_tables.append(raw.model_copy(update=update))
     normalised = scene.model_copy(update={
         "particles": fam_tables,

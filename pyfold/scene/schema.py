@@ -81,6 +81,8 @@ Length = Annotated[float, Field(ge=_SMALLEST, le=MAGNITUDE_LIMIT), AfterValidato
 #: a rate or velocity gradient entry [1/s]: |value| <= MAGNITUDE_LIMIT
 Rate = Annotated[float, Field(ge=-MAGNITUDE_LIMIT, le=MAGNITUDE_LIMIT), AfterValidator(_finite)]
 Vector = Annotated[list[Real], Field(min_length=2, max_length=3)]
+#: a data file named in a scene (``.csv`` or ``.npy``), relative to the scene file
+FilePath = Annotated[str, Field(min_length=1, max_length=4096)]
 RateVector = Annotated[list[Rate], Field(min_length=2, max_length=3)]
 
 
@@ -139,8 +141,13 @@ class ParticleFamily(_Table):
     orientation: Literal["isotropic", "aligned", "planar_random", "given"] = "isotropic"
     #: axis of every particle for orientation = "aligned" (normalised; default the flow direction x)
     direction: Vector | None = None
-    #: one axis per particle (count x dim) for orientation = "given" (each normalised)
-    orientations: list[Vector] | None = None
+    #: one axis per particle (count x dim) for orientation = "given" (each normalised), inline
+    #: or a .csv / .npy file (path relative to the scene file, one row per particle)
+    orientations: list[Vector] | FilePath | None = None
+    #: given centres, one per particle (n x dim) [m], inline or a .csv / .npy file (path
+    #: relative to the scene file, one row per particle; a CSV may start with a header line):
+    #: no random placement, the count is the number of rows
+    positions: list[Vector] | FilePath | None = None
     #: finite cylinders only: rule giving the equivalent spheroid aspect ratio
     #: (Cox 1971, Zhang et al. 2011, Harris & Pittman 1975)
     equivalent_aspect_ratio: Literal["cox", "zhang", "harris_pittman"] | None = None

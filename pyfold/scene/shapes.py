@@ -105,3 +105,61 @@ def unit_vectors(vectors, path: str, dim: int) -> np.ndarray:
     if np.any(norms <= 0.0):
         raise InputError(f"{path}: axis vectors must be non-zero")
     return arr / norms[:, None]
+
+
+def half_segment(shape: str, radius: float, length: float) -> float:
+    """Half length of the particle's core segment (``fold_particles.particle_half_segment``):
+    fibre ``L/2``, spheroid ``max(0, L/2 - R)``, sphere 0 [m]."""
+    if shape == "fibre":
+        return 0.5 * length
+    if shape == "spheroid":
+        return max(0.0, 0.5 * length - radius)
+    return 0.0
+
+
+def interaction_range(particles, alpha: float) -> float:
+    """Centre-distance range of fold_run's contact search (``fold_contacts.contact_search_range``
+    with the default Verlet skin ``alpha + R_max``)::
+
+        rc = 2 max_k (h_k + R_k) + alpha + skin = max extent + 2 alpha + R_max
+
+    ``particles`` is a sequence of ``(shape, radius, length)`` (one per family is enough);
+    the extent of a particle is ``2 (h + R)``: ``L + 2R`` for a fibre, ``L`` for a spheroid,
+    ``2R`` for a sphere. 0 without particles [m].
+    """
+    particles = list(particles)
+    if not particles:
+        return 0.0
+    skin = alpha + max(r for _, r, _ in particles)
+    return 2.0 * max(half_segment(s, r, l) + r for s, r, l in particles) + (alpha + skin)
+
+
+def range_rule_applies(n_particles: int) -> bool:
+    """The cell/interaction-range rule binds only when a pair exists: with at most one
+    particle there is no pair (a rigid particle never meets its own periodic images, which
+    move with it), and fold_run's cell lists skip the check (``fold_cell_list.cell_list_setup``)."""
+    return n_particles >= 2
+
+
+def periodic_edges(lengths, dim: int, walls: bool) -> list[tuple[int, float]]:
+    """The periodic cell edges ``(axis, length)`` fold_run checks against ``2 rc`` at t = 0
+    (``fold_cell_list.cell_list_setup``: every edge but y between Couette walls)."""
+    return [(ax, float(lengths[ax])) for ax in range(dim) if not (walls and ax == 1)]
+
+
+def cell_range_violation(lengths, dim: int, walls: bool, particles, alpha: float,
+                         n_particles: int) -> tuple[int, float, float] | None:
+    """fold_run's rule, the one place pyfold states it: with two or more particles every
+    periodic edge must exceed twice the interaction range (``L > 2 rc``, strictly), so that
+    the minimum image of a pair is unique. Returns ``(axis, edge, rc)`` of the shortest
+    violating edge, or None when the rule holds (or does not apply)."""
+    if not range_rule_applies(n_particles):
+        return None
+    rc = interaction_range(particles, alpha)
+    edges = periodic_edges(lengths, dim, walls)
+    if not edges:
+        return None
+    ax, edge = min(edges, key=lambda t: t[1])
+    if not edge > 2.0 * rc:
+        return ax, edge, rc
+    return None
