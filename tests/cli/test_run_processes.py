@@ -5,6 +5,7 @@ anything runs, and the particle placement shows progress and stops on Ctrl-C."""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -200,7 +201,8 @@ def test_hopeless_placement_gives_up_early_naming_the_key(tmp_path, fake_fold_ru
     exit 2 naming particles[0].volume_fraction and the fraction reached, in seconds
     (it took 5000 sweeps, ~35 s on 2 cores, before the stall test)."""
     s = base_scene()
-    s["cell"]["size"] = [2.5, 2.5, 2.5]
+    # the cell clears twice the contact range (longest extent 1.2 + 2 alpha + radius)
+    s["cell"]["size"] = [2.75, 2.75, 2.75]
     s["particles"] = [{"name": "rods", "shape": "fibre", "length": 1.0, "radius": 0.1, "volume_fraction": 0.4}]
     s["model"] = {"alpha": 0.01}
     s["numerics"].update(seed=1, t_end=0.1)
@@ -209,7 +211,9 @@ def test_hopeless_placement_gives_up_early_naming_the_key(tmp_path, fake_fold_ru
     assert main(["run", str(write_scene(tmp_path / "hopeless.toml", s)), "-o", str(out)]) == 2
     took = time.monotonic() - started
     err = capsys.readouterr().err
-    assert "particles[0].volume_fraction" in err and "reached 0.2151" in err and "stalled" in err
+    assert "particles[0].volume_fraction" in err and "stalled" in err
+    reached = float(re.search(r"reached ([0-9.]+)", err).group(1))
+    assert 0.0 < reached < 0.4, err
     assert "Hint" in err and "lower the volume fraction" in err
     assert took < 20.0, took
     assert not out.exists() and not out.with_name("hopeless.h5.partial").exists()
