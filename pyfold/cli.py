@@ -18,9 +18,10 @@ import importlib
 import signal
 import sys
 import threading
+import warnings
 
 from pyfold import __version__
-from pyfold.errors import InputError, PyfoldError
+from pyfold.errors import InputError, PyfoldError, PyfoldWarning
 
 #: command name -> (module under pyfold.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -89,12 +90,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def _plain_warnings(command: str):
+    """pyfold's own warnings (a trajectory leaving the orientation tensors, an
+    eigenvalue crossing, ...) as one line each, ``pyfold CMD: warning: ...``, instead of
+    Python's file:line form: they are messages to the user, not to a programmer."""
+    original = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, PyfoldWarning):
+            print(f"pyfold {command}: warning: {message}", file=sys.stderr if file is None else file)
+        else:
+            original(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = original
+
+
 def main(argv: list[str] | None = None) -> int:
     global _depth
     args = build_parser().parse_args(argv)
     _depth += 1
     try:
-        with _signals_raise():
+        with _signals_raise(), _plain_warnings(args.command):
             return int(args._run(args) or EXIT_OK)
     except InputError as exc:
         print(f"pyfold {args.command}: error: {exc}", file=sys.stderr)

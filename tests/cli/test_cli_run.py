@@ -104,3 +104,33 @@ def test_real_run_of_seed_disks_no_overlap(tmp_path, capsys, monkeypatch):
         assert ds["x"].sizes["snapshot"] == 2 and ds["x"].attrs["units"] == "m"
     finally:
         ds.close()
+
+
+def test_pyfold_warnings_are_printed_as_one_line_by_the_cli(capsys, monkeypatch):
+    import warnings
+
+    from pyfold import cli
+    from pyfold.errors import InadmissibleOrientationWarning
+
+    def run(args):
+        warnings.warn("a2 leaves the orientation tensors at t = 3 s", InadmissibleOrientationWarning)
+        return 0
+
+    parser = cli.build_parser()
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    args = parser.parse_args(["demo"])
+    monkeypatch.setattr(parser, "parse_args", lambda argv=None: argparse_namespace(args, run))
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        assert cli.main(["demo"]) == 0
+    err = capsys.readouterr().err
+    assert "pyfold demo: warning: a2 leaves the orientation tensors at t = 3 s" in err
+    assert "InadmissibleOrientationWarning" not in err and ".py:" not in err
+
+
+def argparse_namespace(args, run):
+    import argparse
+
+    ns = argparse.Namespace(**vars(args))
+    ns._run = run
+    return ns
