@@ -9,7 +9,6 @@ import itertools
 
 import h5py
 import numpy as np
-import pytest
 
 from conftest import write_scene
 from pyfold.cli import main
