@@ -1,0 +1,101 @@
+"""Scenes of a contacts-only fibre suspension in simple shear, sized from (beta, n L^3).
+
+The C_I studies, the closure verdict, the main job's ensemble and the cross-validation
+tests all simulate the same kind of scene: ``count`` rigid fibres of length ``L = 1 m``
+and aspect ratio ``beta = L/d`` in a cubic periodic cell (Lees-Edwards), simple shear
+at ``rate = 1 1/s``, Jeffery kinematics (no hydrodynamic interactions) with the seed's
+collision strategy: the model of Sundararajakumar & Koch (1997)
+(docs/physics.md#collision-driven-orientation-diffusion). This module builds that
+scene once, so that every study means the same thing by "beta = 10, n L^3 = 15".
+
+Choices, and why:
+
+* security zone ``alpha = alpha_over_d * d`` (default 0.1 d, docs/physics.md#collision-strategy);
+* time step ``dt = alpha / (rate L)``: a fibre tip moves at most ``rate L / 2`` so it
+  travels at most ``alpha / 2`` per step (docs/physics.md#time-step);
+* cell side: the smallest multiple of 0.1 L (at least ``min_side``) that clears fold_run's
+  range rule ``side > 2 rc`` (:func:`pyfold.scene.shapes.interaction_range`);
+* ``count = round(n L^3 side^3)``; the realised ``n L^3`` is returned.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from pyfold.errors import InputError
+from pyfold.scene.shapes import interaction_range
+
+
+@dataclasses.dataclass(frozen=True)
+class ShearedFibres:
+    """A contacts-only fibre scene: its TOML text and what it realises."""
+
+    toml: str
+    beta: float
+    n_l3: float  # realised count / side^3 (L = 1)
+    count: int
+    side: float
+    alpha: float
+    dt: float
+    t_end: float
+    seed: int
+
+
+def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_over_d: float = 0.1,
+                   interval: float = 0.2, min_side: float = 2.2, collisions: str = "strategy",
+                   dt: float | None = None, title: str | None = None) -> ShearedFibres:
+    """Build the scene (see the module docstring). ``collisions = "none"`` gives the no-contact twin."""
+    if not beta >= 1.0:
+        raise InputError(f"beta: must be >= 1, got {beta}")
+    if not n_l3 > 0.0:
+        raise InputError(f"n_l3: must be > 0, got {n_l3}")
+    if not 0.0 < alpha_over_d <= 1.0:
+        raise InputError(f"alpha_over_d: must lie in (0, 1], got {alpha_over_d}")
+    if collisions not in ("strategy", "none"):
+        raise InputError(f"collisions: 'strategy' or 'none', got {collisions!r}")
+    length = 1.0
+    radius = length / beta / 2.0
+    alpha = round(alpha_over_d * 2.0 * radius, 12)
+    step = round(dt if dt is not None else alpha / length, 12)  # rate = 1
+    rc = interaction_range([("fibre", radius, length)], alpha)
+    side = max(min_side, math.floor(2.0 * rc / 0.1 + 1.0 + 1e-9) * 0.1)
+    side = round(side, 6)
+    count = max(2, int(round(n_l3 * side ** 3)))
+    records = max(1, int(round(interval / step)))
+    interval = round(records * step, 12)
+    n_steps = int(round(t_end / step))
+    t_end = round(n_steps * step, 12)
+    title = title or f"contacts-only fibres, beta {beta:g}, n L^3 {count / side ** 3:.3g}, seed {seed}"
+    toml = f'''title = "{title}"
+[cell]
+dim = 3
+size = [{side!r}, {side!r}, {side!r}]
+
+[flow]
+type = "simple_shear"
+rate = 1.0
+
+[[particles]]
+name = "fibres"
+shape = "fibre"
+length = {length!r}
+radius = {radius!r}
+count = {count}
+orientation = "isotropic"
+
+[model]
+hydrodynamics = "jeffery"
+collisions = "{collisions}"
+alpha = {alpha!r}
+
+[numerics]
+dt = {step!r}
+t_end = {t_end!r}
+seed = {int(seed)}
+
+[output]
+interval = {interval!r}
+snapshot_interval = {t_end!r}
+'''
+    return ShearedFibres(toml=toml, beta=float(beta), n_l3=count / side ** 3, count=count, side=side,
+                         alpha=alpha, dt=step, t_end=t_end, seed=int(seed))
