@@ -39,6 +39,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
+from typing import Sequence
 
 import numpy as np
 
@@ -289,7 +290,15 @@ class SteadyMatch:
     closure : str
         Closure used.
     method : str
-        ``"least_squares"`` or ``"root a_ij"``.
+        ``"least_squares"``, ``"least_squares a_ij a_kl"`` (a subset of components)
+        or ``"root a_ij"``.
+    on_bound : bool
+        The least-squares optimum lies on a search bound: no interior ``C_I``
+        matches better, usually because the target lies outside the set of
+        Folgar-Tucker steady states (see the notes of :func:`ci_steady_state_match`).
+    span : numpy.ndarray (2, m), optional
+        Steady state on the independent components at the two search bounds
+        (row 0: ``bounds[0]``, row 1: ``bounds[1]``), to compare with the target.
     """
 
     ci: float
@@ -300,6 +309,8 @@ class SteadyMatch:
     sensitivity: np.ndarray
     closure: str
     method: str
+    on_bound: bool = False
+    span: np.ndarray | None = None
 
 
 def ci_steady_state_match(
@@ -312,6 +323,7 @@ def ci_steady_state_match(
     component: tuple[int, int] | None = None,
     bounds: tuple[float, float] = (1e-6, 0.5),
     xtol: float = 1e-10,
+    components: "Sequence[tuple[int, int]] | None" = None,
 ) -> SteadyMatch:
     """``C_I`` whose Folgar-Tucker steady state with ``closure`` matches a steady ``a2``.
 
@@ -324,7 +336,19 @@ def ci_steady_state_match(
       bounded 1-D minimisation over ``log C_I`` (Brent, ``scipy.optimize.
       minimize_scalar``);
     * ``component=(i, j)``: the root of ``a_ss,ij(C_I) = a_ij`` (Brent's method on
-      ``bounds``), as in Tucker's ``fitCI`` for ``a11``.
+      ``bounds``), as in Tucker's ``fitCI`` for ``a11``;
+    * ``components=[(i, j), ...]``: least squares over those components only (e.g.
+      ``[(0, 0), (1, 1)]``, the in-plane diagonal that moulding codes are judged on).
+
+    **When the optimum lies on a bound.** One ``C_I`` moves every component along
+    one curve ``a_ss(C_I)``. In simple shear that curve starts, as ``C_I -> 0+``,
+    at the closure's fixed point of Jeffery's equation (``a_xy -> 0``, ``a_xx``
+    at its largest: about 0.785 with IBOF and 0.777 with FEC at ``xi = 0.97``) and
+    loses alignment as ``C_I`` grows. A target more aligned than that fixed point,
+    or with ``a_xy <= 0``, is reached by no ``C_I > 0``: the least-squares optimum
+    is then the lower bound (``on_bound``; a ``RuntimeWarning`` says so) and the
+    root of ``a_xx`` is not bracketed (``InputError``). ``span`` gives the steady
+    states at both bounds so the caller can say which components are out of reach.
 
     **Error.** At the optimum ``g = a_ss'(C_I)`` (central differences in
     ``log C_I``, relative step 1e-3 on a state converged to 1e-13). The implicit
@@ -350,6 +374,10 @@ def ci_steady_state_match(
         independent components.
     component : (int, int), optional
         Match one component by root finding instead of least squares.
+    components : sequence of (int, int), optional
+        Least squares over these components only (each ``i <= j`` or its mirror;
+        ``(d-1, d-1)`` allowed: ``a_dd = 1 - `` the other diagonals). Not together
+        with ``component``.
     bounds : (float, float)
         Search interval for ``C_I`` (> 0).
     xtol : float
@@ -406,6 +434,20 @@ def ci_steady_state_match(
         ci_, cj_ = min(ci_, cj_), max(ci_, cj_)
     else:
         ci_ = cj_ = -1
+    if components is not None:
+        if component is not None:
+            raise InputError("components: give either component (root) or components (least squares), not both")
+        try:
+            pairs = sorted({(min(int(p), int(q)), max(int(p), int(q))) for p, q in components})
+        except (TypeError, ValueError):
+            raise InputError(f"components: expected pairs (i, j), got {components!r}") from None
+        if not pairs or any(not (0 <= p < d and 0 <= q < d) for p, q in pairs):
+            raise InputError(f"components: need >= 1 pair with indices in [0, {d}), got {components!r}")
+        sel_i = np.array([p for p, _ in pairs])
+        sel_j = np.array([q for _, q in pairs])
+        sel_label = " ".join(f"a_{p}{q}" for p, q in pairs)
+    else:
+        sel_i, sel_j, sel_label = iu, ju, ""
     if isinstance(closure, str):
         from pyfold.closures import resolve
 
@@ -426,15 +468,26 @@ def ci_steady_state_match(
 
     target = a[iu, ju]
     if component is None:
-        def loss(u: float) -> float:
-            r = a_ss(math.exp(u))[iu, ju] - target
+        sel_target = a[sel_i, sel_j]
+
+        def loss_at(c: float) -> float:
+            r = a_ss(c)[sel_i, sel_j] - sel_target
             return float(r @ r)
 
         res = scipy.optimize.minimize_scalar(
-            loss, bounds=(math.log(lo), math.log(hi)), method="bounded", options={"xatol": xtol}
+            lambda u: loss_at(math.exp(u)), bounds=(math.log(lo), math.log(hi)), method="bounded",
+            options={"xatol": xtol},
         )
         ci = float(math.exp(res.x))
-        method = "least_squares"
+        # Brent's bounded search never evaluates the bounds themselves; it stops within
+        # its tolerance sqrt(eps) |u| + xtol of an optimum on a bound (scipy's fminbound
+        # rule). Such an optimum, or a bound that is better, is the bound.
+        for edge in (lo, hi):
+            ue = math.log(edge)
+            near = abs(res.x - ue) <= 10.0 * (math.sqrt(np.finfo(np.float64).eps) * abs(ue) + xtol)
+            if near or loss_at(edge) < loss_at(ci):
+                ci = edge
+        method = "least_squares" + (f" {sel_label}" if sel_label else "")
     else:
         f = lambda c: float(a_ss(c)[ci_, cj_] - a[ci_, cj_])  # noqa: E731
         f_lo, f_hi = f(lo), f(hi)
@@ -450,7 +503,21 @@ def ci_steady_state_match(
         ci * (math.exp(step) - math.exp(-step))
     )
     if component is None:
-        sens = g / float(g @ g)
+        # Gauss-Newton on the selected components only; zero on the others.
+        sel = np.array([int(np.flatnonzero((iu == p) & (ju == q))[0]) if not (p == q == d - 1) else -1
+                        for p, q in zip(sel_i, sel_j)])
+        gs = np.zeros(m)
+        if components is None:
+            gs = g.copy()
+        else:
+            diag = np.flatnonzero(iu == ju)
+            for k in sel:
+                if k >= 0:
+                    gs[k] += g[k]
+            if np.any(sel < 0):  # a_dd = 1 - sum of the other diagonals: d a_dd / d a_kk = -1
+                g_dd = -float(np.sum(g[diag]))
+                gs[diag] += -g_dd
+        sens = gs / float(g @ gs) if float(g @ gs) != 0.0 else np.zeros(m)
     else:
         k = int(np.flatnonzero((iu == ci_) & (ju == cj_))[0]) if not (ci_ == cj_ == d - 1) else None
         sens = np.zeros(m)
@@ -463,8 +530,12 @@ def ci_steady_state_match(
     stderr = math.sqrt(float(sens @ cov @ sens)) if cov is not None else math.nan
     model_a = a_ss(ci)
     resid = model_a[iu, ju] - target
-    if ci <= lo * (1 + 1e-6) or ci >= hi * (1 - 1e-6):
-        warnings.warn(f"ci_steady_state_match: C_I = {ci:.3e} on the search bound {bounds}", RuntimeWarning, stacklevel=2)
+    on_bound = bool(ci <= lo * (1 + 1e-6) or ci >= hi * (1 - 1e-6)) if component is not None else ci in (lo, hi)
+    span = np.stack([a_ss(lo)[iu, ju], a_ss(hi)[iu, ju]])
+    if on_bound:
+        warnings.warn(f"ci_steady_state_match: C_I = {ci:.3e} on the search bound {bounds} (closure {label!r}): "
+                      "the target is outside the Folgar-Tucker steady states reached in between "
+                      "(see SteadyMatch.span)", RuntimeWarning, stacklevel=2)
     return SteadyMatch(
         ci=ci,
         stderr=stderr,
@@ -474,4 +545,6 @@ def ci_steady_state_match(
         sensitivity=sens,
         closure=label,
         method=method,
+        on_bound=on_bound,
+        span=span,
     )

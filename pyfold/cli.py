@@ -25,10 +25,13 @@ from pyfold.errors import InputError, PyfoldError, PyfoldWarning
 
 #: command name -> (module under pyfold.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "main": ("main_job", "run the bundled default job: simulate, fit C_I, compare closures, write figures"),
+    "main": ("main_job", "run the bundled default job: simulate an ensemble of seeds, report C_I per closure, "
+                         "steady state, correlations and the closure ranking"),
     "validate": ("validate", "check a scene file completely and print it normalised"),
     "run": ("run", "run the direct simulation of a scene into an HDF5 run file"),
     "analyse": ("analyse", "fit C_I per closure and judge closures against a finished run's a4"),
+    "report": ("report", "C_I per closure with errors, steady state, correlations and closure ranking for a run "
+                         "or an ensemble of seeds"),
     "demo": ("demo", "macro layer only: Folgar-Tucker per closure and a C_I fit on synthetic data"),
 }
 

@@ -1,9 +1,16 @@
-"""The multi-scale chain of the README's main job, as one function.
+"""The multi-scale chain of ``pyfold analyse``, and the checks every consumer of a run shares.
 
     scene ─► direct simulation (fold_run) ─► a2(t), a4(t)
-          ─► fit C_I of Folgar–Tucker per closure (and with the simulation's own a4)
+          ─► fit C_I of Folgar–Tucker per closure by trajectory fits through the ODE
+             (and with the simulation's own a4)
           ─► closures judged against the simulation's a4
           ─► figures, a NetCDF of the results, a text summary
+
+The main job and ``pyfold report`` use :mod:`pyfold.report` instead (rate
+regressions over the stationary part of an ensemble of long runs: a trajectory
+fit integrates the whole run at every iteration and compiles per closure); both
+share :func:`run_scene`, :func:`open_checked_run`, :func:`check_closures` and the
+run readers here.
 
 Why fit with several closures: the fitted ``C_I`` depends on the closure used
 (docs/physics.md#the-fitted-c_i-depends-on-the-closure), so the table reports one value per closure, plus the value
@@ -126,7 +133,7 @@ def check_orientation_records(a2: np.ndarray, times: np.ndarray, n_particles: in
                      "damaged or was not written by fold_run, refusing to fit it")
 
 
-def open_checked_run(run_path: Path, allow_failed: bool = False) -> xr.Dataset:
+def open_checked_run(run_path: Path, allow_failed: bool = False, command: str = "pyfold analyse") -> xr.Dataset:
     """Open a run for the C_I fit, refusing what cannot be fitted meaningfully.
 
     Refused (:class:`InputError`): not a run file, no ``/setup`` (or an incomplete
@@ -134,7 +141,7 @@ def open_checked_run(run_path: Path, allow_failed: bool = False) -> xr.Dataset:
     ``status`` other than ``"ok"`` (unless ``allow_failed``: then a loud warning on
     stderr and only the records up to the last good state, ``steps_done``), and any
     record of ``a2`` that is not an orientation tensor (:func:`check_orientation_records`)
-    or an ``a4`` that is not finite.
+    or an ``a4`` that is not finite. ``command`` names the caller in the warning.
     """
     import h5py
 
@@ -176,7 +183,7 @@ def open_checked_run(run_path: Path, allow_failed: bool = False) -> xr.Dataset:
             ds = ds.isel(time=np.flatnonzero(keep))
         else:
             t_good = float("nan")
-        print(f"pyfold analyse: WARNING: {run_path} did not finish (status {status!r}); --allow-failed: fitting only "
+        print(f"{command}: WARNING: {run_path} did not finish (status {status!r}); --allow-failed: fitting only "
               f"the {ds.sizes['time']} records up to the last good state (step {steps}, t = {t_good:.6g}). "
               "The fitted C_I describes a run that blew up: treat it with suspicion.", file=sys.stderr)
     n_records = ds.sizes.get("time", 0)
@@ -210,8 +217,21 @@ def check_output_folder(out: Path) -> Path:
     return out
 
 
-def run_scene(scene: Path, out: Path, ranks: int = 1) -> Path:
-    """Run a scene with the direct simulation (``pyfold run``); returns the result file."""
+def run_scene(scene: Path, out: Path, ranks: int = 1, log=None):
+    """Run a scene with the direct simulation (``pyfold run``); returns the result file.
+
+    With ``log`` (a file open for writing), ``pyfold run`` is started instead as a child
+    Python process in its own session, its output going to ``log``, and the
+    :class:`subprocess.Popen` is returned at once: the caller waits for it and stops it
+    (SIGTERM: ``pyfold run`` then stops its fold_run and keeps the partial file). The
+    main job runs its seeds this way, several at a time.
+    """
+    if log is not None:
+        import subprocess
+
+        argv = [sys.executable, "-m", "pyfold.cli", "run", str(scene), "-o", str(out), "--np", str(ranks)]
+        return subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                start_new_session=True)
     from pyfold.cli import main as cli_main
 
     argv = ["run", str(scene), "-o", str(out), "--np", str(ranks)]

@@ -13,7 +13,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-__all__ = ["plot_a2_histories", "plot_fit", "DEFAULT_COMPONENTS"]
+__all__ = ["plot_a2_histories", "plot_fit", "plot_report_a2", "plot_closure_report", "plot_ci_vs_correlations",
+           "DEFAULT_COMPONENTS"]
 
 #: Components shown by default: flow (11), shear (12), gradient (22) and
 #: vorticity (33) directions of a simple shear u = (gamma_dot y, 0, 0).
@@ -102,4 +103,137 @@ def plot_fit(
     bottom.grid(alpha=0.3)
     if title:
         fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+# --------------------------------------------------------------------------- report figures (pyfold.report)
+
+
+def plot_report_a2(dns: Mapping[int, tuple[np.ndarray, np.ndarray]], strain_ft: np.ndarray,
+                   predictions: Mapping[str, np.ndarray], ci_used: Mapping[str, float], onsets: Sequence[float],
+                   path) -> Path:
+    """Simulated ``a2`` per seed (thin grey) and their mean (black) against Folgar--Tucker
+    at each closure's C_I (coloured), with the steady-state onsets (dotted).
+
+    Parameters
+    ----------
+    dns : mapping seed -> (strain (nt,), a2 (nt, d, d))
+    strain_ft : array (np,)
+    predictions : mapping closure -> a2 (np, d, d)
+    ci_used : mapping closure -> C_I of its prediction
+    onsets : strains where each run's stationary window starts
+    path : output PNG
+    """
+    first = next(iter(dns.values()))
+    d = first[1].shape[-1]
+    components = [(0, 0), (1, 1), (0, 1)] + ([(2, 2)] if d == 3 else [])
+    fig = Figure(figsize=(3.3 * len(components), 4.2), layout="constrained")
+    axes = fig.subplots(1, len(components), squeeze=False)[0]
+    same_grid = len({len(s) for s, _ in dns.values()}) == 1
+    for ax, (i, j) in zip(axes, components):
+        for strain, a2 in dns.values():
+            ax.plot(strain, a2[:, i, j], color="0.6", lw=0.5, alpha=0.7)
+        if same_grid and len(dns) > 1:
+            strain = first[0]
+            ax.plot(strain, np.mean([a2[:, i, j] for _, a2 in dns.values()], axis=0), "k", lw=1.3,
+                    label=f"simulation, mean of {len(dns)} seeds")
+        elif len(dns) == 1:
+            ax.lines[-1].set(color="k", lw=1.0, alpha=1.0, label="simulation")
+        for k, (name, a2) in enumerate(predictions.items()):  # colours as in plot_closure_report
+            ax.plot(strain_ft, a2[:, i, j], color=f"C{k + 1}", lw=1.1, label=f"FT {name}, C_I = {ci_used[name]:.2g}")
+        for x in onsets:
+            ax.axvline(x, color="0.4", lw=0.6, ls=":")
+        ax.set_xlabel(r"shear strain $\dot\gamma t$")
+        ax.set_ylabel(_label(i, j))
+        ax.grid(alpha=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 6), fontsize=7, frameon=False)
+    fig.suptitle("Direct simulation (grey: seeds) vs Folgar-Tucker at each closure's C_I; dotted: steady-state onsets",
+                 fontsize=10)
+    return _save(fig, path)
+
+
+def plot_closure_report(errors: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray]]],
+                        ci: Mapping[str, tuple[float, float]], correlations: Mapping[str, float], ranking,
+                        path) -> Path:
+    """Left: each closure's ``a4:D`` error against the simulation's ``a4`` over strain
+    (mean over seeds), labelled with its rank. Right: C_I ± error per closure ("exact":
+    the runs' own a4) with the published correlations at the scene's phi beta.
+
+    Parameters
+    ----------
+    errors : mapping closure -> [(strain, error) per run]
+    ci : mapping closure -> (C_I, error)
+    correlations : mapping name -> C_I at the scene's phi beta
+    ranking : sequence of pyfold.ensemble.RankedEntry
+    path : output PNG
+    """
+    fig = Figure(figsize=(11, 3.9), layout="constrained")
+    left, right = fig.subplots(1, 2)
+    rank = {e.name: e.rank for e in ranking}
+    for k, (name, series) in enumerate(errors.items()):
+        strain = series[0][0]
+        if all(len(s) == len(strain) for s, _ in series):
+            e = np.mean([v for _, v in series], axis=0)
+        else:
+            strain, e = series[0]
+        left.semilogy(strain, np.maximum(e, 1e-16), lw=1.0, color=f"C{k + 1}",
+                      label=f"{rank.get(name, '?')}. {name}")
+    left.set_xlabel(r"shear strain $\dot\gamma t$")
+    left.set_ylabel(r"$\|(\mathrm{closure}(a_2) - a_4):D\| / \|a_4:D\|$")
+    left.grid(alpha=0.3, which="both")
+    if errors:
+        left.legend(fontsize=7, frameon=False, title="rank. closure", title_fontsize=7, loc="lower right")
+    names = list(ci)
+    x = np.arange(len(names))
+    values = np.array([ci[n][0] for n in names])
+    errs = np.array([ci[n][1] for n in names])
+    judged = [n for n in names if n != "exact"]
+    colours = ["0.3" if n == "exact" else f"C{judged.index(n) + 1}" for n in names]
+    right.bar(x, values, yerr=np.where(np.isfinite(errs), errs, 0.0), capsize=3, color=colours)
+    for k, (name, value) in enumerate(correlations.items()):
+        right.axhline(value, color=f"C{k + 6}", ls="--", lw=1.0, label=f"{name}: {value:.2g}")
+    right.axhline(0.0, color="k", lw=0.6)
+    right.set_xticks(x, ["exact\n(own a4)" if n == "exact" else n for n in names], rotation=30)
+    right.set_ylabel("C_I (rate regression)")
+    right.set_yscale("symlog", linthresh=1e-4)
+    right.grid(alpha=0.3, axis="y")
+    if correlations:
+        right.legend(fontsize=7, frameon=False, loc="lower left")
+    fig.suptitle("Closures against the simulation's own a4 (left); C_I per closure and published correlations (right)",
+                 fontsize=10)
+    return _save(fig, path)
+
+
+def plot_ci_vs_correlations(phi_beta: float, ci: Mapping[str, tuple[float, float]], path) -> Path:
+    """The published C_I correlations and Folgar & Tucker's (1984) measurements against
+    phi beta (pyfold.correlations), with this report's C_I per closure at the scene's
+    phi beta (symmetric-log axis: a negative C_I is shown as such)."""
+    from pyfold import correlations as corr
+
+    fig = Figure(figsize=(6.4, 4.4), layout="constrained")
+    ax = fig.subplots()
+    pb = np.linspace(0.0, 5.0, 201)
+    for k, (name, (fn, _)) in enumerate(corr.CORRELATIONS.items()):
+        ax.plot(pb, fn(pb), color=f"C{k + 6}", lw=1.3, label=name)
+    ft = corr.FOLGAR_TUCKER_1984
+    ax.plot([v.phi_beta for v in ft], [v.ci for v in ft], "ks", ms=5, label=ft[0].source)
+    ax.axhspan(*corr.PUBLISHED_RANGE, color="tab:green", alpha=0.07, label="published range")
+    if np.isfinite(phi_beta):
+        names = list(ci)
+        offsets = (np.arange(len(names)) - (len(names) - 1) / 2) * 0.03
+        judged = [n for n in names if n != "exact"]
+        for k, name in enumerate(names):
+            value, err = ci[name]
+            ax.errorbar(phi_beta + offsets[k], value, yerr=err if np.isfinite(err) else None, fmt="o", ms=4,
+                        capsize=2, color="0.3" if name == "exact" else f"C{judged.index(name) + 1}",
+                        label=f"this report: {'exact (own a4)' if name == 'exact' else name}")
+        ax.axvline(phi_beta, color="0.5", lw=0.6, ls=":")
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_yscale("symlog", linthresh=1e-4)
+    ax.set_xlabel(r"$\phi\beta$")
+    ax.set_ylabel(r"$C_I$")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=6.5, frameon=False, ncol=2, loc="lower right")
+    ax.set_title("C_I: correlations, measurements, and this report", fontsize=10)
     return _save(fig, path)

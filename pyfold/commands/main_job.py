@@ -1,5 +1,14 @@
 """``pyfold main``: the bundled default job of the README.
 
+The default scene is simulated for several seeds (the scene's seed, seed + 1, ...),
+``--np`` runs at a time as separate processes, then :mod:`pyfold.report` measures,
+on the stationary part of every run, C_I per closure (rate regression with the
+closure's a4) and closure-free (with the runs' own a4), each with its ensemble
+error, beside the published correlations at the scene's phi beta, whether and
+when the steady state was reached, and the closures ranked by their a4:D error
+with paired significance tests (the same report as ``pyfold report`` on the run
+files). The small Stokes scene runs while the report is computed.
+
 Every invocation writes a fresh, timestamped results folder under ``--out``
 (``run-YYYYmmdd-HHMMSS``), assembled in a hidden temporary folder and renamed
 into place only when complete, so an earlier result is never overwritten and
@@ -10,13 +19,15 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import shutil
+import subprocess
 import tempfile
 import time
 from pathlib import Path
 
 
-from pyfold.errors import InputError
+from pyfold.errors import InputError, PyfoldError
 from pyfold.pipeline import DEFAULT_CLOSURES
 
 def _bundled_scenes() -> Path:
@@ -29,17 +40,26 @@ def _bundled_scenes() -> Path:
 SCENES = _bundled_scenes()
 DEFAULT_SCENE = SCENES / "default.toml"
 STOKES_SCENE = SCENES / "stokes_small.toml"
+#: Seeds of the ensemble by default: enough for a standard error across seeds and a
+#: paired test (3 degrees of freedom), and two rounds of two processes on 2 cores.
+DEFAULT_SEEDS = 4
+#: Processes at a time by default (the 2 cores the README's budget assumes).
+DEFAULT_PROCESSES = 2
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/main", help="parent folder of the results (default: out/main)")
     parser.add_argument("--scene", default=None,
                         help=f"scene to simulate (default: the bundled {DEFAULT_SCENE.name})")
-    parser.add_argument("--np", type=int, default=1, metavar="N", help="MPI ranks of the simulation (default 1)")
+    parser.add_argument("--np", type=int, default=DEFAULT_PROCESSES, metavar="N",
+                        help="cores to use: N seeds are simulated at a time, one MPI rank each "
+                             f"(default {DEFAULT_PROCESSES})")
+    parser.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, metavar="K",
+                        help=f"seeds of the ensemble: the scene's seed, seed + 1, ... (default {DEFAULT_SEEDS})")
     parser.add_argument("--closures", default=None,
-                        help="comma-separated closures to fit C_I with and to judge: 'exact' or names of "
-                             f"pyfold.closures.available(dim) (default: {','.join(DEFAULT_CLOSURES)}, "
-                             "those defined in the scene's dimension)")
+                        help="comma-separated closures to estimate C_I with and to judge: 'exact' (the runs' own "
+                             "a4) or names of pyfold.closures.available(dim) "
+                             f"(default: {','.join(DEFAULT_CLOSURES)}, those defined in the scene's dimension)")
 
 
 def _scene_dim(scene: Path) -> int:
@@ -56,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     from pyfold.commands.run import check_ranks
 
     check_ranks(args.np)
+    if args.seeds < 1:
+        raise InputError(f"--seeds: must be an integer >= 1, got {args.seeds}")
     dim = _scene_dim(scene)
     if args.closures is None:
         from pyfold.closures import available
@@ -77,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         final = parent / f"{stamp}-{suffix}"
     work = Path(tempfile.mkdtemp(prefix=".partial-", dir=parent))
     try:
-        _job(work, scene, args.np, closures)
+        _job(work, scene, args.np, args.seeds, closures)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
@@ -92,22 +114,145 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _job(outdir: Path, scene: Path, ranks: int, closures: tuple[str, ...]) -> None:
-    """Simulate the scene, fit C_I per closure, judge closures, write figures and data."""
-    from pyfold import pipeline
+def with_seed(text: str, seed: int) -> str:
+    """The scene text with ``numerics.seed = seed`` (the line replaced in place, so the
+    comments stay; added under ``[numerics]``, or in a new ``[numerics]`` table)."""
+    lines = text.splitlines()
+    table = None
+    numerics_at = None
+    for k, line in enumerate(lines):
+        header = re.match(r"\s*\[\s*([^\]]+?)\s*\]", line)
+        if header and not line.lstrip().startswith("[["):
+            table = header.group(1)
+            if table == "numerics":
+                numerics_at = k
+            continue
+        if line.lstrip().startswith("[["):
+            table = None
+            continue
+        if table == "numerics" and re.match(r"\s*seed\s*=", line):
+            comment = line[line.index("#"):] if "#" in line else ""
+            lines[k] = f"seed = {seed}" + (f"                   {comment}" if comment else "")
+            return "\n".join(lines) + "\n"
+    if numerics_at is not None:
+        lines.insert(numerics_at + 1, f"seed = {seed}")
+        return "\n".join(lines) + "\n"
+    return text.rstrip("\n") + f"\n\n[numerics]\nseed = {seed}\n"
 
-    print(f"pyfold main: 1/3 direct simulation of {scene}")
-    run_path = pipeline.run_scene(scene, outdir / "run.h5", ranks=ranks)
-    print("pyfold main: 2/3 fitting C_I of Folgar-Tucker per closure and judging closures against the run's a4")
-    chain = pipeline.fit_and_compare(run_path, outdir, closures=closures)
-    results = pipeline.results_dataset(chain)
-    results.attrs["scene"] = str(scene)
-    results.to_netcdf(outdir / "results.nc", engine="h5netcdf")
-    summary = [f"scene: {scene}", f"run: {run_path.name}", "", pipeline.summary_table(chain.fits, chain.closure_errors)]
-    if STOKES_SCENE.is_file() and scene == DEFAULT_SCENE:
-        print(f"pyfold main: 3/3 small Stokes scene {STOKES_SCENE.name} (fibres coupled through the fluid)")
-        stokes_path = pipeline.run_scene(STOKES_SCENE, outdir / "stokes_run.h5", ranks=ranks)
-        summary += ["", pipeline.stokes_summary(stokes_path)]
-    else:
-        print("pyfold main: 3/3 skipped (no Stokes scene with a custom --scene)")
-    (outdir / "summary.txt").write_text("\n".join(summary) + "\n")
+
+class _Jobs:
+    """Child processes ``pyfold run`` (:func:`pyfold.pipeline.run_scene` with a log), at most
+    ``slots`` at a time, each with a log file.
+
+    The children run in their own sessions; on an error or a signal in the main job
+    every running child gets SIGTERM (``pyfold run`` then stops its fold_run) and is
+    waited for, so nothing outlives the job."""
+
+    def __init__(self, slots: int, logs: Path):
+        self.slots = max(1, int(slots))
+        self.logs = logs
+        self.running: dict[str, tuple[subprocess.Popen, object, Path, float]] = {}
+        self.done: dict[str, tuple[int, float]] = {}
+
+    def start(self, name: str, scene: Path, out: Path) -> None:
+        """Start `pyfold run` of ``scene`` with one rank (fold_run and the placement are
+        serial per run: the parallelism is over seeds)."""
+        from pyfold import pipeline
+
+        log_path = self.logs / f"{name.replace(' ', '_')}.log"
+        log = open(log_path, "w", encoding="utf-8")
+        try:
+            proc = pipeline.run_scene(scene, out, ranks=1, log=log)
+        except BaseException:
+            log.close()
+            raise
+        self.running[name] = (proc, log, log_path, time.perf_counter())
+
+    def wait_one(self) -> str:
+        while True:
+            for name, (proc, log, log_path, t0) in list(self.running.items()):
+                if proc.poll() is not None:
+                    log.close()
+                    del self.running[name]
+                    self.done[name] = (proc.returncode, time.perf_counter() - t0)
+                    if proc.returncode != 0:
+                        tail = log_path.read_text(encoding="utf-8", errors="replace").strip().splitlines()[-8:]
+                        raise PyfoldError(f"`pyfold run` for {name} failed (exit {proc.returncode}):\n  "
+                                          + "\n  ".join(tail))
+                    return name
+            time.sleep(0.2)
+
+    def run_all(self, jobs: list[tuple[str, Path, Path]], say) -> None:
+        queue = list(jobs)
+        while queue or self.running:
+            while queue and len(self.running) < self.slots:
+                self.start(*queue.pop(0))
+            if self.running:
+                name = self.wait_one()
+                say(f"{name} done ({self.done[name][1]:.0f} s)")
+
+    def stop(self) -> None:
+        for proc, log, _, _ in self.running.values():
+            if proc.poll() is None:
+                proc.terminate()
+        deadline = time.monotonic() + 20.0
+        for proc, log, _, _ in self.running.values():
+            try:
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            log.close()
+        self.running.clear()
+
+
+def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tuple[str, ...]) -> None:
+    """Simulate the seeds, report on them (and run the Stokes scene meanwhile)."""
+    from pyfold import pipeline, report
+    from pyfold.scene import load_scene
+
+    def say(text: str) -> None:
+        print(f"pyfold main: {text}", flush=True)
+
+    t_start = time.perf_counter()
+    base = load_scene(scene).seed
+    seeds = [base + k for k in range(n_seeds)]
+    text = scene.read_text(encoding="utf-8")
+    scratch = Path(tempfile.mkdtemp(prefix=".scenes-", dir=outdir))
+    jobs = _Jobs(processes, scratch)
+    try:
+        runs, todo = [], []
+        for seed in seeds:
+            seed_scene = scene  # the scene's own seed: the file itself
+            if seed != base:
+                seed_scene = scratch / f"seed_{seed}.toml"
+                seed_scene.write_text(with_seed(text, seed), encoding="utf-8")
+                if load_scene(seed_scene).seed != seed:  # the text edit must mean what it says
+                    raise PyfoldError(f"{scene}: could not set numerics.seed = {seed} in a copy of the scene")
+            runs.append(outdir / f"run_seed{seed}.h5")
+            todo.append((f"seed {seed}", seed_scene, runs[-1]))
+        say(f"1/3 direct simulation of {scene.name}, seeds {', '.join(map(str, seeds))} "
+            f"({jobs.slots} at a time)")
+        jobs.run_all(todo, say)
+        stokes = STOKES_SCENE.is_file() and scene.resolve() == DEFAULT_SCENE.resolve()
+        if stokes:
+            say(f"2/3 small Stokes scene {STOKES_SCENE.name} (fibres coupled through the fluid), beside step 3")
+            jobs.start("Stokes scene", STOKES_SCENE, outdir / "stokes_run.h5")
+        say("3/3 report: steady state, C_I per closure, closure errors and ranking, Folgar-Tucker per closure")
+        rep = report.build_report(runs, closures, progress=lambda t: say(f"  {t}"))
+        extra = []
+        if stokes:
+            while jobs.running:
+                jobs.wait_one()
+            extra = [pipeline.stokes_summary(outdir / "stokes_run.h5")]
+        else:
+            extra = ["Stokes scene: skipped (it runs with the bundled default scene only)"]
+        extra.append(f"main job: {n_seeds} seeds, {jobs.slots} processes at a time; "
+                     f"{time.perf_counter() - t_start:.0f} s wall")
+        report.write_report(rep, outdir, extra)
+    except BaseException:
+        jobs.stop()
+        raise
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    print("\n".join(report.summary_lines(rep) + [""] + extra))

@@ -16,11 +16,19 @@ Choices, and why:
 * cell side: the smallest multiple of 0.1 L (at least ``min_side``) that clears fold_run's
   range rule ``side > 2 rc`` (:func:`pyfold.scene.shapes.interaction_range`);
 * ``count = round(n L^3 side^3)``; the realised ``n L^3`` is returned.
+
+``hydrodynamics = "stokes"`` gives the fluid-coupled twin of the same scene (same
+particles, cell, time step and seed, so the placement is identical): the fictitious-domain
+FFT Stokes solver (docs/physics.md#fft-stokes-solver) replaces Jeffery kinematics, with
+its ``[numerics.stokes]`` keys given by ``stokes`` (``cells_per_diameter``, ``tolerance``,
+``kappa``, ``max_iterations``, ...; the solver's defaults otherwise) and the time scheme
+by ``time_scheme`` (docs/scenes.md#numerics). The contacts-only scene is unchanged.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Mapping
 
 from pyfold.errors import InputError
 from pyfold.scene.shapes import interaction_range
@@ -39,12 +47,16 @@ class ShearedFibres:
     dt: float
     t_end: float
     seed: int
+    hydrodynamics: str = "jeffery"
 
 
 def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_over_d: float = 0.1,
                    interval: float = 0.2, min_side: float = 2.2, collisions: str = "strategy",
-                   dt: float | None = None, title: str | None = None) -> ShearedFibres:
-    """Build the scene (see the module docstring). ``collisions = "none"`` gives the no-contact twin."""
+                   dt: float | None = None, title: str | None = None, hydrodynamics: str = "jeffery",
+                   stokes: Mapping[str, int | float | str] | None = None,
+                   time_scheme: str | None = None) -> ShearedFibres:
+    """Build the scene (see the module docstring). ``collisions = "none"`` gives the no-contact twin,
+    ``hydrodynamics = "stokes"`` the fluid-coupled twin (``stokes``: its ``[numerics.stokes]`` keys)."""
     if not beta >= 1.0:
         raise InputError(f"beta: must be >= 1, got {beta}")
     if not n_l3 > 0.0:
@@ -53,6 +65,10 @@ def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_o
         raise InputError(f"alpha_over_d: must lie in (0, 1], got {alpha_over_d}")
     if collisions not in ("strategy", "none"):
         raise InputError(f"collisions: 'strategy' or 'none', got {collisions!r}")
+    if hydrodynamics not in ("jeffery", "stokes"):
+        raise InputError(f"hydrodynamics: 'jeffery' or 'stokes', got {hydrodynamics!r}")
+    if hydrodynamics == "jeffery" and (stokes or time_scheme is not None):
+        raise InputError("stokes, time_scheme: only with hydrodynamics = 'stokes'")
     length = 1.0
     radius = length / beta / 2.0
     alpha = round(alpha_over_d * 2.0 * radius, 12)
@@ -65,7 +81,14 @@ def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_o
     interval = round(records * step, 12)
     n_steps = int(round(t_end / step))
     t_end = round(n_steps * step, 12)
-    title = title or f"contacts-only fibres, beta {beta:g}, n L^3 {count / side ** 3:.3g}, seed {seed}"
+    model_words = "contacts-only" if hydrodynamics == "jeffery" else "Stokes-coupled"
+    title = title or f"{model_words} fibres, beta {beta:g}, n L^3 {count / side ** 3:.3g}, seed {seed}"
+    numerics_extra = ""
+    if time_scheme is not None:
+        numerics_extra += f'time_scheme = "{time_scheme}"\n'
+    if hydrodynamics == "stokes":
+        numerics_extra += "\n[numerics.stokes]\n" + "".join(
+            f"{key} = {_toml_value(value)}\n" for key, value in (stokes or {}).items())
     toml = f'''title = "{title}"
 [cell]
 dim = 3
@@ -84,7 +107,7 @@ count = {count}
 orientation = "isotropic"
 
 [model]
-hydrodynamics = "jeffery"
+hydrodynamics = "{hydrodynamics}"
 collisions = "{collisions}"
 alpha = {alpha!r}
 
@@ -92,10 +115,19 @@ alpha = {alpha!r}
 dt = {step!r}
 t_end = {t_end!r}
 seed = {int(seed)}
-
+{numerics_extra}
 [output]
 interval = {interval!r}
 snapshot_interval = {t_end!r}
 '''
     return ShearedFibres(toml=toml, beta=float(beta), n_l3=count / side ** 3, count=count, side=side,
-                         alpha=alpha, dt=step, t_end=t_end, seed=int(seed))
+                         alpha=alpha, dt=step, t_end=t_end, seed=int(seed), hydrodynamics=hydrodynamics)
+
+
+def _toml_value(value: int | float | str) -> str:
+    """A scalar as TOML text (strings quoted; ``repr`` keeps integers integers and reals exact)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return repr(value)

@@ -34,12 +34,22 @@ from pyfold.runs import open_run
 CLOSURES = ("exact", "ibof")
 
 
-def scene_with_alpha(text: str, alpha: float) -> str:
-    """The default scene with ``model.alpha`` replaced (the only change)."""
-    new, count = re.subn(r"(?m)^alpha\s*=\s*[0-9.eE+-]+", f"alpha = {alpha!r}", text)
+#: This study's span and record spacing: the transient of the default scene (strain 20,
+#: 201 records); the default scene itself runs longer, for the main job's ensemble.
+T_END, INTERVAL = 20.0, 0.1
+
+
+def _replace(text: str, key: str, value: float) -> str:
+    new, count = re.subn(rf"(?m)^{key}\s*=\s*[0-9.eE+-]+", f"{key} = {value!r}", text)
     if count != 1:
-        raise SystemExit("the default scene has no single 'alpha = ...' line to vary")
+        raise SystemExit(f"the default scene has no single '{key} = ...' line to vary")
     return new
+
+
+def scene_with_alpha(text: str, alpha: float) -> str:
+    """The default scene with ``model.alpha`` replaced (the only physical change), run over this
+    study's span ``T_END`` with records every ``INTERVAL``."""
+    return _replace(_replace(_replace(text, "alpha", alpha), "t_end", T_END), "interval", INTERVAL)
 
 
 def main() -> None:

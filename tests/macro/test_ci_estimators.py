@@ -116,6 +116,59 @@ def test_steady_state_match_recovers_a_known_ci(ci_true):
     assert root.stderr == pytest.approx(1e-3 / abs(root.gradient[0]), rel=1e-12)
 
 
+def test_steady_state_match_on_a_subset_of_components_ignores_the_others():
+    """Least squares over (a11, a12) of a steady state whose a22, a33 were changed (trace
+    kept): the changed components do not enter, so the known C_I is recovered as
+    exactly as from the whole tensor; the Gauss-Newton sensitivity of the subset
+    match (with a_33 = 1 - a11 - a22 among the components) predicts the response to
+    a perturbation to first order."""
+    ci_true = 3e-3
+    a2 = np.asarray(steady_state_a2(FolgarTucker(ci=ci_true, xi=XI, closure="ibof"), SHEAR))
+    moved = a2.copy()
+    moved[1, 1] += 0.02
+    moved[2, 2] -= 0.02
+    m = ci_steady_state_match(moved, "ibof", XI, SHEAR, components=[(0, 0), (1, 0)])
+    assert abs(m.ci - ci_true) < 1e-6 * ci_true
+    assert m.method == "least_squares a_00 a_01" and not m.on_bound
+    # the whole-tensor match sees the moved components and lands elsewhere
+    assert abs(ci_steady_state_match(moved, "ibof", XI, SHEAR).ci - ci_true) > 1e-2 * ci_true
+    # sensitivity with a_dd in the subset: perturb a11 by +delta, a33 by -delta
+    three = ci_steady_state_match(a2, "ibof", XI, SHEAR, components=[(0, 0), (1, 1), (2, 2)])
+    delta = 1e-5
+    shifted = a2.copy()
+    shifted[0, 0] += delta
+    shifted[2, 2] -= delta
+    moved3 = ci_steady_state_match(shifted, "ibof", XI, SHEAR, components=[(0, 0), (1, 1), (2, 2)])
+    predicted = three.sensitivity[0] * delta  # a11 is the first independent component
+    assert abs((moved3.ci - three.ci) - predicted) < 0.05 * abs(predicted)
+    with pytest.raises(InputError, match="components"):
+        ci_steady_state_match(a2, "ibof", XI, SHEAR, components=[(0, 0)], component=(0, 0))
+    with pytest.raises(InputError, match="components"):
+        ci_steady_state_match(a2, "ibof", XI, SHEAR, components=[(0, 3)])
+
+
+def test_steady_state_match_beyond_the_closures_jeffery_fixed_point_is_on_the_lower_bound():
+    """As C_I -> 0+ Folgar-Tucker's steady state in shear tends to the closure's fixed
+    point of Jeffery's equation, its most aligned steady state (a11 falls as C_I
+    grows). A target more aligned than the state at the lower bound is matched by no
+    C_I in the bounds: least squares returns the bound itself and says so, the a11
+    root is not bracketed, and span holds the steady states at both bounds."""
+    lo, hi = 1e-6, 0.5
+    edge = np.asarray(steady_state_a2(FolgarTucker(ci=lo, xi=XI, closure="ibof"), SHEAR))
+    target = edge.copy()
+    target[0, 0] += 0.03
+    target[2, 2] -= 0.03
+    with pytest.warns(RuntimeWarning, match="search bound"):
+        m = ci_steady_state_match(target, "ibof", XI, SHEAR, bounds=(lo, hi))
+    assert m.on_bound and m.ci == lo
+    # both solves converge to |da2/dt| <= 1e-13; the inverse Jacobian at the fixed point is O(1 / the
+    # Jeffery frequency ~ 0.1): the states agree to ~1e-12, 1e-10 leaves room
+    np.testing.assert_allclose(m.span[0], edge[[0, 0, 0, 1, 1], [0, 1, 2, 1, 2]], rtol=0, atol=1e-10)
+    assert m.span[1][0] < m.span[0][0]  # less aligned at the upper bound
+    with pytest.raises(InputError, match="not reached"):
+        ci_steady_state_match(target, "ibof", XI, SHEAR, bounds=(lo, hi), component=(0, 0))
+
+
 def test_steady_state_match_rejects_bad_arguments():
     a2 = np.diag([0.8, 0.1, 0.1])
     with pytest.raises(InputError, match="a2_steady"):

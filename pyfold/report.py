@@ -1,0 +1,851 @@
+"""The report on a run, or an ensemble of runs (seeds) of one scene: ``pyfold report`` and ``pyfold main``.
+
+    run files ─► checks (each run, and one scene apart from the seed)
+              ─► per run: stationary part (MSER-5 onset, drift test), C_I by rate
+                 regression with the run's own a4 and with each closure's a4,
+                 closure errors a4:D against the run's a4
+              ─► over the runs: ensemble means ± standard errors, closure ranking
+                 with paired tests, Folgar-Tucker integrated once per closure at
+                 its C_I, the published correlations at the scene's phi beta
+              ─► figures (PNG), results.nc, summary.txt / summary.md
+
+Why these estimators (docs/physics.md#the-fitted-c_i-depends-on-the-closure): a
+moulding code integrates Folgar-Tucker with *its* closure, so the interaction
+coefficient it needs is the one fitted with that closure. Here it is the rate
+regression :func:`pyfold.ci_estimators.ci_rate_regression` with the closure's
+``a4`` evaluated on the simulated ``a2`` (no ODE, linear in C_I, cheap over a
+long run), over the stationary part of each run. The same regression with the
+run's own ``a4`` needs no closure: it measures what the contacts alone do,
+projected on Folgar-Tucker's isotropic diffusion. Trajectory fits through the ODE
+(:func:`pyfold.fit.fit_parameters`, ``pyfold analyse``) compile per closure and
+integrate the whole run at every iteration, too slow for an ensemble of long runs.
+
+Compilations: closures are evaluated on a fixed shape (:data:`CLOSURE_RECORDS`
+records per run, thinned and padded), and Folgar-Tucker is integrated by a
+fixed-step RK4 in ``jax.lax.scan`` onto :data:`PREDICTION_POINTS` times, so each
+closure compiles two programs whatever the runs, both kept by JAX's persistent
+cache (:mod:`pyfold._jax`). (diffrax solves carry host callbacks, which the
+persistent cache does not store, so a new process would trace and compile them
+again.)
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import xarray as xr
+
+from pyfold.errors import InputError
+
+#: Records per run on which closures are evaluated: a longer run is thinned to every
+#: k-th record (the rate regression gives the same C_I at record spacings 0.1 to 0.5,
+#: tests/cross/test_ci_methods.py), a shorter one padded; one compiled shape.
+CLOSURE_RECORDS = 1024
+#: Output times of the Folgar-Tucker prediction (fixed: one compiled shape).
+PREDICTION_POINTS = 256
+#: Largest RK4 step of the prediction [1/gamma_dot]. Against the adaptive diffrax
+#: solve at rtol 1e-10 over a strain of 400 from isotropy (beta = 10), the largest a2
+#: error was 6e-5 at C_I = 0 and 8e-6 at C_I = 1e-3 (IBOF and FEC alike; 1e-3 at a
+#: step of 1): far below what a figure shows. The step sets the cost: the FEC closure
+#: costs ~0.5 ms per evaluation, four per step. tests/cli/test_report.py checks it.
+PREDICTION_MAX_STEP = 0.5
+#: Span of the trajectory fit of C_I, in Jeffery periods ``T = 2 pi (beta_e + 1/beta_e) / gamma_dot``
+#: from the start of the runs: the transient in which the contacts damp the ensemble's
+#: Jeffery oscillation (MSER onsets at 2-4 periods in the default scene), the strains of a
+#: mould filling (10-100). Over longer spans the fit weighs the slowly drifting late state,
+#: which Folgar-Tucker's steady states often cannot reach
+#: (studies/interaction_coefficient/ci_concentration.py).
+TRAJECTORY_PERIODS = 2.0
+#: Largest C_I the trajectory fit considers (the published range ends at 3e-2).
+TRAJECTORY_CI_MAX = 0.1
+#: Fewest records a stationary window must hold for the estimators (ci_rate_regression
+#: needs 8 interior records; blocking errors need 16 samples).
+MIN_WINDOW_RECORDS = 16
+#: Significance level of the closure ranking (Holm-adjusted neighbour tests).
+RANK_LEVEL = 0.05
+#: Files a report writes (``--out`` rules refer to these).
+REPORT_FILES = ("results.nc", "summary.txt", "summary.md", "a2_dns_vs_fitted_ft.png", "closures_vs_dns.png",
+                "ci_vs_correlations.png")
+#: Scene keys that may differ between the runs of one ensemble: the seed, and the
+#: free texts (``title``/``description`` often name the seed).
+SEED_KEYS = ("numerics.seed", "title", "description", "resolved/seed")
+
+
+# --------------------------------------------------------------------------- one scene
+
+
+def _flatten(value, prefix: str = "") -> dict[str, object]:
+    """Nested dicts/lists as ``{"a.b[0].c": leaf}``."""
+    out: dict[str, object] = {}
+    if isinstance(value, dict):
+        for key, item in value.items():
+            out.update(_flatten(item, f"{prefix}.{key}" if prefix else str(key)))
+    elif isinstance(value, (list, tuple)):
+        for k, item in enumerate(value):
+            out.update(_flatten(item, f"{prefix}[{k}]"))
+    else:
+        out[prefix] = value
+    return out
+
+
+def scene_fingerprint(run_path: Path) -> dict[str, object]:
+    """What makes the scene of a run: the normalised scene stored in ``/setup/scene_json``
+    and every resolved value in ``/setup/resolved`` (``resolved/<name>``), without the
+    seed and the free texts (:data:`SEED_KEYS`). The verbatim TOML is not compared
+    (comments and layout may differ)."""
+    from pyfold.run_file import read_setup
+
+    setup = read_setup(run_path)
+    keys = _flatten(setup.scene)
+    for name, value in setup.resolved.items():
+        arr = np.asarray(value)
+        keys[f"resolved/{name}"] = arr.tolist() if arr.dtype.kind in "fiub" else value
+    return {k: v for k, v in keys.items() if k not in SEED_KEYS}
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, float) or isinstance(b, float) or isinstance(a, list) or isinstance(b, list):
+        try:
+            x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+            return x.shape == y.shape and bool(np.all((x == y) | (np.isnan(x) & np.isnan(y))))
+        except (TypeError, ValueError):
+            return a == b
+    return a == b
+
+
+def check_same_scene(paths: Sequence[Path]) -> list[int]:
+    """Refuse runs of different scenes; returns the seed of each run.
+
+    Raises
+    ------
+    InputError
+        Naming the first run that differs from the first one, the differing key
+        (e.g. ``particles[0].count``) and both values; or two runs with the same seed
+        (the same realisation twice would shrink the error bars falsely).
+    """
+    from pyfold.run_file import read_setup
+
+    reference = scene_fingerprint(paths[0])
+    for path in paths[1:]:
+        other = scene_fingerprint(path)
+        for key in sorted(set(reference) | set(other)):
+            if key not in reference or key not in other or not _same(reference[key], other[key]):
+                raise InputError(
+                    f"{path}: a different scene than {paths[0]}: key {key!r} is "
+                    f"{other.get(key, '<missing>')!r} there and {reference.get(key, '<missing>')!r} in {paths[0]} "
+                    "(an ensemble must be one scene, only the seed may differ)")
+    seeds = [int(read_setup(p).resolved["seed"]) for p in paths]
+    for k, seed in enumerate(seeds):
+        if seed in seeds[:k]:
+            raise InputError(f"{paths[k]}: the same seed {seed} as {paths[seeds.index(seed)]}: the same realisation "
+                             "twice is not an independent sample")
+    return seeds
+
+
+# --------------------------------------------------------------------------- per run
+
+
+@dataclasses.dataclass
+class RunAnalysis:
+    """What the report measures on one run."""
+
+    path: Path
+    seed: int
+    t: np.ndarray  # record times [s]
+    a2: np.ndarray  # (nt, d, d)
+    onset_time: float  # start of the stationary part (MSER-5) [s]
+    stationary: bool
+    steady_message: str
+    window: tuple[float, float]  # times used by the estimators [s]
+    ci: dict[str, float]  # closure name ("exact": the run's own a4) -> C_I
+    ci_stderr: dict[str, float]
+    error_t: np.ndarray  # closure errors' times (thinned records) [s]
+    error_contracted: dict[str, np.ndarray]  # judged closure -> a4:D error at error_t
+    error_mean: dict[str, float]  # time mean over the window
+    error_stderr: dict[str, float]  # blocking s.e. of that mean
+    drift: dict[str, tuple[float, float]]  # diagonal of a2: slope and s.e. over the last half of the window [1/s]
+    thinned: tuple | None = None  # (a2, a4) at error_t, until the closure errors are computed
+
+
+def _thin_pad(n: int) -> tuple[np.ndarray, int]:
+    """Indices of at most CLOSURE_RECORDS records (every k-th, the last kept), and k."""
+    k = max(1, math.ceil(n / CLOSURE_RECORDS))
+    idx = np.arange(0, n, k)
+    return idx, k
+
+
+def _padded(x: np.ndarray) -> np.ndarray:
+    """``x`` (n, ...) padded to CLOSURE_RECORDS rows by repeating its last row."""
+    if len(x) == CLOSURE_RECORDS:
+        return x
+    return np.concatenate([x, np.repeat(x[-1:], CLOSURE_RECORDS - len(x), axis=0)])
+
+
+_CLOSURE_JIT: dict[tuple[str, int], object] = {}
+
+
+def closure_a4(name: str, a2: np.ndarray) -> np.ndarray:
+    """``closure(a2)`` for (n <= CLOSURE_RECORDS) records, on the fixed padded shape."""
+    from pyfold._jax import jax, jnp
+    from pyfold.closures import get_closure
+
+    d = a2.shape[-1]
+    key = (name, d)
+    if key not in _CLOSURE_JIT:
+        _CLOSURE_JIT[key] = jax.jit(jax.vmap(get_closure(name, d)))
+    return np.asarray(_CLOSURE_JIT[key](jnp.asarray(_padded(a2))))[: len(a2)]
+
+
+def stationary_window(t: np.ndarray, a2: np.ndarray):
+    """The steady-state verdict of a run and the window the estimators use.
+
+    The window starts at the MSER-5 onset (:func:`pyfold.steady_state.detect_steady_state`)
+    when at least :data:`MIN_WINDOW_RECORDS` records follow it, else at the middle of
+    the run; the verdict (``stationary``, ``message``) is reported either way.
+    """
+    from pyfold.steady_state import detect_steady_state
+
+    steady = detect_steady_state(t, a2)
+    start = steady.onset_index
+    if len(t) - start < MIN_WINDOW_RECORDS:
+        start = len(t) // 2
+    return steady, (float(t[start]), float(t[-1]))
+
+
+def analyse_run(path: Path, ds: xr.Dataset, seed: int, closures: Sequence[str], L: np.ndarray,
+                xi: float) -> RunAnalysis:
+    """Steady state and C_I per closure of one checked run (closure errors: :func:`attach_closure_errors`)."""
+    from pyfold.ci_estimators import ci_rate_regression
+
+    t_all = np.asarray(ds["time"].values, dtype=np.float64)
+    a2_all = np.asarray(ds["a2"].values, dtype=np.float64)
+    a4_all = np.asarray(ds["a4"].values, dtype=np.float64)
+    if len(t_all) < 4 * MIN_WINDOW_RECORDS // 2:
+        raise InputError(f"{path}: {len(t_all)} records; the report needs at least {4 * MIN_WINDOW_RECORDS // 2} "
+                         "(steady-state detection and a rate regression over its window)")
+    steady, window = stationary_window(t_all, a2_all)
+    idx, _ = _thin_pad(len(t_all))
+    t, a2, a4 = t_all[idx], a2_all[idx], a4_all[idx]
+    d = a2.shape[-1]
+    L = np.asarray(L, dtype=np.float64)[:d, :d]
+    ci, ci_se = {}, {}
+    judged = [c for c in closures if c != "exact"]
+    a4_closure = {name: closure_a4(name, a2) for name in judged}
+    if len(t) - np.searchsorted(t, window[0]) < MIN_WINDOW_RECORDS:
+        window = (float(t[len(t) // 2]), float(t[-1]))
+    for name in closures:
+        r = ci_rate_regression(t, a2, a4 if name == "exact" else a4_closure[name], L, xi, window=window)
+        ci[name], ci_se[name] = r.ci, r.stderr
+    labels = ("x", "y", "z")[:d]
+    slope, slope_se = np.asarray(steady.drift_slope), np.asarray(steady.drift_stderr)
+    drift = {f"a_{labels[i]}{labels[i]}": (float(slope[i, i]), float(slope_se[i, i])) for i in range(d)}
+    return RunAnalysis(path=path, seed=seed, t=t_all, a2=a2_all, onset_time=steady.onset_time,
+                       stationary=bool(steady.stationary), steady_message=steady.message, window=window, ci=ci,
+                       ci_stderr=ci_se, error_t=t, error_contracted={}, error_mean={}, error_stderr={}, drift=drift,
+                       thinned=(a2, a4))
+
+
+def attach_closure_errors(runs: Sequence[RunAnalysis], judged: Sequence[str], L: np.ndarray) -> None:
+    """The a4:D error of every judged closure against each run's own a4
+    (:func:`pyfold.closure_check.closure_errors`, one call for all runs: each closure is
+    compiled and traced once), and its time mean and blocking s.e. over the run's window."""
+    from pyfold.closure_check import closure_errors
+    from pyfold.steady_state import blocking_stderr
+
+    if judged:
+        a2 = np.concatenate([_padded(r.thinned[0]) for r in runs])
+        a4 = np.concatenate([_padded(r.thinned[1]) for r in runs])
+        data = xr.Dataset({"a2": (("time", "i", "j"), a2), "a4": (("time", "i", "j", "k", "l"), a4)},
+                          coords={"time": np.arange(len(a2), dtype=float)})
+        errs = np.asarray(closure_errors(data, list(judged), velocity_gradient=L)["error_contracted"]
+                          .sel(closure=list(judged)).values)
+        for k, r in enumerate(runs):
+            inside = (r.error_t >= r.window[0]) & (r.error_t <= r.window[1])
+            for c, name in enumerate(judged):
+                e = errs[c, k * CLOSURE_RECORDS: k * CLOSURE_RECORDS + len(r.error_t)]
+                r.error_contracted[name] = e
+                r.error_mean[name] = float(np.mean(e[inside]))
+                r.error_stderr[name] = float(blocking_stderr(e[inside])[0])
+    for r in runs:
+        r.thinned = None
+
+
+# --------------------------------------------------------------------------- Folgar-Tucker prediction
+
+_PREDICT_JIT: dict[tuple[str, int], object] = {}
+
+
+def _rk4_program(closure: str, dim: int):
+    """The jitted RK4 integrator of Folgar-Tucker with ``closure`` (one per closure).
+
+    The rate is its own jitted function, so tracing the four RK4 stages traces the
+    closure once (tracing the FEC closure costs about half a second)."""
+    key = (closure, dim)
+    if key not in _PREDICT_JIT:
+        from pyfold._jax import jax, jnp
+        from pyfold.models import FolgarTucker
+
+        @jax.jit
+        def rate(ci, xi, a, L):
+            # Folgar-Tucker is autonomous for a constant L: t = 0
+            return FolgarTucker(ci=ci, xi=xi, closure=closure, dim=dim).rate(0.0, a, L)
+
+        @jax.jit
+        def integrate(ci, xi, a2_0, L, t, n_sub):
+            def interval(a, k):
+                h = (t[k + 1] - t[k]) / n_sub
+
+                def step(i, a):
+                    k1 = rate(ci, xi, a, L)
+                    k2 = rate(ci, xi, a + h / 2 * k1, L)
+                    k3 = rate(ci, xi, a + h / 2 * k2, L)
+                    k4 = rate(ci, xi, a + h * k3, L)
+                    return a + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+                a = jax.lax.fori_loop(0, n_sub, step, a)
+                return a, a
+
+            _, ys = jax.lax.scan(interval, a2_0, jnp.arange(t.shape[0] - 1))
+            return jnp.concatenate([a2_0[None], ys])
+
+        _PREDICT_JIT[key] = integrate
+    return _PREDICT_JIT[key]
+
+
+def predict_ft(closure: str, ci: float, xi: float, a2_0: np.ndarray, L: np.ndarray, t_end: float,
+               t_start: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Folgar-Tucker ``a2(t)`` with ``closure`` at ``ci`` from ``a2_0``, on
+    :data:`PREDICTION_POINTS` equally spaced times over ``[t_start, t_end]``.
+
+    Classical RK4 with a fixed step no longer than :data:`PREDICTION_MAX_STEP` /
+    gamma_dot (Folgar & Tucker 1984; Advani & Tucker 1987 for the tensor form).
+    Returns ``(t, a2)``.
+    """
+    from pyfold._jax import jnp
+    from pyfold.models import FolgarTucker
+
+    a2_0 = np.asarray(a2_0, dtype=np.float64)
+    d = a2_0.shape[-1]
+    L = np.asarray(L, dtype=np.float64)[:d, :d]
+    D = 0.5 * (L + L.T)
+    rate = math.sqrt(2.0 * float(np.sum(D * D))) or 1.0
+    t = np.linspace(t_start, t_end, PREDICTION_POINTS)
+    n_sub = max(1, math.ceil((t[1] - t[0]) * rate / PREDICTION_MAX_STEP))
+    FolgarTucker(ci=float(ci), xi=float(xi), closure=closure, dim=d)  # checks C_I >= 0, xi and the closure name
+    f64 = jnp.float64
+    ys = _rk4_program(closure, d)(jnp.asarray(ci, f64), jnp.asarray(xi, f64), jnp.asarray(a2_0), jnp.asarray(L),
+                                  jnp.asarray(t), jnp.asarray(n_sub))
+    return t, np.asarray(ys)
+
+
+def fit_ci_trajectory(closure: str, xi: float, t: np.ndarray, a2: np.ndarray, L: np.ndarray,
+                      t_end: float) -> tuple[float, float]:
+    """Trajectory fit of Folgar-Tucker's ``C_I`` with ``closure`` to one run's ``a2(t)``.
+
+    Minimises the mean over :data:`PREDICTION_POINTS` equally spaced times in
+    ``[t[0], t_end]`` of ``||a2_FT(t; C_I) - a2_run(t)||_F^2`` (the run's records linearly
+    interpolated), Folgar-Tucker started from the run's first record and integrated by
+    :func:`predict_ft`, over ``C_I = s^2`` with ``s`` in ``[0, sqrt(TRAJECTORY_CI_MAX)]``
+    (bounded Brent search, ``scipy.optimize.minimize_scalar``; ``s^2`` keeps C_I >= 0, the
+    model's admissible set). This is the classical way C_I is fitted to a simulated or
+    measured transient (e.g. Meyer et al. 2020, docs/physics.md#published-c_i-values):
+    the C_I a moulding code running this closure should use. Returns ``(C_I, rms)`` with
+    the RMS a2 error over the tensor's components and the times at the optimum.
+    """
+    from scipy.optimize import minimize_scalar
+
+    t = np.asarray(t, dtype=np.float64)
+    d = a2.shape[-1]
+    a2_0 = 0.5 * (a2[0] + a2[0].T)
+    grid = np.linspace(float(t[0]), float(t_end), PREDICTION_POINTS)
+    target = np.stack([[np.interp(grid, t, a2[:, i, j]) for j in range(d)] for i in range(d)]).transpose(2, 0, 1)
+
+    def cost(s: float) -> float:
+        _, pred = predict_ft(closure, s * s, xi, a2_0, L, float(t_end), float(t[0]))
+        value = float(np.mean((pred - target) ** 2))
+        return value if math.isfinite(value) else math.inf
+
+    hi = math.sqrt(TRAJECTORY_CI_MAX)
+    best = minimize_scalar(cost, bounds=(0.0, hi), method="bounded", options={"xatol": 1e-4})
+    s_opt = float(best.x)
+    # the bounded search never evaluates the bound itself: C_I = 0 (Jeffery with the closure) may be better
+    if cost(0.0) <= best.fun:
+        s_opt = 0.0
+    return s_opt * s_opt, math.sqrt(cost(s_opt))
+
+
+# --------------------------------------------------------------------------- the ensemble
+
+
+@dataclasses.dataclass
+class Report:
+    """Everything a report shows (see :func:`build_report`)."""
+
+    runs: list[RunAnalysis]
+    closures: tuple[str, ...]
+    judged: tuple[str, ...]
+    scene: dict
+    scene_title: str
+    dim: int
+    L: np.ndarray
+    xi: float
+    beta: float
+    n_l3: float
+    phi_beta: float
+    correlations: dict[str, float]
+    ci: dict[str, object]  # closure -> pyfold.ensemble.EnsembleMean
+    errors: dict[str, object]  # judged closure -> EnsembleMean of the time-mean a4:D error
+    ranking: list  # pyfold.ensemble.RankedEntry
+    ranking_method: str
+    prediction_t: np.ndarray
+    prediction: dict[str, np.ndarray]  # closure -> a2 (PREDICTION_POINTS, d, d)
+    prediction_ci: dict[str, float]  # the C_I each prediction used (>= 0)
+    ci_fit: dict[str, object] = dataclasses.field(default_factory=dict)  # closure -> EnsembleMean (trajectory fit)
+    ci_fit_runs: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # closure -> per-run fitted C_I
+    fit_rms: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # closure -> per-run a2 RMS at the fit
+    fit_window: tuple[float, float] = (math.nan, math.nan)  # times of the trajectory fit [s]
+    allow_failed: bool = False
+    notes: list[str] = dataclasses.field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return len(self.runs)
+
+    @property
+    def error_kind(self) -> str:
+        if self.n == 1:
+            return ("within-run statistical error (one run: blocking standard error of the time average "
+                    "over its stationary part; no seed-to-seed scatter included)")
+        return (f"ensemble of {self.n} seeds: the larger of the standard error across seeds (s/sqrt(n)) and the "
+                "pooled within-run standard errors")
+
+    @property
+    def gamma_dot(self) -> float:
+        D = 0.5 * (self.L + self.L.T)
+        return math.sqrt(2.0 * float(np.sum(D * D))) or 1.0
+
+
+def _fibre_concentration(ds: xr.Dataset, run_path: Path, dim: int) -> tuple[float, float, float]:
+    """``(beta, n L^3, phi beta)`` of the run's single fibre family (NaN where undefined:
+    2-D, or not one family of fibres); ``phi beta`` by :func:`pyfold.correlations.phi_beta`."""
+    from pyfold.correlations import phi_beta
+    from pyfold.run_file import read_setup
+
+    res = read_setup(run_path).resolved
+    shapes = np.atleast_1d(res["family_shape"])
+    if dim != 3 or shapes.size != 1 or int(shapes[0]) != 1:
+        return math.nan, math.nan, math.nan
+    length = float(np.atleast_1d(res["family_length"])[0])
+    beta = float(np.atleast_1d(res["family_aspect_ratio"])[0])
+    count = float(np.atleast_1d(res["family_count"])[0])
+    volume = float(np.prod(np.asarray(res["cell_lengths"], dtype=float)[:3]))
+    n_l3 = count * length**3 / volume
+    return beta, n_l3, phi_beta(n_l3, beta)
+
+
+def _rank_one_run(run: RunAnalysis, judged: Sequence[str]) -> list:
+    """Ranking of closures on a single run: neighbours compared by the blocking standard
+    error of the time mean of their paired error difference over the window (normal
+    approximation), Holm-adjusted like :func:`pyfold.ensemble.rank_paired`."""
+    from scipy import stats
+
+    from pyfold.ensemble import RankedEntry, holm
+    from pyfold.steady_state import blocking_stderr
+
+    inside = (run.error_t >= run.window[0]) & (run.error_t <= run.window[1])
+    order = sorted(judged, key=lambda c: run.error_mean[c])
+    raw = []
+    for a, b in zip(order[:-1], order[1:]):
+        diff = run.error_contracted[b][inside] - run.error_contracted[a][inside]
+        se = blocking_stderr(diff)[0]
+        mean = float(np.mean(diff))
+        raw.append(0.0 if se == 0.0 and mean != 0.0 else (1.0 if se == 0.0 else float(2 * stats.norm.sf(abs(mean / se)))))
+    adjusted = holm(raw)
+    rows = []
+    for i, name in enumerate(order):
+        p = adjusted[i] if i < len(adjusted) else math.nan
+        rows.append(RankedEntry(rank=i + 1, name=name, mean=run.error_mean[name], error=run.error_stderr[name], n=1,
+                                p_next=p, better_than_next=bool(math.isfinite(p) and p < RANK_LEVEL)))
+    return rows
+
+
+def build_report(paths: Sequence[str | Path], closures: Sequence[str], allow_failed: bool = False,
+                 progress=None) -> Report:
+    """Check the runs (each by :func:`pyfold.pipeline.open_checked_run`, and that they are
+    one scene) and measure everything the report shows.
+
+    Raises
+    ------
+    InputError
+        A run that cannot be analysed (named), runs of different scenes (the file and
+        the differing key), closure names not defined in the runs' dimension.
+    """
+    from pyfold import pipeline
+    from pyfold.correlations import correlations_at
+    from pyfold.ensemble import ensemble_mean, rank_paired
+
+    say = progress or (lambda text: None)
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise InputError("RUN.h5: give at least one run file")
+    for p in paths:
+        if not p.is_file():
+            raise InputError(f"RUN.h5: no such file: {p}")
+    closures = pipeline.check_closures(closures)
+    datasets = [pipeline.open_checked_run(p, allow_failed=allow_failed, command="pyfold report") for p in paths]
+    seeds = check_same_scene(paths)
+    dim = int(datasets[0].sizes["i"])
+    closures = pipeline.check_closures(closures, dim=dim)
+    judged = tuple(c for c in closures if c != "exact")
+    L = pipeline.velocity_gradient_of(paths[0])[:dim, :dim]
+    xi = pipeline.shape_factor_of(datasets[0])
+    runs = []
+    for p, ds, seed in zip(paths, datasets, seeds):
+        say(f"{p.name} (seed {seed}): steady state, C_I per closure")
+        runs.append(analyse_run(p, ds, seed, closures, L, xi))
+    say("closure errors a4:D against the runs' own a4")
+    attach_closure_errors(runs, judged, L)
+    beta, n_l3, pb = _fibre_concentration(datasets[0], paths[0], dim)
+    corr = correlations_at(pb) if math.isfinite(pb) else {}
+    ci = {c: ensemble_mean([r.ci[c] for r in runs], [r.ci_stderr[c] for r in runs]) for c in closures}
+    errors = {c: ensemble_mean([r.error_mean[c] for r in runs], [r.error_stderr[c] for r in runs]) for c in judged}
+    if not judged:
+        ranking, method = [], "no closure judged"
+    elif len(runs) == 1:
+        ranking = _rank_one_run(runs[0], judged)
+        method = ("one run: neighbours compared by the blocking standard error of the time mean of their paired "
+                  "error difference, Holm-adjusted")
+    else:
+        ranking = rank_paired({c: [r.error_mean[c] for r in runs] for c in judged}, level=RANK_LEVEL)
+        method = (f"paired t-tests over the {len(runs)} seeds between neighbours in the ranking, Holm-adjusted "
+                  "(pyfold.ensemble.rank_paired)")
+    # prediction from the ensemble-mean initial state over the span of the runs
+    a2_0 = np.mean([r.a2[0] for r in runs], axis=0)
+    a2_0 = 0.5 * (a2_0 + a2_0.T)
+    t0 = float(min(r.t[0] for r in runs))
+    t1 = float(max(r.t[-1] for r in runs))
+    prediction, prediction_ci, notes = {}, {}, []
+    pred_t = np.linspace(t0, t1, PREDICTION_POINTS)
+    gamma_dot = math.sqrt(2.0 * float(np.sum((0.5 * (L + L.T)) ** 2))) or 1.0
+    beta_e = math.sqrt((1.0 + xi) / (1.0 - xi)) if xi < 1.0 else math.inf
+    period = 2.0 * math.pi * (beta_e + 1.0 / beta_e) / gamma_dot
+    fit_end = min(t1, t0 + TRAJECTORY_PERIODS * period) if math.isfinite(period) else t1
+    ci_fit, ci_fit_runs, fit_rms = {}, {}, {}
+    for c in judged:
+        say(f"trajectory fit of C_I with {c} over strain {t0 * gamma_dot:.3g}-{fit_end * gamma_dot:.3g}")
+        fits = [fit_ci_trajectory(c, xi, r.t, r.a2, L, min(fit_end, float(r.t[-1]))) for r in runs]
+        ci_fit_runs[c] = [f[0] for f in fits]
+        fit_rms[c] = [f[1] for f in fits]
+        ci_fit[c] = ensemble_mean(ci_fit_runs[c])
+        used = ci_fit[c].mean
+        say(f"Folgar-Tucker with {c} at the fitted C_I = {used:.3g}")
+        pred_t, prediction[c] = predict_ft(c, used, xi, a2_0, L, t1, t0)
+        prediction_ci[c] = used
+    for ds in datasets:
+        ds.close()
+    scene = json.loads(datasets[0].attrs.get("scene", "{}"))
+    return Report(runs=runs, closures=tuple(closures), judged=judged, scene=scene,
+                  scene_title=str(scene.get("title", "")), dim=dim, L=np.asarray(L), xi=xi, beta=beta, n_l3=n_l3,
+                  phi_beta=pb, correlations=corr, ci=ci, errors=errors, ranking=ranking, ranking_method=method,
+                  prediction_t=pred_t, prediction=prediction, prediction_ci=prediction_ci,
+                  allow_failed=allow_failed, notes=notes, ci_fit=ci_fit, ci_fit_runs=ci_fit_runs, fit_rms=fit_rms,
+                  fit_window=(t0, fit_end))
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def results_dataset(rep: Report) -> xr.Dataset:
+    """The report's numbers as one Dataset (written as results.nc)."""
+    seeds = [r.seed for r in rep.runs]
+    closures = list(rep.closures)
+    judged = list(rep.judged)
+    nt = max(len(r.t) for r in rep.runs)
+    d = rep.dim
+    labels = ["x", "y", "z"][:d]
+    a2 = np.full((rep.n, nt, d, d), np.nan)
+    for k, r in enumerate(rep.runs):
+        a2[k, : len(r.t)] = r.a2
+    t = max((r.t for r in rep.runs), key=len)
+
+    def per_seed(attr, names):
+        return np.array([[getattr(r, attr)[c] for c in names] for r in rep.runs], dtype=float).reshape(rep.n, len(names))
+
+    ens = {c: rep.ci[c] for c in closures}
+    out = xr.Dataset(
+        {
+            "ci": ("closure", [ens[c].mean for c in closures],
+                   {"units": "1", "long_name": "Folgar-Tucker C_I by rate regression, mean over the runs"}),
+            "ci_error": ("closure", [ens[c].error for c in closures],
+                         {"units": "1", "long_name": "standard error quoted for ci", "description": rep.error_kind}),
+            "ci_stderr_across": ("closure", [ens[c].stderr_across for c in closures],
+                                 {"units": "1", "long_name": "standard error across seeds, s/sqrt(n) (NaN for one run)"}),
+            "ci_stderr_pooled": ("closure", [ens[c].stderr_pooled for c in closures],
+                                 {"units": "1", "long_name": "pooled within-run standard error, sqrt(sum se^2)/n"}),
+            "ci_seed": (("seed", "closure"), per_seed("ci", closures),
+                        {"units": "1", "long_name": "C_I by rate regression per run"}),
+            "ci_seed_stderr": (("seed", "closure"), per_seed("ci_stderr", closures),
+                               {"units": "1", "long_name": "within-run standard error of ci_seed (blocking)"}),
+            "onset_time": ("seed", [r.onset_time for r in rep.runs],
+                           {"units": "s", "long_name": "start of the stationary part (MSER-5)"}),
+            "stationary": ("seed", np.array([r.stationary for r in rep.runs], dtype=np.int8),
+                           {"long_name": "stationary part found and not drifting (1) or not (0)"}),
+            "steady_message": ("seed", [r.steady_message for r in rep.runs]),
+            "window_start": ("seed", [r.window[0] for r in rep.runs],
+                             {"units": "s", "long_name": "first time used by the estimators"}),
+            "window_end": ("seed", [r.window[1] for r in rep.runs], {"units": "s"}),
+            "a2_drift": (("seed", "i"), [[v for v, _ in r.drift.values()] for r in rep.runs],
+                         {"units": "1/s", "long_name": "slope of the diagonal of a2 over the last half of the "
+                          "stationary part (pyfold.steady_state drift test)"}),
+            "a2_drift_stderr": (("seed", "i"), [[se for _, se in r.drift.values()] for r in rep.runs],
+                                {"units": "1/s"}),
+            "a2": (("seed", "time", "i", "j"), a2, {"units": "1", "long_name": "a2 of the direct simulation"}),
+            "a2_ft": (("closure_predicted", "time_ft", "i", "j"),
+                      np.stack([rep.prediction[c] for c in rep.prediction]) if rep.prediction
+                      else np.zeros((0, PREDICTION_POINTS, d, d)),
+                      {"units": "1", "long_name": "a2 of Folgar-Tucker at the closure's fitted C_I (ci_fit)"}),
+            "ci_ft": ("closure_predicted", [rep.prediction_ci[c] for c in rep.prediction],
+                      {"units": "1", "long_name": "C_I used by a2_ft"}),
+        },
+        coords={"seed": seeds, "closure": closures, "time": ("time", t, {"units": "s"}),
+                "time_ft": ("time_ft", rep.prediction_t, {"units": "s"}), "closure_predicted": list(rep.prediction),
+                "i": labels, "j": labels},
+    )
+    if judged:
+        out["a4D_error"] = ("judged_closure", [rep.errors[c].mean for c in judged],
+                            {"units": "1", "long_name": "time mean of ||(closure(a2) - a4):D|| / ||a4:D|| over the "
+                             "stationary window, mean over the runs"})
+        out["a4D_error_error"] = ("judged_closure", [rep.errors[c].error for c in judged], {"units": "1"})
+        out["a4D_error_stderr_across"] = ("judged_closure", [rep.errors[c].stderr_across for c in judged], {"units": "1"})
+        out["a4D_error_seed"] = (("seed", "judged_closure"), per_seed("error_mean", judged), {"units": "1"})
+        rank = {e.name: e for e in rep.ranking}
+        out["rank"] = ("judged_closure", [rank[c].rank for c in judged], {"long_name": "1 = smallest a4:D error"})
+        out["p_next"] = ("judged_closure", [rank[c].p_next for c in judged],
+                         {"long_name": "Holm-adjusted p of the test against the next in the ranking"})
+        out = out.assign_coords(judged_closure=judged)
+    if rep.ci_fit:
+        fitted = [c for c in judged if c in rep.ci_fit]
+        out["ci_fit"] = ("judged_closure", [rep.ci_fit[c].mean if c in rep.ci_fit else np.nan for c in judged],
+                         {"units": "1", "long_name": "C_I of Folgar-Tucker with the closure by trajectory fit to a2(t), "
+                          "mean over the runs (pyfold.report.fit_ci_trajectory)",
+                          "fit_window_start": rep.fit_window[0], "fit_window_end": rep.fit_window[1]})
+        out["ci_fit_error"] = ("judged_closure", [rep.ci_fit[c].error if c in rep.ci_fit else np.nan for c in judged],
+                               {"units": "1", "long_name": "standard error across seeds of ci_fit (NaN for one run)"})
+        out["ci_fit_seed"] = (("seed", "judged_closure"),
+                              np.array([[rep.ci_fit_runs[c][k] if c in fitted else np.nan for c in judged]
+                                        for k in range(rep.n)]), {"units": "1"})
+        out["ci_fit_rms_seed"] = (("seed", "judged_closure"),
+                                  np.array([[rep.fit_rms[c][k] if c in fitted else np.nan for c in judged]
+                                            for k in range(rep.n)]),
+                                  {"units": "1", "long_name": "RMS a2 error of the trajectory fit"})
+    for name, value in rep.correlations.items():
+        out.attrs[f"ci_correlation {name}"] = value
+    out.attrs.update(format="pyfold.report", format_version="1.0",
+                     runs=json.dumps([str(r.path) for r in rep.runs]), n_runs=rep.n, error_kind=rep.error_kind,
+                     ranking_method=rep.ranking_method, xi=rep.xi, beta=rep.beta, n_L3=rep.n_l3, phi_beta=rep.phi_beta,
+                     scene=json.dumps(rep.scene), estimator="ci: pyfold.ci_estimators.ci_rate_regression over the "
+                     "stationary window, 'exact' = the run's own a4; ci_fit: trajectory fit over the first "
+                     f"{TRAJECTORY_PERIODS:g} Jeffery periods (pyfold.report.fit_ci_trajectory)")
+    return out
+
+
+def _fmt(x: float, spec: str = ".2e") -> str:
+    return "n/a" if not math.isfinite(x) else format(x, spec)
+
+
+def interpretation(rep: Report) -> list[str]:
+    """Which C_I a moulding code should use, and what the closure-free one means (from the numbers)."""
+    lines = ["Which C_I to use: a moulding code should take the trajectory-fitted C_I of the closure it runs (C_I "
+             "is not a material constant: each closure's a4:D error is absorbed into its C_I, docs/physics.md)."]
+    at_zero = [c for c, e in rep.ci_fit.items() if e.mean == 0.0]
+    if at_zero:
+        lines.append(f"The trajectory fit ends at C_I = 0 for {', '.join(at_zero)}: Folgar-Tucker with that closure "
+                     "follows the simulation best without any diffusion.")
+    if "exact" in rep.ci:
+        e = rep.ci["exact"]
+        sign = ("negative: the contacts narrow the orientation spread instead of diffusing it" if e.mean < 0 else
+                "positive: the contacts diffuse orientations")
+        significant = math.isfinite(e.error) and abs(e.mean) > 2.0 * e.error
+        lines.append(f"The closure-free C_I (rate regression with the runs' own a4) = {e.mean:+.2e} ± "
+                     f"{_fmt(e.error, '.1e')} is what the contacts alone do, projected on Folgar-Tucker's isotropic "
+                     "diffusion; " + (sign if significant else "not distinguishable from 0") + ". The difference from "
+                     "the fitted values is the closure's error plus the memory of the initial orbits that "
+                     "Folgar-Tucker's diffusion stands in for (docs/physics.md#what-contacts-alone-do).")
+    return lines
+
+
+def summary_lines(rep: Report) -> list[str]:
+    """The summary as plain-text lines (also the body of summary.md)."""
+    g = rep.gamma_dot
+    lines = [f"scene: {rep.scene_title}" if rep.scene_title else "scene: (untitled)",
+             f"runs: {rep.n} ({', '.join(f'{r.path.name} seed {r.seed}' for r in rep.runs)})"]
+    if math.isfinite(rep.phi_beta):
+        lines.append(f"fibres: beta = {rep.beta:.3g}, n L^3 = {rep.n_l3:.3g}, phi beta = {rep.phi_beta:.3g}, "
+                     f"xi = {rep.xi:.4f}")
+    t_end = max(float(r.t[-1]) for r in rep.runs)
+    lines.append(f"error bars: {rep.error_kind}")
+    if rep.allow_failed:
+        lines.append("WARNING: --allow-failed: runs that did not finish are used up to their last good state")
+    lines += ["", f"Steady state (MSER-5 onset and drift test, pyfold.steady_state; run to strain {t_end * g:.4g}):"]
+    n_ok = sum(r.stationary for r in rep.runs)
+    for r in rep.runs:
+        verdict = "stationary" if r.stationary else "NOT judged stationary"
+        drift = ", ".join(f"{k} {v / g:+.1e} ± {se / g:.0e}" for k, (v, se) in r.drift.items())
+        msg = r.steady_message if len(r.steady_message) <= 160 else r.steady_message[:157] + "..."
+        lines.append(f"  seed {r.seed}: onset strain {r.onset_time * g:.4g}, {verdict}; window strain "
+                     f"{r.window[0] * g:.4g}-{r.window[1] * g:.4g}; drift per unit strain over its last half: {drift}")
+        if not r.stationary:
+            lines.append(f"    ({msg})")
+    lines.append(f"  reached in {n_ok} of {rep.n} runs" + (
+        "" if n_ok == rep.n else "; the numbers below are averages over the window after the onset of runs still "
+        "drifting slowly: read them as effective values over that strain range"))
+    f0, f1 = rep.fit_window
+    lines += ["", f"Folgar-Tucker C_I per closure. fitted: trajectory fit to each run's a2(t) over strain "
+              f"{f0 * g:.3g}-{f1 * g:.3g} ({TRAJECTORY_PERIODS:g} Jeffery periods; pyfold.report.fit_ci_trajectory); "
+              "rate regr.: regression of da2/dt on the diffusion term over the stationary window "
+              "(pyfold.ci_estimators.ci_rate_regression):",
+              f"  {'closure':<10} {'fitted C_I':>11} {'± error':>9} {'a2 RMS':>8}   {'rate regr.':>11} {'± error':>9}"]
+    for c in rep.closures:
+        e = rep.ci[c]
+        label = "exact*" if c == "exact" else c
+        if c in rep.ci_fit:
+            f = rep.ci_fit[c]
+            rms = float(np.mean(rep.fit_rms[c]))
+            fitted = f"{f.mean:11.3e} {_fmt(f.error, '9.1e')} {rms:8.1e}"
+        else:
+            fitted = f"{'-':>11} {'':>9} {'':>8}"
+        lines.append(f"  {label:<10} {fitted}   {e.mean:+11.3e} {_fmt(e.error, '9.1e')}")
+    if "exact" in rep.closures:
+        lines.append("  * exact: the runs' own a4 (closure-free; no trajectory fit: that a4 exists only along the "
+                     "simulated path)")
+    if rep.correlations:
+        lines.append(f"  published correlations at phi beta = {rep.phi_beta:.3g} (pyfold.correlations): "
+                     + ", ".join(f"{k} {v:.2e}" for k, v in rep.correlations.items()))
+    else:
+        lines.append("  published correlations: not applicable (they are for one family of 3-D fibres)")
+    lines += [f"  {line}" for line in interpretation(rep)]
+    if rep.judged:
+        lines += ["", "Closures against the runs' own a4 (time mean of ||(closure(a2) - a4):D|| / ||a4:D|| over the "
+                  "window; pyfold.closure_check):",
+                  f"  {'rank':<5}{'closure':<10} {'a4:D error':>11} {'± error':>9}   vs next"]
+        for e in rep.ranking:
+            if math.isfinite(e.p_next):
+                gap = rep.ranking[e.rank].mean - e.mean  # ranking is sorted, e.rank is 1-based
+                verdict = (f"{'better' if e.better_than_next else 'not distinguishable'} by {gap:.1e} "
+                           f"(p = {e.p_next:.2g})")
+            else:
+                verdict = "" if e.rank == len(rep.ranking) else "no test (one value per closure)"
+            err = rep.errors[e.name].error  # as in results.nc: the larger of across-seed and pooled
+            lines.append(f"  {e.rank:<5}{e.name:<10} {e.mean:11.3e} {_fmt(err, '9.1e')}   {verdict}")
+        lines.append(f"  significance: {rep.ranking_method}, level {RANK_LEVEL}")
+    return lines
+
+
+def summary_markdown(rep: Report, extra: Sequence[str] = ()) -> str:
+    """summary.md: the summary as Markdown (tables for C_I and the ranking)."""
+    g = rep.gamma_dot
+    md = [f"# pyfold report: {rep.scene_title or 'untitled scene'}", "",
+          f"{rep.n} run(s): " + ", ".join(f"`{r.path.name}` (seed {r.seed})" for r in rep.runs) + ".  ",
+          f"Error bars: {rep.error_kind}.", ""]
+    if math.isfinite(rep.phi_beta):
+        md += [f"Fibres: β = {rep.beta:.3g}, nL³ = {rep.n_l3:.3g}, φβ = {rep.phi_beta:.3g}, ξ = {rep.xi:.4f}.", ""]
+    md += ["## Steady state", "", "| seed | onset strain | stationary | window (strain) | message |", "|---|---|---|---|---|"]
+    for r in rep.runs:
+        md.append(f"| {r.seed} | {r.onset_time * g:.4g} | {'yes' if r.stationary else 'no'} | "
+                  f"{r.window[0] * g:.4g}–{r.window[1] * g:.4g} | {r.steady_message.replace('|', '/')} |")
+    f0, f1 = rep.fit_window
+    md += ["", "## C_I per closure", "",
+           f"Fitted: trajectory fit to each run's a2(t) over strain {f0 * g:.3g}–{f1 * g:.3g}; rate regression: over "
+           "the stationary window.", "",
+           "| closure | fitted C_I | ± error | a2 RMS | rate regression C_I | ± error |", "|---|---|---|---|---|---|"]
+    for c in rep.closures:
+        e = rep.ci[c]
+        label = "exact (the runs' own a4, closure-free)" if c == "exact" else c
+        if c in rep.ci_fit:
+            f = rep.ci_fit[c]
+            fitted = f"{f.mean:.3e} | {_fmt(f.error)} | {float(np.mean(rep.fit_rms[c])):.1e}"
+        else:
+            fitted = "– | | "
+        md.append(f"| {label} | {fitted} | {e.mean:+.3e} | {_fmt(e.error)} |")
+    for k, v in rep.correlations.items():
+        md.append(f"| correlation {k} at φβ = {rep.phi_beta:.3g} | {v:.3e} | | | | |")
+    md += [""] + [f"* {line}" for line in interpretation(rep)]
+    if rep.judged:
+        md += ["", "## Closure ranking (a4:D error against the runs' own a4)", "",
+               "| rank | closure | a4:D error | ± error | Holm p vs next |", "|---|---|---|---|---|"]
+        for e in rep.ranking:
+            md.append(f"| {e.rank} | {e.name} | {e.mean:.3e} | {_fmt(rep.errors[e.name].error)} | "
+                      f"{_fmt(e.p_next, '.2g')} |")
+        md += ["", f"Significance: {rep.ranking_method}, level {RANK_LEVEL}."]
+    if extra:
+        md += ["", "## Also", "", "```", *extra, "```"]
+    md += ["", "Figures: `a2_dns_vs_fitted_ft.png`, `closures_vs_dns.png`, `ci_vs_correlations.png`; "
+           "numbers: `results.nc`."]
+    return "\n".join(md) + "\n"
+
+
+def check_report_folder(out: Path, force: bool = False) -> Path:
+    """Refuse to replace report files in ``out`` without ``force``; make sure it can be
+    written (:func:`pyfold.pipeline.check_output_folder`), before any analysis."""
+    from pyfold import pipeline
+
+    out = Path(out)
+    if out.is_dir() and not force:
+        present = [name for name in REPORT_FILES if (out / name).exists()]
+        if present:
+            raise InputError(f"--out: {out} already holds a report ({', '.join(present)}); give another --out, or "
+                             "--force to replace those files")
+    return pipeline.check_output_folder(out)
+
+
+def write_report(rep: Report, out: Path, extra_summary: Sequence[str] = ()) -> list[Path]:
+    """Write figures, results.nc, summary.txt and summary.md into ``out``.
+
+    The files are written into a hidden folder inside ``out`` and moved into place
+    when all are complete, so an interrupted report leaves the earlier files (if any)
+    or the new ones, never a mixture of half-written files.
+    """
+    from pyfold import plotting
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=".report-", dir=out))
+    try:
+        g = rep.gamma_dot
+        dns = {r.seed: (r.t * g, r.a2) for r in rep.runs}
+        plotting.plot_report_a2(dns, rep.prediction_t * g, rep.prediction, rep.prediction_ci,
+                                [r.window[0] * g for r in rep.runs], work / "a2_dns_vs_fitted_ft.png")
+        errors_t = {c: [(r.error_t * g, r.error_contracted[c]) for r in rep.runs] for c in rep.judged}
+        # the C_I shown per closure: its trajectory fit; for the runs' own a4 the rate regression
+        shown = {c: ((rep.ci_fit[c].mean, rep.ci_fit[c].error) if c in rep.ci_fit else (rep.ci[c].mean, rep.ci[c].error))
+                 for c in rep.closures}
+        plotting.plot_closure_report(errors_t, shown,
+                                     rep.correlations, rep.ranking, work / "closures_vs_dns.png")
+        plotting.plot_ci_vs_correlations(rep.phi_beta, shown,
+                                         work / "ci_vs_correlations.png")
+        results_dataset(rep).to_netcdf(work / "results.nc", engine="h5netcdf")
+        text = "\n".join(summary_lines(rep) + ([""] + list(extra_summary) if extra_summary else [])) + "\n"
+        (work / "summary.txt").write_text(text, encoding="utf-8")
+        (work / "summary.md").write_text(summary_markdown(rep, extra_summary), encoding="utf-8")
+        written = []
+        for name in REPORT_FILES:
+            os.replace(work / name, out / name)
+            written.append(out / name)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return written
+
+
+def report(paths: Sequence[str | Path], out: Path, closures: Sequence[str], allow_failed: bool = False,
+           force: bool = False, extra_summary: Sequence[str] = (), progress=None) -> tuple[Report, list[Path]]:
+    """Check, measure and write: what ``pyfold report`` and ``pyfold main`` do."""
+    check_report_folder(out, force=force)
+    rep = build_report(paths, closures, allow_failed=allow_failed, progress=progress)
+    return rep, write_report(rep, out, extra_summary)
