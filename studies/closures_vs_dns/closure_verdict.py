@@ -23,14 +23,17 @@ Question
        outputs); and the late time mean of each signed component of
        (f(a2) − a4):D / γ̇ (pyfold.closure_check.window_means): which components a
        closure gets wrong, and in which direction, beyond the noise of the population.
-    2. a2_rms: the a2(t) the closure predicts. C_I per closure by rate regression
-       (pyfold.ci_estimators.ci_rate_regression with the closure's a4 evaluated on the
-       run's a2: cheap, no ODE; the closure error is absorbed into C_I as in
-       docs/physics.md#the-fitted-c_i-depends-on-the-closure), clipped at C_I = 0 where
-       the regression is negative (Folgar–Tucker needs C_I >= 0); then Folgar–Tucker
-       (docs/physics.md#folgar-tucker-model) with that closure and C_I is integrated from
+    2. a2_rms: the a2(t) the closure predicts. C_I per closure by a trajectory fit of
+       Folgar–Tucker with that closure to the run's whole a2(t)
+       (pyfold.report.fit_ci_trajectory: fixed-step RK4, C_I >= 0; the closure error is
+       absorbed into C_I as in docs/physics.md#the-fitted-c_i-depends-on-the-closure);
+       --ci regression uses the rate regression with the closure's a4 on the run's a2
+       instead (no ODE, clipped at C_I = 0 where negative, which leaves Folgar–Tucker
+       tumbling like Jeffery's: the prediction then ranks the closures' own damping);
+       then Folgar–Tucker (docs/physics.md#folgar-tucker-model) with that closure and C_I
+       is integrated from
        the run's initial a2, and a2_rms = sqrt(mean_t ||a2_FT(t) − a2_DNS(t)||_F^2) over
-       the whole run. C_I by the same regression with the run's own a4 ("dns_a4") is
+       the whole run. C_I by the rate regression with the run's own a4 ("dns_a4") is
        listed as the reference value, free of closure error. Folgar–Tucker driven by
        that tabulated a4 is *not* used as an a2 reference over these long runs: it is
        open loop (a4 does not respond to a2), so a deviation of a2 is stretched by
@@ -68,10 +71,10 @@ Command
 
         nice -n 5 .venv/bin/python studies/closures_vs_dns/closure_verdict.py --large
 
-    --ci fit replaces the rate regression by a trajectory fit of C_I per closure and
-    run (pyfold.fit.fit_parameters, C_I >= 0; about a minute per closure and run, so
-    meant for the large form or a few closures: --closures fec,ibof,hybrid). Outputs
-    then go to out/closures_vs_dns/ci_fit/.
+    --ci fit replaces the default trajectory fit (fixed-step RK4) by one through the
+    adaptive solver (pyfold.fit.fit_parameters, C_I >= 0; about a minute per closure and
+    run, so meant for a few closures: --closures fec,ibof,hybrid); outputs then go to
+    out/closures_vs_dns/ci_fit/ (--ci regression: out/closures_vs_dns/ci_regression/).
 
     Judging runs made elsewhere (e.g. by studies/interaction_coefficient/ci_concentration.py
     under out/interaction_coefficient/runs/): scenes are formed from what the files say
@@ -146,6 +149,7 @@ from pyfold.closure_check import (
 from pyfold.ensemble import ensemble_mean, holm, paired_difference, rank_paired
 from pyfold.errors import InadmissibleOrientationWarning, InputError
 from pyfold.fit import fit_parameters
+from pyfold.report import fit_ci_trajectory
 from pyfold.models import FolgarTucker, solve_batch
 from pyfold.runs import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
@@ -166,6 +170,8 @@ MEASURES = {
 }
 LEVEL = 0.05
 CI_LONG_NAME = {
+    "trajectory": "C_I by a trajectory fit of Folgar-Tucker's a2(t) per closure, fixed-step RK4 "
+                  "(dns_a4: rate regression, own a4)",
     "regression": "C_I by rate regression with the closure's a4 on the DNS a2 (dns_a4: the DNS's own a4)",
     "fit": "C_I by a trajectory fit of Folgar-Tucker's a2(t) per closure (dns_a4: rate regression, own a4)",
 }
@@ -285,7 +291,7 @@ def half_jeffery_period(xi: float, L: np.ndarray) -> float:
     return math.pi / gamma_dot * (beta_e + 1.0 / beta_e)
 
 
-def judge_run(info: dict, closures: tuple[str, ...], ci_method: str = "regression") -> dict:
+def judge_run(info: dict, closures: tuple[str, ...], ci_method: str = "trajectory") -> dict:
     """Closure errors, C_I per closure (rate regression, or a trajectory fit), sampling floor of one run."""
     path = info["path"]
     ds = open_run(path)
@@ -302,6 +308,12 @@ def judge_run(info: dict, closures: tuple[str, ...], ci_method: str = "regressio
     stat = window_means(errors, late, t[-1], stderr=True)
     ci, ci_se = [], []
     for name in closures:
+        if ci_method == "trajectory":
+            # Folgar-Tucker with the closure fitted to the run's whole a2(t) by the fixed-step
+            # RK4 of pyfold.report (C_I >= 0; the C_I a moulding code running it would use)
+            ci.append(fit_ci_trajectory(name, xi, t, a2, L, float(t[-1]))[0])
+            ci_se.append(math.nan)
+            continue
         if ci_method == "fit":
             ci.append(0.0)
             ci_se.append(math.nan)
@@ -363,7 +375,7 @@ def predict_a2(runs: list[dict], closures: tuple[str, ...]) -> tuple[np.ndarray,
     return np.stack(preds), np.stack(ok), np.stack(adm)
 
 
-def judge_scene(label: str, runs: list[dict], closures: tuple[str, ...], ci_method: str = "regression") -> xr.Dataset:
+def judge_scene(label: str, runs: list[dict], closures: tuple[str, ...], ci_method: str = "trajectory") -> xr.Dataset:
     """Every measure of one scene, over its seeds and closures, with the rankings."""
     judged = [judge_run(r, closures, ci_method) for r in runs]
     pred, ok, adm = predict_a2(judged, closures)
@@ -656,9 +668,12 @@ def main() -> None:
     parser.add_argument("--closures", default=",".join(CLOSURES), help="comma-separated closures to judge")
     parser.add_argument("--write-scenes", action="store_true",
                         help="only write the scenes and runs/commands.txt (one pyfold run per line) and stop")
-    parser.add_argument("--ci", choices=("regression", "fit"), default="regression",
-                        help="C_I per closure for the a2 prediction: rate regression (default, cheap) or a "
-                        "trajectory fit (pyfold.fit.fit_parameters; ~1 min per closure and run)")
+    parser.add_argument("--ci", choices=("trajectory", "regression", "fit"), default="trajectory",
+                        help="C_I per closure for the a2 prediction: trajectory fit by pyfold.report's fixed-step "
+                        "RK4 (default: seconds per closure and run, FEC ~1 min), rate regression (cheap; a "
+                        "negative C_I is clipped to 0, so the prediction then ranks the closures' damping, not "
+                        "their a4) or a trajectory fit by the adaptive solver (pyfold.fit.fit_parameters; ~1 min "
+                        "per closure and run)")
     parser.add_argument("--out", type=Path, help="output folder (default out/closures_vs_dns; with --runs "
                         "out/closures_vs_dns/given_runs, with --ci fit out/closures_vs_dns/ci_fit)")
     parser.add_argument("--run-folder", type=Path, default=Path("out/closures_vs_dns/runs"),
@@ -666,7 +681,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.out is None:
         args.out = Path("out/closures_vs_dns") / ("given_runs" if args.runs else "") / (
-            "ci_fit" if args.ci == "fit" else "")
+            {"fit": "ci_fit", "regression": "ci_regression"}.get(args.ci, ""))
     closures = tuple(c for c in pipeline.check_closures(args.closures, dim=3) if c != "exact")
     if "fec" not in closures:
         raise InputError("--closures: fec is needed (the verdict compares every closure with it)")

@@ -23,10 +23,10 @@ Estimators (per point; pyfold.ci_estimators, docs/physics.md#folgar-tucker-model
                5 independent components "b_*_all" and the root of a11 "b_*_a11", as
                in Tucker's fitCI, with the mismatch of the other components). Error propagated from the across-seed
                s.e. of the stationary a2.
-    a_<clo>    trajectory fit through the ODE (pyfold.fit.fit_parameters), per seed,
-               on records every strain unit: the C_I a moulding code would use with
-               that closure (small form: IBOF on the beta = 10 points; large form:
-               IBOF, ORW3, FEC on every point; --no-trajectory-fit skips it).
+    a_<clo>    trajectory fit of Folgar–Tucker to the run's whole a2(t), per seed
+               (pyfold.report.fit_ci_trajectory, fixed-step RK4, C_I >= 0): the C_I a
+               moulding code would use with that closure (small form: IBOF and ORW3 on
+               every point; large form: also FEC; --no-trajectory-fit skips it).
     rsc_<clo>  RSC (C_I, kappa) trajectory fit (IBOF) on the seed-averaged a2(t) of
                the most concentrated point (small form: beta = 10; large form: every
                beta; --no-rsc skips it): FT with one C_I damps the Jeffery
@@ -147,7 +147,8 @@ class Form:
 
 
 SMALL = Form(points={5.0: (2.0, 8.0), 10.0: (2.0, 10.0, 20.0), 20.0: (5.0, 10.0)},
-             seeds=(1, 2, 3, 4), t_end=100.0, fit_betas=(10.0,), fit_closures=("ibof",), rsc_betas=(10.0,))
+             seeds=(1, 2, 3, 4), t_end=100.0, fit_betas=(5.0, 10.0, 20.0), fit_closures=("ibof", "orw3"),
+             rsc_betas=(10.0,))
 LARGE = Form(points={5.0: (1.0, 2.0, 4.0, 8.0, 10.0), 10.0: (1.0, 2.0, 5.0, 10.0, 20.0, 30.0),
                      20.0: (2.0, 5.0, 10.0, 20.0, 40.0)},
              seeds=(1, 2, 3, 4, 5, 6, 7, 8), t_end=300.0, fit_betas=(5.0, 10.0, 20.0),
@@ -158,7 +159,7 @@ ALPHA_OVER_D = 0.1
 #: Fewest fibres per cell: dilute points get a larger cell (sheared_fibres' min_side).
 MIN_FIBRES = 60
 INTERVAL = 0.2  # record spacing [strain]
-FIT_SPACING = 1.0  # record spacing of the trajectory fits [strain]
+FIT_SPACING = 1.0  # record spacing of the RSC fit [strain]
 CLOSURES = ("ibof", "orw3", "fec")
 CI_BOUNDS = (1e-6, 0.5)
 #: Steady-state matches: least squares over the 5 independent components, and the root
@@ -283,18 +284,15 @@ def _with_xi(model, xi: float):
 
 
 def trajectory_fits(run: dict, closures: tuple) -> dict:
-    """(a): Folgar–Tucker C_I fitted to a2(t) through the ODE, one per closure."""
-    from pyfold.fit import fit_parameters
-    from pyfold.models import FolgarTucker
+    """(a): Folgar–Tucker C_I fitted to the run's whole a2(t), one per closure
+    (pyfold.report.fit_ci_trajectory: fixed-step RK4, C_I >= 0; the error bar is the
+    scatter across seeds)."""
+    from pyfold.report import fit_ci_trajectory
 
-    step = max(1, int(round(FIT_SPACING / float(np.median(np.diff(run["t"]))))))
-    data = xr.Dataset({"a2": (("time", "i", "j"), run["a2"][::step])},
-                      coords={"time": ("time", run["t"][::step], {"units": "s"})})
     out = {}
     for name in closures:
-        model = _with_xi(_base_model(FolgarTucker, name), run["xi"])
-        res = fit_parameters(data, model, params=("ci",), L=run["L"])
-        out[f"a_{name}"] = (res.values["ci"], res.stderr["ci"] if res.success else math.nan)
+        ci, _ = fit_ci_trajectory(name, run["xi"], run["t"], run["a2"], run["L"], float(run["t"][-1]))
+        out[f"a_{name}"] = (ci, math.nan)
     return out
 
 
@@ -483,7 +481,7 @@ def weighted_slope(x, y, e):
 
 def trend_fits(table):
     out = []
-    for method in ("c_own_stat", "c_own_all", "c_ibof_stat", "c_fec_stat", "c_orw3_stat", "a_ibof", "a_fec"):
+    for method in ("c_own_stat", "c_own_all", "c_ibof_stat", "c_fec_stat", "c_orw3_stat", "a_ibof", "a_orw3", "a_fec"):
         rows = [r for r in table if r["method"] == method]
         if not rows:
             continue
