@@ -110,6 +110,10 @@ contains
       integer(ip) :: first, last
       integer, allocatable :: cnt_v(:), dsp_v(:), cnt_w(:), dsp_w(:)
       real(dp) :: t
+      !> Cost of the time loop (printed at its end): clock ticks, CPU seconds of this
+      !> process, CG iterations of the solves made in the loop
+      integer(i8) :: tick0, tick1, tick_rate, cg_total
+      real(dp) :: cpu0, cpu1
       logical :: stokes, have_prev, good_have_prev
       !> Stokes velocities of the current configuration, of the previous one (AB2 history)
       real(dp), allocatable :: v_hyd(:, :), w_hyd(:, :), v_prev(:, :), w_prev(:, :), good_vprev(:, :), good_wprev(:, :)
@@ -256,6 +260,9 @@ contains
 
       ! ---------------------------------------------------------------- time loop
       progress_every = max(1_i8, setup%nsteps/100)
+      cg_total = 0
+      call system_clock(tick0, tick_rate)
+      call cpu_time(cpu0)
       good = parts
       do step = step0 + 1, setup%nsteps
          good%x = parts%x
@@ -367,6 +374,15 @@ contains
          end if
       end do
 
+      call cpu_time(cpu1)
+      call system_clock(tick1)
+      if (rank == 0) then
+         ! benchmarks/bench_stokes_step.py reads this line
+         write (output_unit, '(a,i0,a,es12.5,a,es12.5,a,i0)') "TIMING steps=", setup%nsteps - step0, &
+            " wall=", real(tick1 - tick0, dp)/real(max(tick_rate, 1_i8), dp), " cpu=", cpu1 - cpu0, &
+            " cg_iterations=", cg_total
+         flush (output_unit)
+      end if
       if (rank == 0) then
          call output_status(out, "ok", setup%nsteps, stat, errmsg)
          if (stat == FOLD_OK) then
@@ -461,6 +477,7 @@ contains
             w_hyd = tmp
          end block
          if (sstat == FOLD_OK .or. sstat == FOLD_NOT_CONVERGED) then
+            cg_total = cg_total + srec%iterations
             rec%stokes_iterations = max(rec%stokes_iterations, int(srec%iterations, i8))
             rec%stokes_residual = max(rec%stokes_residual, srec%residual)
             rec%rigidity_max = max(rec%rigidity_max, srec%rigidity_max)
