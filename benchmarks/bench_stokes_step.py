@@ -55,6 +55,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SETTINGS: dict[str, tuple[dict, str]] = {
     "reference": ({"tolerance": 1e-10}, "tolerance 1e-10, a solve every step, previous solution as guess"),
     "baseline": ({}, "defaults: tolerance 1e-6, previous solution as guess"),
+    "extrapolate": ({"initial_guess": "extrapolate"}, "guess 2 u_n - u_(n-1) of the last two solutions"),
     "tol1e-5": ({"tolerance": 1e-5}, "tolerance 1e-5"),
     "tol1e-4": ({"tolerance": 1e-4}, "tolerance 1e-4"),
     "tol1e-3": ({"tolerance": 1e-3}, "tolerance 1e-3"),

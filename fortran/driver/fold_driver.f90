@@ -655,6 +655,7 @@ contains
       set%tol = setup%stokes_tolerance
       set%max_iter = setup%stokes_max_iterations
       set%derivative = setup%stokes_derivative
+      set%guess = setup%stokes_initial_guess
       set%plan_effort = effort
       call stokes_context_init(ctx, fft, set, stat, errmsg)
       if (stat /= FOLD_OK) errmsg = "/setup/resolved/stokes_*: "//trim(errmsg)

@@ -193,6 +193,10 @@ class StokesSettings(_Table):
     #: FFTW planning: "measure" (faster transforms, plans timed at start-up; repeated runs
     #: agree to the solver tolerance) or "estimate" (bitwise reproducible)
     fft_plan: Literal["measure", "estimate"] = "measure"
+    #: initial guess of each CG solve: "previous" (the last step's solution) or
+    #: "extrapolate" (2 u_n - u_(n-1) of the last two solutions); measured by
+    #: benchmarks/bench_stokes_step.py (2 % fewer iterations on the dense-fibre scene)
+    initial_guess: Literal["previous", "extrapolate"] = "previous"
 
 
 class Numerics(_Table):
