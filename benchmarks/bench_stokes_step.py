@@ -59,6 +59,12 @@ SETTINGS: dict[str, tuple[dict, str]] = {
     "tol1e-5": ({"tolerance": 1e-5}, "tolerance 1e-5"),
     "tol1e-4": ({"tolerance": 1e-4}, "tolerance 1e-4"),
     "tol1e-3": ({"tolerance": 1e-3}, "tolerance 1e-3"),
+    "tol1e-4_every2": ({"tolerance": 1e-4, "solve_every": 2},
+                       "tolerance 1e-4, a solve every 2nd step (velocities extrapolated linearly in between)"),
+    "tol1e-4_every4": ({"tolerance": 1e-4, "solve_every": 4}, "tolerance 1e-4, a solve every 4th step"),
+    "tol1e-3_every2": ({"tolerance": 1e-3, "solve_every": 2}, "tolerance 1e-3, a solve every 2nd step"),
+    "tol1e-3_every3": ({"tolerance": 1e-3, "solve_every": 3}, "tolerance 1e-3, a solve every 3rd step"),
+    "tol1e-3_every4": ({"tolerance": 1e-3, "solve_every": 4}, "tolerance 1e-3, a solve every 4th step"),
 }
 
 

@@ -83,6 +83,8 @@ module fold_run_file
       !> CG initial guess: 1 the previous solution, 2 extrapolated from the last two
       !> (fold_stokes_fft FOLD_GUESS_*; optional key, 1 when absent)
       integer(ip) :: stokes_initial_guess = 1
+      !> A Stokes solve every k-th step, velocities extrapolated in between (optional key, 1 when absent)
+      integer(ip) :: stokes_solve_every = 1
    end type run_setup_t
 
    public :: read_run_file
@@ -221,6 +223,11 @@ contains
       if (h5_exists(file, R//"stokes_initial_guess")) then
          call get_int(file, R//"stokes_initial_guess", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
          s%stokes_initial_guess = int(iv, ip)
+      end if
+      s%stokes_solve_every = 1
+      if (h5_exists(file, R//"stokes_solve_every")) then
+         call get_int(file, R//"stokes_solve_every", 1_i8, 1000_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+         s%stokes_solve_every = int(iv, ip)
       end if
    end subroutine read_stokes
 

@@ -186,6 +186,8 @@ class ResolvedScene:
             "stokes_fft_plan": (np.int32(FFT_PLAN_CODES[st.fft_plan]), "1", "FFTW planning: 0 estimate, 1 measure"),
             "stokes_initial_guess": (np.int32(INITIAL_GUESS_CODES[st.initial_guess]), "1",
                                      "CG initial guess: 1 previous solution, 2 extrapolated from the last two"),
+            "stokes_solve_every": (np.int32(st.solve_every), "1",
+                                   "a Stokes solve every k-th step, velocities extrapolated linearly in between"),
             "time_scheme": (np.int32(TIME_SCHEME_CODES[num.time_scheme]), "1",
                             "time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2"),
         }
