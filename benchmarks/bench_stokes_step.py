@@ -3,14 +3,15 @@ solver setting, against a tight reference.
 
 Question: how many real-3-D-FFT-equivalents does one step of fold_run cost (Stokes
 solve, rigid fit, contacts, output), and what accuracy of the particles' motion does
-each speed setting keep? Scene (issue 9): 55 fibres, aspect ratio 10, cell 2.4^3
+each speed setting keep? Scene: 55 fibres, aspect ratio 10, cell 2.4^3
 fibre lengths, 3 voxels per diameter (grid 72^3), kappa 1e3, AB2, dt = 0.01 (strain
 0.01 per step), contacts on (strategy); ``--big``: its 128^3 sibling (cell 4.25^3,
 305 fibres, same number density and resolution); ``--quick``: 2 voxels per diameter
 (grid 48^3), 30 steps.
 Command:  nice -n 5 python benchmarks/bench_stokes_step.py [--quick | --big] [--steps N]
-          [--only NAME ...] [--build build-wt]
-Cost: --quick ~5 min, default ~1 h, --big several hours on a loaded 2-core machine.
+          [--only NAME ...] [--build build-wt] [--keep DIR [--reuse]]
+Cost (CPU time; wall time depends on the load): --quick ~4 CPU-min for the reference, the baseline
+and 7 settings, default (72^3, 100 steps) ~15 CPU-min for the reference and the baseline, --big hours.
 
 Each setting is one ``pyfold run`` of the same scene (same seed, hence the same
 initial state) through the build's fold_run (``$PYFOLD_FOLD_RUN``, else
@@ -31,7 +32,7 @@ Accuracy, against the reference setting (tolerance 1e-10, a solve every step):
 * ``rot err``: the same for the axis rates (L/2) dp/dt alone (not dominated by the
   affine translation G x);
 * ``a2 err``: max |a2 - a2_ref| over the components after the last step.
-Targets (issue 9): vel err <= 1e-3 and a2 err <= 1e-4 after 100 steps.
+Targets: vel err <= 1e-3 and a2 err <= 1e-4 after 100 steps.
 """
 from __future__ import annotations
 
