@@ -25,7 +25,10 @@ contains
       set%mixing = mixing
       set%subsamples = subsamples
       set%fibre_ends = fibre_ends
+      ! warm_start: 0 cold (zero guess), else the guess code (fold_stokes_fft FOLD_GUESS_*:
+      ! 1 previous solution, 2 extrapolated from the last two)
       set%warm_start = warm_start /= 0
+      set%guess = max(1_ip, min(int(warm_start, ip), 2_ip))
       set%plan_effort = plan_effort
    end function make_settings
 
@@ -195,8 +198,9 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    real(dp), intent(in) :: lengths(3), g(3, 3), t0, dt, radius(np), length(np), xi(np), x0(dim, np), p0(dim, np)
    real(dp), intent(in) :: eta_f, kappa, tol
    real(dp), intent(out) :: x_hist(dim, np, nsteps + 1), p_hist(dim, np, nsteps + 1)
-   !> records(:, step): iterations, residual, rigidity_max, eta_eff, solid_strain, solid_fraction
-   real(dp), intent(out) :: records(6, nsteps)
+   !> records(:, step): iterations, residual, rigidity_max, eta_eff, solid_strain, solid_fraction,
+   !> residual of the initial guess
+   real(dp), intent(out) :: records(7, nsteps)
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
    class(fft_backend_t), allocatable :: fft
@@ -222,7 +226,7 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    call stokes_march(ctx, cell, parts, t0, dt, nsteps, scheme, x_hist, p_hist, recs, stat, errmsg)
    do k = 1, nsteps
       records(:, k) = [real(recs(k)%iterations, dp), recs(k)%residual, recs(k)%rigidity_max, recs(k)%bulk%eta_eff, &
-                       recs(k)%bulk%solid_strain, recs(k)%bulk%solid_fraction]
+                       recs(k)%bulk%solid_strain, recs(k)%bulk%solid_fraction, recs(k)%residual0]
    end do
    call stokes_context_destroy(ctx)
 end subroutine fold_stokes_march

@@ -110,9 +110,19 @@ contains
       integer(ip) :: first, last
       integer, allocatable :: cnt_v(:), dsp_v(:), cnt_w(:), dsp_w(:)
       real(dp) :: t
+      !> Cost of the time loop (printed at its end): clock ticks, CPU seconds of this
+      !> process, CG iterations of the solves made in the loop
+      integer(i8) :: tick0, tick1, tick_rate, cg_total
+      real(dp) :: cpu0, cpu1
       logical :: stokes, have_prev, good_have_prev
       !> Stokes velocities of the current configuration, of the previous one (AB2 history)
       real(dp), allocatable :: v_hyd(:, :), w_hyd(:, :), v_prev(:, :), w_prev(:, :), good_vprev(:, :), good_wprev(:, :)
+      !> Solve re-use (stokes_solve_every = k > 1): v_hyd, w_hyd are the last solve (time
+      !> t_a), v_sb, w_sb the one before (t_b, when have_b); the hydrodynamic velocity
+      !> at a step's time is their linear extrapolation (v_hyd itself when k = 1)
+      real(dp), allocatable :: v_sb(:, :), w_sb(:, :), v_est(:, :), w_est(:, :)
+      real(dp) :: t_a, t_b
+      logical :: have_b
 
       call MPI_Comm_rank(MPI_COMM_WORLD, rank)
       call MPI_Comm_size(MPI_COMM_WORLD, nranks)
@@ -146,6 +156,12 @@ contains
             return
          end if
          allocate (v_hyd(parts%dim, parts%n), w_hyd(3, parts%n), v_prev(parts%dim, parts%n), w_prev(3, parts%n))
+         allocate (v_sb(parts%dim, parts%n), w_sb(3, parts%n), v_est(parts%dim, parts%n), w_est(3, parts%n))
+         v_sb = 0.0_dp
+         w_sb = 0.0_dp
+         have_b = .false.
+         t_a = 0.0_dp
+         t_b = 0.0_dp
          v_prev = 0.0_dp
          w_prev = 0.0_dp
          good_vprev = v_prev
@@ -238,6 +254,7 @@ contains
          ! flow of the starting configuration: velocities of the first step, stress of its record
          call cell_set_time(cell, t)
          call stokes_solve(stat, errmsg)
+         t_a = t
          if (stat /= FOLD_OK) then
             call fail(step0 + 1, trim(errmsg), stat)
             return
@@ -256,6 +273,9 @@ contains
 
       ! ---------------------------------------------------------------- time loop
       progress_every = max(1_i8, setup%nsteps/100)
+      cg_total = 0
+      call system_clock(tick0, tick_rate)
+      call cpu_time(cpu0)
       good = parts
       do step = step0 + 1, setup%nsteps
          good%x = parts%x
@@ -271,16 +291,24 @@ contains
          call cell_set_time(cell, t)
 
          if (stokes) then
-            ! v_hyd: the solve of this configuration (made at the end of the previous step)
-            if (setup%time_scheme == FOLD_AB2 .and. have_prev) then
-               parts%v = 1.5_dp*v_hyd - 0.5_dp*v_prev
-               parts%omega = 1.5_dp*w_hyd - 0.5_dp*w_prev
+            ! v_hyd: the solve of this configuration (made at the end of the previous step);
+            ! with solve re-use, the extrapolation of the last two solves to this time
+            if (setup%stokes_solve_every > 1 .and. have_b .and. t > t_a) then
+               v_est = v_hyd + ((t - t_a)/(t_a - t_b))*(v_hyd - v_sb)
+               w_est = w_hyd + ((t - t_a)/(t_a - t_b))*(w_hyd - w_sb)
             else
-               parts%v = v_hyd
-               parts%omega = w_hyd
+               v_est = v_hyd
+               w_est = w_hyd
             end if
-            v_prev = v_hyd
-            w_prev = w_hyd
+            if (setup%time_scheme == FOLD_AB2 .and. have_prev) then
+               parts%v = 1.5_dp*v_est - 0.5_dp*v_prev
+               parts%omega = 1.5_dp*w_est - 0.5_dp*w_prev
+            else
+               parts%v = v_est
+               parts%omega = w_est
+            end if
+            v_prev = v_est
+            w_prev = w_est
             have_prev = .true.
          else
             call jeffery_step_velocities(stepper, cell, parts, first, last)
@@ -326,11 +354,20 @@ contains
          block
             integer(ip) :: k
             real(dp) :: xk(3)
+            real(dp), allocatable :: xw(:, :)
+            if (stokes .and. setup%stokes_solve_every > 1) xw = parts%x
             do k = 1, parts%n
                xk(1:parts%dim) = parts%x(:, k)
                call cell_wrap(cell, parts%x(:, k), parts%v(:, k))
                ! the AB2 history crosses a sheared face with the same velocity jump
                if (stokes) call cell_wrap(cell, xk(1:parts%dim), v_prev(:, k))
+               if (stokes .and. setup%stokes_solve_every > 1) then
+                  ! so do the re-used solves
+                  xk(1:parts%dim) = xw(1:parts%dim, k)
+                  call cell_wrap(cell, xk(1:parts%dim), v_hyd(:, k))
+                  xk(1:parts%dim) = xw(1:parts%dim, k)
+                  call cell_wrap(cell, xk(1:parts%dim), v_sb(:, k))
+               end if
             end do
          end block
          if (.not. finite_state(parts)) then
@@ -339,8 +376,16 @@ contains
             return
          end if
          call accumulate(rec, cstats, parts)
-         if (stokes) then
+         if (stokes .and. mod(step, int(setup%stokes_solve_every, i8)) == 0) then
             ! flow of the new configuration: the stress of this record, the velocities of the next step
+            ! (with solve re-use every k-th step only; the last solve becomes the one before)
+            if (setup%stokes_solve_every > 1) then
+               v_sb = v_hyd
+               w_sb = w_hyd
+               t_b = t_a
+               have_b = .true.
+               t_a = t
+            end if
             call stokes_solve(stat, errmsg)
             if (stat /= FOLD_OK) then
                ! the configuration at t is good; it is the next step that cannot be made
@@ -367,6 +412,15 @@ contains
          end if
       end do
 
+      call cpu_time(cpu1)
+      call system_clock(tick1)
+      if (rank == 0) then
+         ! benchmarks/bench_stokes_step.py reads this line
+         write (output_unit, '(a,i0,a,es12.5,a,es12.5,a,i0)') "TIMING steps=", setup%nsteps - step0, &
+            " wall=", real(tick1 - tick0, dp)/real(max(tick_rate, 1_i8), dp), " cpu=", cpu1 - cpu0, &
+            " cg_iterations=", cg_total
+         flush (output_unit)
+      end if
       if (rank == 0) then
          call output_status(out, "ok", setup%nsteps, stat, errmsg)
          if (stat == FOLD_OK) then
@@ -461,6 +515,7 @@ contains
             w_hyd = tmp
          end block
          if (sstat == FOLD_OK .or. sstat == FOLD_NOT_CONVERGED) then
+            cg_total = cg_total + srec%iterations
             rec%stokes_iterations = max(rec%stokes_iterations, int(srec%iterations, i8))
             rec%stokes_residual = max(rec%stokes_residual, srec%residual)
             rec%rigidity_max = max(rec%rigidity_max, srec%rigidity_max)
@@ -638,6 +693,7 @@ contains
       set%tol = setup%stokes_tolerance
       set%max_iter = setup%stokes_max_iterations
       set%derivative = setup%stokes_derivative
+      set%guess = setup%stokes_initial_guess
       set%plan_effort = effort
       call stokes_context_init(ctx, fft, set, stat, errmsg)
       if (stat /= FOLD_OK) errmsg = "/setup/resolved/stokes_*: "//trim(errmsg)

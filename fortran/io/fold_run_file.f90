@@ -80,6 +80,11 @@ module fold_run_file
       integer :: stokes_fft_plan = 1
       !> Time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2
       integer(ip) :: time_scheme = 1
+      !> CG initial guess: 1 the previous solution, 2 extrapolated from the last two
+      !> (fold_stokes_fft FOLD_GUESS_*; optional key, 1 when absent)
+      integer(ip) :: stokes_initial_guess = 1
+      !> A Stokes solve every k-th step, velocities extrapolated in between (optional key, 1 when absent)
+      integer(ip) :: stokes_solve_every = 1
    end type run_setup_t
 
    public :: read_run_file
@@ -213,6 +218,17 @@ contains
       s%stokes_fft_plan = int(iv)
       call get_int(file, R//"time_scheme", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
       s%time_scheme = int(iv, ip)
+      ! optional: run files written before the setting existed used the previous solution
+      s%stokes_initial_guess = 1
+      if (h5_exists(file, R//"stokes_initial_guess")) then
+         call get_int(file, R//"stokes_initial_guess", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+         s%stokes_initial_guess = int(iv, ip)
+      end if
+      s%stokes_solve_every = 1
+      if (h5_exists(file, R//"stokes_solve_every")) then
+         call get_int(file, R//"stokes_solve_every", 1_i8, 1000_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+         s%stokes_solve_every = int(iv, ip)
+      end if
    end subroutine read_stokes
 
    subroutine read_initial(file, s, parts, stat, errmsg)

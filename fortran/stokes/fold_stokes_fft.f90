@@ -64,6 +64,13 @@ module fold_stokes_fft
    !> harmonic 1/eta = (1-chi)/eta_f + chi/(kappa eta_f), geometric eta_f kappa^chi
    integer(ip), parameter, public :: FOLD_MIX_ARITHMETIC = 0, FOLD_MIX_HARMONIC = 1, FOLD_MIX_GEOMETRIC = 2
 
+   !> Initial guess of a warm-started solve: the previous solution x_n (its Fourier
+   !> coefficients in lattice coordinates, re-projected on the new lattice), or the
+   !> linear extrapolation 2 x_n - x_(n-1) of the last two. (Translating the stored
+   !> field along a1 by a fraction of the offset change was tried and only made the
+   !> guess worse: measured on a sphere at the cell centre, no shift is the best.)
+   integer(ip), parameter, public :: FOLD_GUESS_PREVIOUS = 1, FOLD_GUESS_EXTRAPOLATE = 2
+
    !> Settings of the fictitious-domain solve.
    type, public :: stokes_settings_t
       !> Fluid viscosity eta_f [Pa s]
@@ -86,6 +93,9 @@ module fold_stokes_fft
       integer(ip) :: mixing = FOLD_MIX_HARMONIC
       !> Start CG from the previous solution (re-projected on the new lattice)
       logical :: warm_start = .true.
+      !> Initial guess of a warm start (FOLD_GUESS_*): the last solution, or the linear
+      !> extrapolation 2 x_n - x_(n-1) of the last two (re-projected on the new lattice)
+      integer(ip) :: guess = FOLD_GUESS_PREVIOUS
    end type stokes_settings_t
 
    !> Solver state: plans, grid, work fields and the Fourier-space solution.
@@ -107,6 +117,8 @@ module fold_stokes_fft
       type(fft_field_t), allocatable :: vel(:)
       !> Staggered Fourier coefficients i phase u^ (unnormalised FFT) of u~ and the CG vectors (nxh, n2l, n3l, dim)
       complex(dp), allocatable :: x(:, :, :, :), r(:, :, :, :), p(:, :, :, :), q(:, :, :, :)
+      !> Solution of the solve before the last one (FOLD_GUESS_EXTRAPOLATE only; else size 0)
+      complex(dp), allocatable :: x_prev(:, :, :, :)
       !> Real derivative vector q of each mode (dim, nxh, n2l, n3l) [1/m]
       real(dp), allocatable :: kv(:, :, :, :)
       !> 1/|q|^2, zero on removed modes (mean, Nyquist/hourglass) [m^2]
@@ -125,6 +137,8 @@ module fold_stokes_fft
       !> Mean strain rate E of the last solve [1/s]
       real(dp) :: E(3, 3) = 0.0_dp
       logical :: have_guess = .false., lattice_set = .false.
+      !> x_prev holds the solution before x (a second guess for the extrapolation)
+      logical :: have_prev = .false.
    end type stokes_fft_t
 
    public :: stokes_fft_init, stokes_fft_set_lattice, stokes_fft_solve, stokes_fft_velocity, &
@@ -160,6 +174,8 @@ contains
             set%mixing
       else if (set%fibre_ends /= 0 .and. set%fibre_ends /= 1) then
          write (errmsg, '(a,i0)') "stokes settings: fibre_ends must be 0 (flat) or 1 (capped), got ", set%fibre_ends
+      else if (set%guess /= FOLD_GUESS_PREVIOUS .and. set%guess /= FOLD_GUESS_EXTRAPOLATE) then
+         write (errmsg, '(a,i0)') "stokes settings: guess must be 1 (previous) or 2 (extrapolate), got ", set%guess
       else
          stat = FOLD_OK
       end if
@@ -215,6 +231,12 @@ contains
       n3 = s%grid%nl(3)
       allocate (s%x(nxh, n2, n3, s%dim), s%r(nxh, n2, n3, s%dim), s%p(nxh, n2, n3, s%dim), s%q(nxh, n2, n3, s%dim))
       allocate (s%kv(s%dim, nxh, n2, n3), s%ik2(nxh, n2, n3), s%cosprod(nxh, n2, n3))
+      if (set%guess == FOLD_GUESS_EXTRAPOLATE) then
+         allocate (s%x_prev(nxh, n2, n3, s%dim))
+      else
+         allocate (s%x_prev(0, 0, 0, s%dim))
+      end if
+      s%x_prev = 0.0_dp
       allocate (s%wx(nxh), s%history(0:set%max_iter))
       s%x = 0.0_dp
       s%r = 0.0_dp
@@ -225,6 +247,7 @@ contains
       if (mod(s%grid%n(1), 2) == 0) s%wx(nxh) = 1.0_dp
       s%history = 0.0_dp
       s%have_guess = .false.
+      s%have_prev = .false.
       s%lattice_set = .false.
    end subroutine stokes_fft_init
 
@@ -364,11 +387,17 @@ contains
          s%x = 0.0_dp
          s%residual = 0.0_dp
          s%have_guess = .true.
+         s%have_prev = .false.
          return
       end if
 
       if (s%set%warm_start .and. s%have_guess) then
-         ! previous solution, re-projected on this lattice's divergence-free modes
+         if (s%set%guess == FOLD_GUESS_EXTRAPOLATE) then
+            ! x <- 2 x_n - x_(n-1) (when there are two), x_prev <- x_n
+            call extrapolate_guess(size(s%x, kind=i8), s%have_prev, s%x, s%x_prev)
+            s%have_prev = .true.
+         end if
+         ! guess re-projected on this lattice's divergence-free modes
          call project(s, s%x)
          call apply(s, s%x, s%q)
          s%r = s%r - s%q
@@ -480,10 +509,12 @@ contains
          deallocate (s%fft)
       end if
       if (allocated(s%x)) deallocate (s%x, s%r, s%p, s%q)
+      if (allocated(s%x_prev)) deallocate (s%x_prev)
       if (allocated(s%kv)) deallocate (s%kv, s%ik2, s%cosprod)
       if (allocated(s%wx)) deallocate (s%wx)
       if (allocated(s%history)) deallocate (s%history)
       s%have_guess = .false.
+      s%have_prev = .false.
       s%lattice_set = .false.
    end subroutine stokes_fft_destroy
 
@@ -616,6 +647,26 @@ contains
       end do
       v = v/s%eta0
    end function precond_dot
+
+   !> Initial guess by linear extrapolation in time: with x = x_n and xp = x_(n-1),
+   !> x <- 2 x_n - x_(n-1) and xp <- x_n in one pass; without a second solution
+   !> (have_prev false) x is kept and xp <- x_n.
+   subroutine extrapolate_guess(n, have_prev, x, xp)
+      integer(i8), intent(in) :: n
+      logical, intent(in) :: have_prev
+      complex(dp), intent(inout) :: x(n), xp(n)
+      integer(i8) :: m
+      complex(dp) :: xn
+      if (have_prev) then
+         do m = 1, n
+            xn = x(m)
+            x(m) = 2.0_dp*xn - xp(m)
+            xp(m) = xn
+         end do
+      else
+         xp = x
+      end if
+   end subroutine extrapolate_guess
 
    ! ------------------------------------------------------------------ CG kernels
    ! Explicit-shape dummies: the compiler sees contiguous, non-aliased arrays and

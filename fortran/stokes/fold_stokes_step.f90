@@ -32,6 +32,8 @@ module fold_stokes_step
       !> CG iterations and relative preconditioned residual reached
       integer(ip) :: iterations = 0
       real(dp) :: residual = 0.0_dp
+      !> Relative preconditioned residual of the initial guess [-]
+      real(dp) :: residual0 = 0.0_dp
       logical :: converged = .false.
       !> Largest and mean rigidity residual of the particles [-]
       real(dp) :: rigidity_max = 0.0_dp, rigidity_mean = 0.0_dp
@@ -107,6 +109,7 @@ contains
       end if
       rec%iterations = ctx%solver%iterations
       rec%residual = ctx%solver%residual
+      rec%residual0 = ctx%solver%history(0)
       rec%converged = solve_stat == FOLD_OK
       call stokes_fft_velocity(ctx%solver)
       if (allocated(ctx%rigidity)) then

@@ -26,6 +26,7 @@ from pyfold.native import load
 DERIVATIVES = {"spectral": 0, "fd": 1}
 MIXINGS = {"arithmetic": 0, "harmonic": 1, "geometric": 2}
 FIBRE_ENDS = {"flat": 0, "capped": 1}
+GUESSES = {"previous": 1, "extrapolate": 2}
 SCHEMES = {"euler": 1, "ab2": 2}
 SHAPES = {"fibre": 1, "sphere": 2, "spheroid": 3}
 
@@ -50,6 +51,8 @@ class StokesSettings:
     subsamples : sub-samples per voxel edge for the partial-volume χ, 1..8.
     fibre_ends : ``"flat"`` cylinder (default) or ``"capped"`` (the contact capsule).
     warm_start : start CG from the previous step's solution (time marching only).
+    guess : initial guess of a warm start: ``"previous"`` (the last solution) or
+        ``"extrapolate"`` (2 x_n − x_(n−1) of the last two).
     measure_plans : FFTW_MEASURE plans (seconds to make, faster transforms).
     """
 
@@ -62,6 +65,7 @@ class StokesSettings:
     subsamples: int = 3
     fibre_ends: str = "flat"
     warm_start: bool = True
+    guess: str = "previous"
     measure_plans: bool = False
 
     def __post_init__(self) -> None:
@@ -73,7 +77,8 @@ class StokesSettings:
             raise InputError(f"tol: must be in (0, 1), got {self.tol}")
         if int(self.max_iter) < 1:
             raise InputError(f"max_iter: must be >= 1, got {self.max_iter}")
-        for key, table in (("derivative", DERIVATIVES), ("mixing", MIXINGS), ("fibre_ends", FIBRE_ENDS)):
+        for key, table in (("derivative", DERIVATIVES), ("mixing", MIXINGS), ("fibre_ends", FIBRE_ENDS),
+                           ("guess", GUESSES)):
             if getattr(self, key) not in table:
                 raise InputError(f"{key}: must be one of {sorted(table)}, got {getattr(self, key)!r}")
         if not 1 <= int(self.subsamples) <= 8:
@@ -148,7 +153,8 @@ class FlowSolution:
 class MarchResult:
     """Histories of a time integration: ``x``, ``p`` of shape (nsteps + 1, N, dim);
     per-step ``iterations``, ``residual``, ``rigidity_max``, ``eta_eff``,
-    ``solid_strain``, ``solid_fraction`` of shape (nsteps,)."""
+    ``solid_strain``, ``solid_fraction``, ``initial_residual`` (relative residual of
+    the solve's initial guess) of shape (nsteps,)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -159,6 +165,7 @@ class MarchResult:
     eta_eff: np.ndarray
     solid_strain: np.ndarray
     solid_fraction: np.ndarray
+    initial_residual: np.ndarray
 
 
 def _grid(grid, dim: int) -> tuple[int, int, int]:
@@ -271,8 +278,10 @@ def march(particles: Particles, cell_lengths, grid, dt: float, nsteps: int, shea
         n[0], n[1], n[2], int(nsteps), L, G, float(t0), float(dt), SCHEMES[scheme], particles.shape,
         particles.radius, particles.length, particles.xi, np.asfortranarray(particles.x.T),
         np.asfortranarray(particles.p.T), c["eta_f"], c["kappa"], c["tol"], c["max_iter"], c["derivative"],
-        c["mixing"], int(s.subsamples), FIBRE_ENDS[s.fibre_ends], int(s.warm_start), c["plan_effort"])
+        c["mixing"], int(s.subsamples), FIBRE_ENDS[s.fibre_ends], GUESSES[s.guess] if s.warm_start else 0,
+        c["plan_effort"])
     checked(stat, msg)
     return MarchResult(t=t0 + dt * np.arange(nsteps + 1), x=np.transpose(xh, (2, 1, 0)),
                        p=np.transpose(ph, (2, 1, 0)), iterations=rec[0].astype(int), residual=rec[1],
-                       rigidity_max=rec[2], eta_eff=rec[3], solid_strain=rec[4], solid_fraction=rec[5])
+                       rigidity_max=rec[2], eta_eff=rec[3], solid_strain=rec[4], solid_fraction=rec[5],
+                       initial_residual=rec[6])

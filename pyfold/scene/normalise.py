@@ -25,6 +25,7 @@ HYDRODYNAMICS_CODES = {"jeffery": 0, "stokes": 1}
 TIME_SCHEME_CODES = {"euler": 1, "ab2": 2}
 DERIVATIVE_CODES = {"spectral": 0, "fd": 1}
 FFT_PLAN_CODES = {"estimate": 0, "measure": 1}
+INITIAL_GUESS_CODES = {"previous": 1, "extrapolate": 2}
 #: Spheres: hydrodynamic interactions "matter" for ``auto`` from this total volume
 #: fraction on. Batchelor & Green (1972, J. Fluid Mech. 56:401):
 #: eta/eta_f = 1 + 2.5 phi + 6.2 phi^2; the pair term is 2.48 phi of the single-particle
@@ -183,6 +184,10 @@ class ResolvedScene:
             "stokes_derivative": (np.int32(DERIVATIVE_CODES[st.derivative]), "1",
                                   "0 spectral, 1 rotated finite differences (Willot 2015)"),
             "stokes_fft_plan": (np.int32(FFT_PLAN_CODES[st.fft_plan]), "1", "FFTW planning: 0 estimate, 1 measure"),
+            "stokes_initial_guess": (np.int32(INITIAL_GUESS_CODES[st.initial_guess]), "1",
+                                     "CG initial guess: 1 previous solution, 2 extrapolated from the last two"),
+            "stokes_solve_every": (np.int32(st.solve_every), "1",
+                                   "a Stokes solve every k-th step, velocities extrapolated linearly in between"),
             "time_scheme": (np.int32(TIME_SCHEME_CODES[num.time_scheme]), "1",
                             "time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2"),
         }

@@ -193,6 +193,14 @@ class StokesSettings(_Table):
     #: FFTW planning: "measure" (faster transforms, plans timed at start-up; repeated runs
     #: agree to the solver tolerance) or "estimate" (bitwise reproducible)
     fft_plan: Literal["measure", "estimate"] = "measure"
+    #: initial guess of each CG solve: "previous" (the last step's solution) or
+    #: "extrapolate" (2 u_n - u_(n-1) of the last two solutions); measured by
+    #: benchmarks/bench_stokes_step.py (2 % fewer iterations on the dense-fibre scene)
+    initial_guess: Literal["previous", "extrapolate"] = "previous"
+    #: a Stokes solve every k-th step only; in between the rigid velocities are the linear
+    #: extrapolation in time of the last two solves (contacts still every step). A
+    #: speed-accuracy setting (benchmarks/bench_stokes_step.py); 1 = a solve every step
+    solve_every: Annotated[int, Field(ge=1, le=1000)] = 1
 
 
 class Numerics(_Table):

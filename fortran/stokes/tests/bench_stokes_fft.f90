@@ -11,6 +11,10 @@
 !>     FFTs per iteration (10 in 3-D: 5 traceless strain components back, 5 stress
 !>     components forward). One line per repeat:
 !>       BENCH n= ranks= t_fft= t_fft_seq= t_iter= ratio= ratio_seq= ffts=
+!>   mode "fft": the time of one hot real 3-D FFT (r2c + c2r of one field, 50 pairs
+!>     per repeat), wall and CPU seconds of this process; one line per repeat:
+!>       FFT n= t_fft_wall= t_fft_cpu=
+!>     (benchmarks/bench_stokes_step.py: the unit of its FFT-equivalents per step)
 !>   mode "iters": CG iterations from a zero guess to tol 1e-6 (relative
 !>     preconditioned residual); one line: ITERS n= kappa= iterations= residual=
 !> Geometry (shape): "sphere" (default), radius N/8 voxels, or "spheroid", a prolate
@@ -35,7 +39,7 @@ program bench_stokes_fft
    type(stokes_fft_t) :: s
    type(stokes_settings_t) :: set
    real(dp), allocatable :: chi(:, :, :)
-   real(dp) :: G(3, 3), t0, t_fft, t_seq, t_it, x(3)
+   real(dp) :: G(3, 3), t0, t_fft, t_seq, t_it, x(3), c0, c1
    integer :: stat, rank, nranks, rep, nrep, i, j, k, c
    integer(ip) :: n
    character(len=msg_len) :: msg
@@ -109,7 +113,19 @@ program bench_stokes_fft
    G = 0.0_dp
    G(1, 2) = 1.0_dp
 
-   if (trim(mode) == "iters") then
+   if (trim(mode) == "fft") then
+      do rep = 1, nrep
+         t0 = MPI_Wtime()
+         call cpu_time(c0)
+         do i = 1, 50
+            call s%fft%r2c(s%work(1))
+            call s%fft%c2r(s%work(1))
+         end do
+         call cpu_time(c1)
+         t_fft = (MPI_Wtime() - t0)/100
+         if (rank == 0) print '(a,i0,a,es12.5,a,es12.5)', "FFT n=", n, " t_fft_wall=", t_fft, " t_fft_cpu=", (c1 - c0)/100
+      end do
+   else if (trim(mode) == "iters") then
       call stokes_fft_solve(s, chi, G, stat, msg)
       if (rank == 0) print '(a,i0,a,es9.2,a,a,a,i0,a,es10.3)', "ITERS n=", n, " kappa=", set%kappa, " shape=", &
          trim(shape), " iterations=", s%iterations, " residual=", s%residual
