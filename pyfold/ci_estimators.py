@@ -480,11 +480,13 @@ def ci_steady_state_match(
         )
         ci = float(math.exp(res.x))
         # Brent's bounded search never evaluates the bounds themselves; it stops within
-        # its tolerance sqrt(eps) |u| + xtol of an optimum on a bound (scipy's fminbound
-        # rule). Such an optimum, or a bound that is better, is the bound.
+        # a few times its tolerance sqrt(eps) |u| + xtol of an optimum on a bound
+        # (scipy's fminbound rule), where the loss is flat to round-off (measured:
+        # |u - u_bound| = 3e-6 with OPENBLAS_CORETYPE=Prescott, beyond that tolerance).
+        # A C_I within a relative 1e-4 of a bound, or a bound that is better, is the bound.
         for edge in (lo, hi):
             ue = math.log(edge)
-            near = abs(res.x - ue) <= 10.0 * (math.sqrt(np.finfo(np.float64).eps) * abs(ue) + xtol)
+            near = abs(res.x - ue) <= max(10.0 * (math.sqrt(np.finfo(np.float64).eps) * abs(ue) + xtol), 1e-4)
             if near or loss_at(edge) < loss_at(ci):
                 ci = edge
         method = "least_squares" + (f" {sel_label}" if sel_label else "")
