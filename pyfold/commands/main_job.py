@@ -221,7 +221,7 @@ def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tupl
     scratch = Path(tempfile.mkdtemp(prefix=".scenes-", dir=outdir))
     jobs = _Jobs(processes, scratch)
     try:
-        runs, todo = [], []
+        runs, pending = [], []
         for seed in seeds:
             seed_scene = scene  # the scene's own seed: the file itself
             if seed != base:
@@ -230,10 +230,10 @@ def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tupl
                 if load_scene(seed_scene).seed != seed:  # the text edit must mean what it says
                     raise PyfoldError(f"{scene}: could not set numerics.seed = {seed} in a copy of the scene")
             runs.append(outdir / f"run_seed{seed}.h5")
-            todo.append((f"seed {seed}", seed_scene, runs[-1]))
+            pending.append((f"seed {seed}", seed_scene, runs[-1]))
         say(f"1/3 direct simulation of {scene.name}, seeds {', '.join(map(str, seeds))} "
             f"({jobs.slots} at a time)")
-        jobs.run_all(todo, say)
+        jobs.run_all(pending, say)
         stokes = STOKES_SCENE.is_file() and scene.resolve() == DEFAULT_SCENE.resolve()
         if stokes:
             say(f"2/3 small Stokes scene {STOKES_SCENE.name} (fibres coupled through the fluid), beside step 3")
