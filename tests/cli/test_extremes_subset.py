@@ -126,3 +126,35 @@ def test_an_orbit_off_the_exact_jeffery_solution_is_silent_garbage(runs, tmp_pat
         f["a2"][-1] = np.diag([0.0, 1.0, 0.0])  # a valid orientation tensor, off the orbit
     broken, _ = extremes.check_run(wrong, case, extremes.Outcome("wrong", "", ""))
     assert any("exact Jeffery orbit" in b for b in broken), broken
+
+
+@pytest.mark.parametrize("name, key, allowed", [
+    # dt = 2 in a unit cell sheared at rate 1: a corner moves 1 > 1/2 per step
+    ("dt_spheres_2radius", "numerics.dt", "allowed: numerics.dt <= 1,"),
+    # uniaxial elongation stretches the unremapped cell: fold_run stopped near strain 5.7
+    ("uniaxial_single_strain20", "numerics.t_end", "allowed: numerics.t_end <="),
+])
+def test_validation_refuses_a_step_that_fold_run_would_stop_as_a_blow_up(name, key, allowed, tmp_path, capsys):
+    import tomli_w
+
+    from pyfold.cli import main
+
+    path = tmp_path / f"{name}.toml"
+    path.write_text(tomli_w.dumps(CASES[name].scene))
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"  {key}: " in err and allowed in err, err
+
+
+def test_validation_names_the_cell_size_a_kraynik_reinelt_lattice_needs(tmp_path, capsys):
+    import tomli_w
+
+    from pyfold.cli import main
+
+    scene = CASES["planar_contacts"].scene
+    scene = {**scene, "cell": {**scene["cell"], "size": [2.4, 2.4, 2.4]}}
+    path = tmp_path / "kr.toml"
+    path.write_text(tomli_w.dumps(scene))
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "  cell.size: the Kraynik-Reinelt lattice" in err and "allowed: cell.size x = y > about" in err, err
