@@ -310,11 +310,76 @@ def _check_lattice_duration(scene: Scene, G: np.ndarray, lengths: np.ndarray, go
     if t_ok < 0:
         problems.add("cell.size", f"the cell must be thicker than twice the contact search range 2 x {rc:.4g} "
                      f"(particle extent, alpha and Verlet skin) along every lattice direction; got {cell.lattice().thickness.min():.4g}")
+    elif t_ok < t_end and n_check < n_steps:
+        # Kraynik-Reinelt: periodic in time, so no t_end helps; the cell must be larger.
+        period = cell.lattice().period
+        thinnest = min(float(cell.at_time(float(t)).lattice().thickness.min())
+                       for t in np.linspace(0.0, period, 2001)) / float(lengths[0])
+        problems.add("cell.size", f"the Kraynik-Reinelt lattice of flow.type = 'planar_elongation' (remapped, any "
+                     f"strain) gets thinner than twice the contact search range 2 x {rc:.4g} at t = {t_ok:g}: over a "
+                     f"period its reduced cell thins to {thinnest:.4f} of the side (sampled); allowed: cell.size "
+                     f"x = y > about {2.0 * rc / thinnest:.4g}, got {lengths[0]:g}")
     elif t_ok < t_end:
         problems.add("numerics.t_end", f"flow.type = {scene.flow.type!r} deforms the periodic lattice without a "
                      f"reproducible remap (Kraynik-Reinelt needs planar elongation with cell.size x = y): the reduced "
                      f"cell gets thinner than twice the contact search range {rc:.4g} after t = {t_ok:g}; allowed: "
                      f"numerics.t_end <= {t_ok:g} (or enlarge cell.size), got {t_end:g}")
+
+
+#: Times sampled for the imposed displacement per step on a deforming lattice (_check_affine_step).
+AFFINE_CHECK_SAMPLES = 2000
+
+
+def _check_affine_step(G: np.ndarray, lengths: np.ndarray, dim: int, shear_flow: bool, dt: float, t_end: float,
+                       problems: Problems) -> None:
+    """fold_run stops a step in which a particle moves more than half the smallest cell side
+    (fold_driver: the minimum image would be meaningless), so validation refuses a time step
+    in which the imposed flow alone does that. A particle at x moves with u = G (x - L/2)
+    (fold_cell's frame); over the primary cell (the box [0, L) in shear, the reduced cell
+    origin + A(t) [0, 1)^dim of a deforming lattice) |u| is largest at a corner. A deforming
+    lattice is sampled over the run (over one period for Kraynik-Reinelt), each sample's
+    bound grown by exp(|G|_2 spacing), the most it can grow between two samples."""
+    from pyfold.native import geometry as geo
+
+    half = 0.5 * float(np.min(lengths[:dim]))
+    centre = 0.5 * lengths[:dim]
+    corners = np.stack(np.meshgrid(*[[0.0, 1.0]] * dim, indexing="ij"), -1).reshape(-1, dim)
+    g = np.asarray(G, dtype=np.float64)[:dim, :dim]
+
+    def largest_speed(origin, vectors) -> float:
+        points = origin + corners @ vectors
+        return float(np.max(np.linalg.norm((points - centre) @ g.T, axis=1)))
+
+    if shear_flow:
+        speed, t_bad = largest_speed(np.zeros(dim), np.diag(lengths[:dim])), 0.0
+        if speed * dt <= half:
+            return
+    else:
+        cell = geo.Cell(tuple(lengths[:dim]), velocity_gradient=g)
+        period = cell.lattice().period
+        span = min(t_end, period) if period > 0 else t_end
+        times = np.linspace(0.0, span, AFFINE_CHECK_SAMPLES + 1)
+        grow = float(np.exp(float(np.linalg.norm(g, 2)) * (times[1] - times[0])))
+        t_bad = None
+        for t in times:
+            lat = cell.at_time(float(t)).lattice()
+            speed = largest_speed(lat.origin, lat.vectors) * (grow if t > 0 else 1.0)
+            if speed * dt > half:
+                t_bad = float(t)
+                break
+        if t_bad is None:
+            return
+    if t_bad <= dt or (not shear_flow and cell.lattice().period > 0):
+        problems.add("numerics.dt", f"the imposed flow moves a particle at a corner of the cell by |G (x - L/2)| dt = "
+                     f"{speed * dt:.4g} per step (t = {t_bad:.4g}), more than half the smallest cell side "
+                     f"{half:.4g} (fold_run stops such a step as a blow-up); allowed: numerics.dt <= "
+                     f"{half / speed:.4g}, got {dt:g}")
+    else:
+        t_ok = max(dt, (np.floor(t_bad / dt) - 1) * dt)
+        problems.add("numerics.t_end", f"the lattice deformed by flow.type stretches the cell so that the imposed flow "
+                     f"moves a particle at a corner by more than half the smallest cell side {half:.4g} per step "
+                     f"from t = {t_bad:.4g} (fold_run stops such a step as a blow-up); allowed: numerics.t_end <= "
+                     f"{t_ok:.6g} (or a smaller numerics.dt), got {t_end:g}")
 
 
 #: Files accepted for positions / orientations (one row per particle).
@@ -841,6 +906,8 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
 
     if not shear_flow and not walls and n_steps is not None and good and shapes.range_rule_applies(n_total):
         _check_lattice_duration(scene, G, lengths, good, alpha, num.dt, num.t_end, problems)
+    if G is not None and n_steps is not None and not problems:
+        _check_affine_step(G, lengths, dim, shear_flow, num.dt, num.t_end, problems)
 
     problems.raise_if_any(source)
     assert G is not None and n_steps is not None
