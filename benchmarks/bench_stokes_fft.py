@@ -6,7 +6,8 @@ strain components back, 5 stress components forward), at 64^3 and 128^3; how do 
 iterations to a 1e-6 residual grow with the contrast kappa and the grid; and what
 is the speed-up of np = 2 slabs over np = 1 at 128^3?
 Command:  python benchmarks/bench_stokes_fft.py [--build build/editable] [--repeats 5] [--quick]
-Cost: ~3 min (--quick: ~1 min). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
+          python benchmarks/bench_stokes_fft.py --mpi [--grids 64 128] [--rounds 5]
+Cost: ~3 min (--quick: ~1 min; --mpi: ~1.5 min per round at 64^3 and 128^3). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
 plans, a sphere of radius n/8 on a sheared lattice, simple shear) and prints medians
 over repeats, with the load average before and after: the machine is shared, so read
 ratios (iteration / FFT, measured back to back in one process), not absolute times.
@@ -14,6 +15,15 @@ ratios (iteration / FFT, measured back to back in one process), not absolute tim
 Two FFT units are reported: ``hot`` (one field transformed back and forth, in cache)
 and ``seq`` (c2r then r2c of each of the 5 strain fields in turn, as the iteration
 does); ``ratio_seq`` is the one to compare with the floor of 10.
+
+``--mpi`` answers only the parallel question (docs/physics.md, "Parallel scaling of
+the slab decomposition"): per round and grid, back to back, np = 1 (serial FFTW),
+np = 2 with the transposed spectrum (one all-to-all per transform, what fold_run
+uses), np = 2 with the natural spectrum (two all-to-alls) and np = 2 with the 5 strain
+fields of a pass in one howmany = 5 plan against one at a time. It prints the load
+average before each round and the medians over rounds of the speed-ups
+t(np=1)/t(np=2) per CG iteration and per hot FFT: a busy machine stalls both ranks of
+an all-to-all whenever either is descheduled, so quote them with the load.
 """
 from __future__ import annotations
 
@@ -46,6 +56,43 @@ def cost(exe: Path, n: int, ranks: int, repeats: int, backend: str = "auto") -> 
     return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
 
 
+def batch(exe: Path, n: int, repeats: int) -> dict:
+    """Medians over repeats of the BATCH lines of np = 2 (first repeat dropped)."""
+    out = _run(exe, [str(n), "1000", str(repeats + 1), "batch"], 2)
+    rows = [dict((k, float(v)) for k, v in re.findall(r"(\w+)=\s*(\S+)", line))
+            for line in out.splitlines() if line.startswith("BATCH")][1:]
+    return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
+
+
+def load() -> str:
+    return " ".join(f"{v:.2f}" for v in os.getloadavg())
+
+
+def mpi_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
+    """np = 2 against np = 1, transposed against natural spectrum, batched FFTs; medians over rounds."""
+    ratios: dict[tuple[int, str], list[float]] = {}
+    print(f"{'round':>5} {'grid':>6} {'load 1/5/15 min':>17} {'t_iter np1':>11} {'np2 tr':>10} {'np2 nat':>10} "
+          f"{'t_fft np1':>10} {'np2 tr':>10} {'np2 nat':>10} {'batch/sep':>9}")
+    for r in range(rounds):
+        for n in grids:
+            before = load()
+            c1 = cost(exe, n, 1, repeats, "auto")
+            c2 = cost(exe, n, 2, repeats, "auto")
+            cn = cost(exe, n, 2, repeats, "natural")
+            b = batch(exe, n, repeats)
+            print(f"{r:>5} {n:>5}^3 {before:>17} {c1['t_iter']:>11.3e} {c2['t_iter']:>10.3e} {cn['t_iter']:>10.3e} "
+                  f"{c1['t_fft']:>10.3e} {c2['t_fft']:>10.3e} {cn['t_fft']:>10.3e} {b['ratio']:>9.3f}", flush=True)
+            for key, v in (("iter transposed", c1["t_iter"] / c2["t_iter"]),
+                           ("iter natural", c1["t_iter"] / cn["t_iter"]),
+                           ("fft transposed", c1["t_fft"] / c2["t_fft"]),
+                           ("fft natural", c1["t_fft"] / cn["t_fft"]),
+                           ("batch/sep", b["ratio"])):
+                ratios.setdefault((n, key), []).append(v)
+    print("\nmedian [min, max] over rounds of t(np=1)/t(np=2) (speed-up), and of t_batch/t_sep at np = 2")
+    for (n, key), v in ratios.items():
+        print(f"  {n:>4}^3 {key:<16} {statistics.median(v):6.2f} [{min(v):.2f}, {max(v):.2f}]  ({len(v)} rounds)")
+
+
 def iterations(exe: Path, n: int, kappa: float, shape: str = "sphere") -> int:
     out = _run(exe, [str(n), str(kappa), "1", "iters", shape], 1)
     m = re.search(r"iterations=\s*(\d+)", out)
@@ -57,12 +104,21 @@ def main() -> None:
     ap.add_argument("--build", default=str(ROOT / "build" / "editable"))
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="64^3 and np = 2 at 64^3 only, shorter sweeps")
+    ap.add_argument("--mpi", action="store_true", help="only np = 2 against np = 1 (transposed, natural, batched)")
+    ap.add_argument("--grids", type=int, nargs="+", default=[64, 128], help="grids of --mpi")
+    ap.add_argument("--rounds", type=int, default=5, help="rounds of --mpi")
     args = ap.parse_args()
+    if args.repeats < 1 or args.rounds < 1 or any(n < 8 for n in args.grids):
+        ap.error("--repeats must be >= 1, --rounds >= 1 and every --grids value >= 8")
     built = Path(args.build) / "fortran" / "stokes" / "tests" / "bench_stokes_fft"
     # a private copy: an editable import elsewhere may relink the build-tree binary mid-run
     exe = Path(tempfile.mkdtemp(prefix="bench_stokes_")) / "bench_stokes_fft"
     shutil.copy2(built, exe)
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
+    if args.mpi:
+        mpi_rounds(exe, args.grids, args.rounds, args.repeats)
+        print(f"\nload average after: {load()}")
+        return
 
     # Parameters
     # (grid, ranks, backend): "auto" = serial FFTW on one rank (what fold_run uses),
