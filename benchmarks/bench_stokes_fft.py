@@ -64,6 +64,39 @@ def batch(exe: Path, n: int, repeats: int) -> dict:
     return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
 
 
+def alltoall(exe: Path, n: int, repeats: int) -> dict:
+    """Medians over repeats of the A2A lines of np = 2 (first repeat dropped)."""
+    out = _run(exe, [str(n), "1000", str(repeats + 1), "a2a"], 2)
+    rows = [dict((k, float(v)) for k, v in re.findall(r"(\w+)=\s*(\S+)", line))
+            for line in out.splitlines() if line.startswith("A2A")][1:]
+    return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
+
+
+def slab_a2a(p: int, n: int, alpha: float, beta: float) -> float:
+    """Seconds of one slab all-to-all of the half spectrum on p ranks: p - 1 messages of V/p^2."""
+    v = 16.0 * (n // 2 + 1) * n * n
+    return (p - 1) * (alpha + v / (p * p * beta))
+
+
+def pencil_a2a(p: int, n: int, alpha: float, beta: float) -> float:
+    """Seconds of the two all-to-alls of a pencil transform (sqrt(p) x sqrt(p) grid): each
+    in a sub-communicator of sqrt(p) ranks, sqrt(p) - 1 messages of V/p^(3/2)."""
+    q = p ** 0.5
+    v = 16.0 * (n // 2 + 1) * n * n
+    return 2.0 * (q - 1.0) * (alpha + v / (p * q * beta))
+
+
+def projection(n: int, t_c: float, alpha: float, beta: float, ps: list[int]) -> None:
+    """Strong scaling at n^3: t(P) = t_c/P + 10 a2a(P) per CG iteration (10 transforms,
+    one all-to-all each for slabs, two for pencils)."""
+    print(f"\nprojected strong scaling at {n}^3 (t_c = {t_c:.3e} s, alpha = {alpha:.2e} s, beta = {beta:.2e} B/s)")
+    print(f"{'P':>6} {'slab t_iter':>12} {'speed-up':>9} {'pencil t_iter':>14} {'speed-up':>9}")
+    for p in ps:
+        slab = t_c / p + 10.0 * slab_a2a(p, n, alpha, beta) if p <= n else float("nan")
+        pen = t_c / p + 10.0 * pencil_a2a(p, n, alpha, beta) if p <= n * n else float("nan")
+        print(f"{p:>6} {slab:>12.3e} {t_c / slab:>9.1f} {pen:>14.3e} {t_c / pen:>9.1f}")
+
+
 def load() -> str:
     return " ".join(f"{v:.2f}" for v in os.getloadavg())
 
@@ -71,6 +104,8 @@ def load() -> str:
 def mpi_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
     """np = 2 against np = 1, transposed against natural spectrum, batched FFTs; medians over rounds."""
     ratios: dict[tuple[int, str], list[float]] = {}
+    t_c: dict[int, list[float]] = {}
+    a2a: dict[int, list[dict]] = {}
     print(f"{'round':>5} {'grid':>6} {'load 1/5/15 min':>17} {'t_iter np1':>11} {'np2 tr':>10} {'np2 nat':>10} "
           f"{'t_fft np1':>10} {'np2 tr':>10} {'np2 nat':>10} {'batch/sep':>9}")
     for r in range(rounds):
@@ -80,8 +115,12 @@ def mpi_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
             c2 = cost(exe, n, 2, repeats, "auto")
             cn = cost(exe, n, 2, repeats, "natural")
             b = batch(exe, n, repeats)
+            a = alltoall(exe, n, repeats)
+            t_c.setdefault(n, []).append(c1["t_iter"])
+            a2a.setdefault(n, []).append(a)
             print(f"{r:>5} {n:>5}^3 {before:>17} {c1['t_iter']:>11.3e} {c2['t_iter']:>10.3e} {cn['t_iter']:>10.3e} "
-                  f"{c1['t_fft']:>10.3e} {c2['t_fft']:>10.3e} {cn['t_fft']:>10.3e} {b['ratio']:>9.3f}", flush=True)
+                  f"{c1['t_fft']:>10.3e} {c2['t_fft']:>10.3e} {cn['t_fft']:>10.3e} {b['ratio']:>9.3f}  "
+                  f"a2a 8 B {a['t_small']:.2e} s, {a['bytes_pair']:.0f} B {a['t_big']:.2e} s", flush=True)
             for key, v in (("iter transposed", c1["t_iter"] / c2["t_iter"]),
                            ("iter natural", c1["t_iter"] / cn["t_iter"]),
                            ("fft transposed", c1["t_fft"] / c2["t_fft"]),
@@ -91,6 +130,15 @@ def mpi_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
     print("\nmedian [min, max] over rounds of t(np=1)/t(np=2) (speed-up), and of t_batch/t_sep at np = 2")
     for (n, key), v in ratios.items():
         print(f"  {n:>4}^3 {key:<16} {statistics.median(v):6.2f} [{min(v):.2f}, {max(v):.2f}]  ({len(v)} rounds)")
+    # Model parameters from the medians: alpha from the 8-byte all-to-all (one message
+    # per rank at P = 2), beta from the transform-sized one; t_c the serial iteration
+    n = max(grids)
+    alpha = statistics.median(a["t_small"] for a in a2a[n])
+    big = statistics.median(a["t_big"] for a in a2a[n])
+    beta = statistics.median(a["bytes_pair"] for a in a2a[n]) / max(big - alpha, 1e-12)
+    tc = statistics.median(t_c[n])
+    print(f"\nmodel at P = 2, {n}^3: t_c/2 + 10 a2a(2) = {tc / 2 + 10 * slab_a2a(2, n, alpha, beta):.3e} s per iteration")
+    projection(n, tc, alpha, beta, [1, 2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096])
 
 
 def iterations(exe: Path, n: int, kappa: float, shape: str = "sphere") -> int:
