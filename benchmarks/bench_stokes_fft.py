@@ -7,7 +7,8 @@ iterations to a 1e-6 residual grow with the contrast kappa and the grid; and wha
 is the speed-up of np = 2 slabs over np = 1 at 128^3?
 Command:  python benchmarks/bench_stokes_fft.py [--build build/editable] [--repeats 5] [--quick]
           python benchmarks/bench_stokes_fft.py --mpi [--grids 64 128] [--rounds 5]
-Cost: ~3 min (--quick: ~1 min; --mpi: ~1.5 min per round at 64^3 and 128^3). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
+          python benchmarks/bench_stokes_fft.py --project T_C ALPHA BETA [--grids 128]
+Cost: ~3 min (--quick: ~1 min; --mpi: 2-5 min per round of 64^3 and 128^3, 4.5 min at load 10). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
 plans, a sphere of radius n/8 on a sheared lattice, simple shear) and prints medians
 over repeats, with the load average before and after: the machine is shared, so read
 ratios (iteration / FFT, measured back to back in one process), not absolute times.
@@ -28,6 +29,7 @@ an all-to-all whenever either is descheduled, so quote them with the load.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import shutil
@@ -79,22 +81,34 @@ def slab_a2a(p: int, n: int, alpha: float, beta: float) -> float:
 
 
 def pencil_a2a(p: int, n: int, alpha: float, beta: float) -> float:
-    """Seconds of the two all-to-alls of a pencil transform (sqrt(p) x sqrt(p) grid): each
-    in a sub-communicator of sqrt(p) ranks, sqrt(p) - 1 messages of V/p^(3/2)."""
-    q = p ** 0.5
+    """Seconds of the two all-to-alls of a pencil transform on a p1 x p2 = p process grid
+    (p1 the largest power of two <= sqrt(p)): one in each sub-communicator, p_i - 1
+    messages of V/(p p_i)."""
+    p1 = 2 ** (p.bit_length() // 2) if p & (p - 1) == 0 else max(d for d in range(1, int(p ** 0.5) + 1) if p % d == 0)
     v = 16.0 * (n // 2 + 1) * n * n
-    return 2.0 * (q - 1.0) * (alpha + v / (p * q * beta))
+    return sum((q - 1) * (alpha + v / (p * q * beta)) for q in (p1, p // p1))
 
 
 def projection(n: int, t_c: float, alpha: float, beta: float, ps: list[int]) -> None:
     """Strong scaling at n^3: t(P) = t_c/P + 10 a2a(P) per CG iteration (10 transforms,
-    one all-to-all each for slabs, two for pencils)."""
+    one all-to-all each for slabs, two for pencils); slabs need P <= n."""
     print(f"\nprojected strong scaling at {n}^3 (t_c = {t_c:.3e} s, alpha = {alpha:.2e} s, beta = {beta:.2e} B/s)")
     print(f"{'P':>6} {'slab t_iter':>12} {'speed-up':>9} {'pencil t_iter':>14} {'speed-up':>9}")
     for p in ps:
         slab = t_c / p + 10.0 * slab_a2a(p, n, alpha, beta) if p <= n else float("nan")
-        pen = t_c / p + 10.0 * pencil_a2a(p, n, alpha, beta) if p <= n * n else float("nan")
+        pen = t_c / p + 10.0 * pencil_a2a(p, n, alpha, beta)
         print(f"{p:>6} {slab:>12.3e} {t_c / slab:>9.1f} {pen:>14.3e} {t_c / pen:>9.1f}")
+    # weak scaling: n^3/P = n0^3 points per rank, compute per rank ~ log2(n) (the FFTs)
+    w = n ** 3 // 2
+    print(f"\nprojected weak scaling at {w} points per rank (compute t_c/2 log2(n)/log2({n}); slabs need P <= n)")
+    print(f"{'P':>6} {'n':>6} {'slab t_iter':>12} {'efficiency':>10} {'pencil t_iter':>14} {'efficiency':>10}")
+    t2 = t_c / 2 + 10.0 * slab_a2a(2, n, alpha, beta)
+    for p in [2, 16, 128, 1024, 8192, 65536]:
+        m = round((w * p) ** (1.0 / 3.0))
+        comp = t_c / 2 * math.log2(m) / math.log2(n)
+        slab = comp + 10.0 * slab_a2a(p, m, alpha, beta) if p <= m else float("nan")
+        pen = comp + 10.0 * pencil_a2a(p, m, alpha, beta)
+        print(f"{p:>6} {m:>6} {slab:>12.3e} {t2 / slab:>10.2f} {pen:>14.3e} {t2 / pen:>10.2f}")
 
 
 def load() -> str:
@@ -130,14 +144,16 @@ def mpi_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
     print("\nmedian [min, max] over rounds of t(np=1)/t(np=2) (speed-up), and of t_batch/t_sep at np = 2")
     for (n, key), v in ratios.items():
         print(f"  {n:>4}^3 {key:<16} {statistics.median(v):6.2f} [{min(v):.2f}, {max(v):.2f}]  ({len(v)} rounds)")
-    # Model parameters from the medians: alpha from the 8-byte all-to-all (one message
-    # per rank at P = 2), beta from the transform-sized one; t_c the serial iteration
+    # Model parameters, the least disturbed round of each (other processes on a shared
+    # machine only add time): alpha from the 8-byte all-to-all (one message per rank at
+    # P = 2), beta from the transform-sized one; t_c the serial iteration
     n = max(grids)
-    alpha = statistics.median(a["t_small"] for a in a2a[n])
-    big = statistics.median(a["t_big"] for a in a2a[n])
-    beta = statistics.median(a["bytes_pair"] for a in a2a[n]) / max(big - alpha, 1e-12)
-    tc = statistics.median(t_c[n])
-    print(f"\nmodel at P = 2, {n}^3: t_c/2 + 10 a2a(2) = {tc / 2 + 10 * slab_a2a(2, n, alpha, beta):.3e} s per iteration")
+    alpha = min(a["t_small"] for a in a2a[n])
+    big = min(a["t_big"] for a in a2a[n])
+    beta = a2a[n][0]["bytes_pair"] / max(big - alpha, 1e-12)
+    tc = min(t_c[n])
+    print(f"\nmodel at P = 2, {n}^3: t_c/2 + 10 a2a(2) = {tc / 2 + 10 * slab_a2a(2, n, alpha, beta):.3e} s per iteration "
+          f"(transposed; natural: {tc / 2 + 20 * slab_a2a(2, n, alpha, beta):.3e} s)")
     projection(n, tc, alpha, beta, [1, 2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096])
 
 
@@ -155,7 +171,15 @@ def main() -> None:
     ap.add_argument("--mpi", action="store_true", help="only np = 2 against np = 1 (transposed, natural, batched)")
     ap.add_argument("--grids", type=int, nargs="+", default=[64, 128], help="grids of --mpi")
     ap.add_argument("--rounds", type=int, default=5, help="rounds of --mpi")
+    ap.add_argument("--project", type=float, nargs=3, metavar=("T_C", "ALPHA", "BETA"),
+                    help="only print the projected scaling at max(--grids) for a serial iteration T_C [s], "
+                         "all-to-all latency ALPHA [s] and bandwidth BETA [B/s] (no run)")
     args = ap.parse_args()
+    if args.project is not None:
+        if not all(v > 0 for v in args.project):
+            ap.error("--project: T_C, ALPHA and BETA must be > 0")
+        projection(max(args.grids), *args.project, [1, 2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096])
+        return
     if args.repeats < 1 or args.rounds < 1 or any(n < 8 for n in args.grids):
         ap.error("--repeats must be >= 1, --rounds >= 1 and every --grids value >= 8")
     built = Path(args.build) / "fortran" / "stokes" / "tests" / "bench_stokes_fft"
