@@ -6,7 +6,9 @@ strain components back, 5 stress components forward), at 64^3 and 128^3; how do 
 iterations to a 1e-6 residual grow with the contrast kappa and the grid; and what
 is the speed-up of np = 2 slabs over np = 1 at 128^3?
 Command:  python benchmarks/bench_stokes_fft.py [--build build/editable] [--repeats 5] [--quick]
-Cost: ~3 min (--quick: ~1 min). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
+          python benchmarks/bench_stokes_fft.py --mpi [--grids 64 128] [--rounds 5]
+          python benchmarks/bench_stokes_fft.py --project T_C ALPHA BETA [--grids 128]
+Cost: ~3 min (--quick: ~1 min; --mpi: 2-5 min per round of 64^3 and 128^3, 4.5 min at load 10). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
 plans, a sphere of radius n/8 on a sheared lattice, simple shear) and prints medians
 over repeats, with the load average before and after: the machine is shared, so read
 ratios (iteration / FFT, measured back to back in one process), not absolute times.
@@ -14,10 +16,20 @@ ratios (iteration / FFT, measured back to back in one process), not absolute tim
 Two FFT units are reported: ``hot`` (one field transformed back and forth, in cache)
 and ``seq`` (c2r then r2c of each of the 5 strain fields in turn, as the iteration
 does); ``ratio_seq`` is the one to compare with the floor of 10.
+
+``--mpi`` answers only the parallel question (docs/physics.md, "Parallel scaling of
+the slab decomposition"): per round and grid, back to back, np = 1 (serial FFTW),
+np = 2 with the transposed spectrum (one all-to-all per transform, what fold_run
+uses), np = 2 with the natural spectrum (two all-to-alls) and np = 2 with the 5 strain
+fields of a pass in one howmany = 5 plan against one at a time. It prints the load
+average before each round and the medians over rounds of the speed-ups
+t(np=1)/t(np=2) per CG iteration and per hot FFT: a busy machine stalls both ranks of
+an all-to-all whenever either is descheduled, so quote them with the load.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import shutil
@@ -46,6 +58,105 @@ def cost(exe: Path, n: int, ranks: int, repeats: int, backend: str = "auto") -> 
     return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
 
 
+def batch(exe: Path, n: int, repeats: int) -> dict:
+    """Medians over repeats of the BATCH lines of np = 2 (first repeat dropped)."""
+    out = _run(exe, [str(n), "1000", str(repeats + 1), "batch"], 2)
+    rows = [dict((k, float(v)) for k, v in re.findall(r"(\w+)=\s*(\S+)", line))
+            for line in out.splitlines() if line.startswith("BATCH")][1:]
+    return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
+
+
+def alltoall(exe: Path, n: int, repeats: int) -> dict:
+    """Medians over repeats of the A2A lines of np = 2 (first repeat dropped)."""
+    out = _run(exe, [str(n), "1000", str(repeats + 1), "a2a"], 2)
+    rows = [dict((k, float(v)) for k, v in re.findall(r"(\w+)=\s*(\S+)", line))
+            for line in out.splitlines() if line.startswith("A2A")][1:]
+    return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
+
+
+def slab_a2a(p: int, n: int, alpha: float, beta: float) -> float:
+    """Seconds of one slab all-to-all of the half spectrum on p ranks: p - 1 messages of V/p^2."""
+    v = 16.0 * (n // 2 + 1) * n * n
+    return (p - 1) * (alpha + v / (p * p * beta))
+
+
+def pencil_a2a(p: int, n: int, alpha: float, beta: float) -> float:
+    """Seconds of the two all-to-alls of a pencil transform on a p1 x p2 = p process grid
+    (p1 the largest power of two <= sqrt(p)): one in each sub-communicator, p_i - 1
+    messages of V/(p p_i)."""
+    p1 = 2 ** (p.bit_length() // 2) if p & (p - 1) == 0 else max(d for d in range(1, int(p ** 0.5) + 1) if p % d == 0)
+    v = 16.0 * (n // 2 + 1) * n * n
+    return sum((q - 1) * (alpha + v / (p * q * beta)) for q in (p1, p // p1))
+
+
+def projection(n: int, t_c: float, alpha: float, beta: float, ps: list[int]) -> None:
+    """Strong scaling at n^3: t(P) = t_c/P + 10 a2a(P) per CG iteration (10 transforms,
+    one all-to-all each for slabs, two for pencils); slabs need P <= n."""
+    print(f"\nprojected strong scaling at {n}^3 (t_c = {t_c:.3e} s, alpha = {alpha:.2e} s, beta = {beta:.2e} B/s)")
+    print(f"{'P':>6} {'slab t_iter':>12} {'speed-up':>9} {'pencil t_iter':>14} {'speed-up':>9}")
+    for p in ps:
+        slab = t_c / p + 10.0 * slab_a2a(p, n, alpha, beta) if p <= n else float("nan")
+        pen = t_c / p + 10.0 * pencil_a2a(p, n, alpha, beta)
+        print(f"{p:>6} {slab:>12.3e} {t_c / slab:>9.1f} {pen:>14.3e} {t_c / pen:>9.1f}")
+    # weak scaling: n^3/P = n0^3 points per rank, compute per rank ~ log2(n) (the FFTs)
+    w = n ** 3 // 2
+    print(f"\nprojected weak scaling at {w} points per rank (compute t_c/2 log2(n)/log2({n}); slabs need P <= n)")
+    print(f"{'P':>6} {'n':>6} {'slab t_iter':>12} {'efficiency':>10} {'pencil t_iter':>14} {'efficiency':>10}")
+    t2 = t_c / 2 + 10.0 * slab_a2a(2, n, alpha, beta)
+    for p in [2, 16, 128, 1024, 8192, 65536]:
+        m = round((w * p) ** (1.0 / 3.0))
+        comp = t_c / 2 * math.log2(m) / math.log2(n)
+        slab = comp + 10.0 * slab_a2a(p, m, alpha, beta) if p <= m else float("nan")
+        pen = comp + 10.0 * pencil_a2a(p, m, alpha, beta)
+        print(f"{p:>6} {m:>6} {slab:>12.3e} {t2 / slab:>10.2f} {pen:>14.3e} {t2 / pen:>10.2f}")
+
+
+def load() -> str:
+    return " ".join(f"{v:.2f}" for v in os.getloadavg())
+
+
+def mpi_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
+    """np = 2 against np = 1, transposed against natural spectrum, batched FFTs; medians over rounds."""
+    ratios: dict[tuple[int, str], list[float]] = {}
+    t_c: dict[int, list[float]] = {}
+    a2a: dict[int, list[dict]] = {}
+    print(f"{'round':>5} {'grid':>6} {'load 1/5/15 min':>17} {'t_iter np1':>11} {'np2 tr':>10} {'np2 nat':>10} "
+          f"{'t_fft np1':>10} {'np2 tr':>10} {'np2 nat':>10} {'batch/sep':>9}")
+    for r in range(rounds):
+        for n in grids:
+            before = load()
+            c1 = cost(exe, n, 1, repeats, "auto")
+            c2 = cost(exe, n, 2, repeats, "auto")
+            cn = cost(exe, n, 2, repeats, "natural")
+            b = batch(exe, n, repeats)
+            a = alltoall(exe, n, repeats)
+            t_c.setdefault(n, []).append(c1["t_iter"])
+            a2a.setdefault(n, []).append(a)
+            print(f"{r:>5} {n:>5}^3 {before:>17} {c1['t_iter']:>11.3e} {c2['t_iter']:>10.3e} {cn['t_iter']:>10.3e} "
+                  f"{c1['t_fft']:>10.3e} {c2['t_fft']:>10.3e} {cn['t_fft']:>10.3e} {b['ratio']:>9.3f}  "
+                  f"a2a 8 B {a['t_small']:.2e} s, {a['bytes_pair']:.0f} B {a['t_big']:.2e} s", flush=True)
+            for key, v in (("iter transposed", c1["t_iter"] / c2["t_iter"]),
+                           ("iter natural", c1["t_iter"] / cn["t_iter"]),
+                           ("fft transposed", c1["t_fft"] / c2["t_fft"]),
+                           ("fft natural", c1["t_fft"] / cn["t_fft"]),
+                           ("batch/sep", b["ratio"])):
+                ratios.setdefault((n, key), []).append(v)
+    print("\nmedian [min, max] over rounds of t(np=1)/t(np=2) (speed-up), and of t_batch/t_sep at np = 2")
+    for (n, key), v in ratios.items():
+        print(f"  {n:>4}^3 {key:<16} {statistics.median(v):6.2f} [{min(v):.2f}, {max(v):.2f}]  ({len(v)} rounds)")
+    # Model parameters, the least disturbed round of each (other processes on a shared
+    # machine only add time): alpha from the 8-byte all-to-all (one message per rank at
+    # P = 2), beta from the transform-sized one; t_c the serial iteration
+    n = max(grids)
+    alpha = min(a["t_small"] for a in a2a[n])
+    big = min(a["t_big"] for a in a2a[n])
+    beta = a2a[n][0]["bytes_pair"] / max(big - alpha, 1e-12)
+    tc = min(t_c[n])
+    print(f"\nmodel at P = 2, {n}^3: t_c/2 + 10 a2a(2) = {tc / 2 + 10 * slab_a2a(2, n, alpha, beta):.3e} s per iteration "
+          f"(transposed; natural: {tc / 2 + 20 * slab_a2a(2, n, alpha, beta):.3e} s)")
+    projection(n, tc, alpha, beta, [1, 2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096])
+
+
 def iterations(exe: Path, n: int, kappa: float, shape: str = "sphere") -> int:
     out = _run(exe, [str(n), str(kappa), "1", "iters", shape], 1)
     m = re.search(r"iterations=\s*(\d+)", out)
@@ -57,12 +168,29 @@ def main() -> None:
     ap.add_argument("--build", default=str(ROOT / "build" / "editable"))
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="64^3 and np = 2 at 64^3 only, shorter sweeps")
+    ap.add_argument("--mpi", action="store_true", help="only np = 2 against np = 1 (transposed, natural, batched)")
+    ap.add_argument("--grids", type=int, nargs="+", default=[64, 128], help="grids of --mpi")
+    ap.add_argument("--rounds", type=int, default=5, help="rounds of --mpi")
+    ap.add_argument("--project", type=float, nargs=3, metavar=("T_C", "ALPHA", "BETA"),
+                    help="only print the projected scaling at max(--grids) for a serial iteration T_C [s], "
+                         "all-to-all latency ALPHA [s] and bandwidth BETA [B/s] (no run)")
     args = ap.parse_args()
+    if args.project is not None:
+        if not all(v > 0 for v in args.project):
+            ap.error("--project: T_C, ALPHA and BETA must be > 0")
+        projection(max(args.grids), *args.project, [1, 2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096])
+        return
+    if args.repeats < 1 or args.rounds < 1 or any(n < 8 for n in args.grids):
+        ap.error("--repeats must be >= 1, --rounds >= 1 and every --grids value >= 8")
     built = Path(args.build) / "fortran" / "stokes" / "tests" / "bench_stokes_fft"
     # a private copy: an editable import elsewhere may relink the build-tree binary mid-run
     exe = Path(tempfile.mkdtemp(prefix="bench_stokes_")) / "bench_stokes_fft"
     shutil.copy2(built, exe)
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
+    if args.mpi:
+        mpi_rounds(exe, args.grids, args.rounds, args.repeats)
+        print(f"\nload average after: {load()}")
+        return
 
     # Parameters
     # (grid, ranks, backend): "auto" = serial FFTW on one rank (what fold_run uses),

@@ -1,14 +1,21 @@
 !> Distributed-or-not real-to-complex FFTs behind one abstract type.
 !>
-!> The Stokes solver does all its arithmetic on the rank-local slab of a
-!> padded real array r(nxp, n2l, n3l) and of its half spectrum c(nxh, n2l, n3l),
-!> nxp = 2 (nx/2 + 1), nxh = nx/2 + 1 (FFTW in-place r2c layout). The slab is
-!> cut along the slowest Fortran index that is > 1: z in 3-D, y in 2-D (then
-!> n3l = 1). A serial backend (fold_fft_serial, in the core library that the
-!> Python extensions link) owns the whole grid; an FFTW-MPI backend
-!> (fold_fft_mpi, executable only) owns one slab and sums over ranks. The
-!> solver never sees which one it has, so serial and parallel runs share every
-!> line of numerics.
+!> The Stokes solver does its real-space arithmetic on the rank-local slab of a
+!> padded real array r(nxp, nl(2), nl(3)) and its Fourier-space arithmetic on the
+!> rank-local part of the half spectrum c(nsl(1), nsl(2), nsl(3)), nxp = 2 (nx/2 + 1),
+!> nsl(1) = nxh = nx/2 + 1 (FFTW in-place r2c layout). The real-space slab is cut
+!> along the slowest Fortran index that is > 1: z in 3-D, y in 2-D (then nl(3) = 1).
+!> The spectral layout is described separately (nsl, soff, saxis): index d of a
+!> spectral array runs over the global wavenumber axis saxis(d) from offset soff(d).
+!> The serial backend and the 2-D MPI backend keep the real-space order
+!> (saxis = [1, 2, 3]); the 3-D MPI backend leaves the spectrum transposed
+!> (c(nxh, n3, local n2), saxis = [1, 3, 2], y distributed), which saves one global
+!> transpose per transform (docs/physics.md#parallel-scaling-of-the-slab-decomposition).
+!> Every Fourier-space loop of the solver is pointwise in the mode and reads its
+!> wavenumbers from this map, so it never sees the order. A serial backend
+!> (fold_fft_serial, in the core library that the Python extensions link) owns
+!> the whole grid; an FFTW-MPI backend (fold_fft_mpi, executable only) owns one
+!> slab and sums over ranks. Serial and parallel runs share every line of numerics.
 module fold_fft_backend
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8
@@ -21,9 +28,9 @@ module fold_fft_backend
    !> as a padded real array and as a half spectrum.
    type, public :: fft_field_t
       type(c_ptr) :: mem = c_null_ptr
-      !> Real view (nxp, n2l, n3l); only r(1:nx, :, :) is data, the rest padding
+      !> Real view (nxp, nl(2), nl(3)); only r(1:nx, :, :) is data, the rest padding
       real(dp), pointer, contiguous :: r(:, :, :) => null()
-      !> Complex view (nxh, n2l, n3l)
+      !> Complex view (nsl(1), nsl(2), nsl(3)) of the backend (spectral layout)
       complex(dp), pointer, contiguous :: c(:, :, :) => null()
    end type fft_field_t
 
@@ -33,10 +40,16 @@ module fold_fft_backend
       integer(ip) :: dim = 3
       !> Global grid sizes (n(3) = 1 in 2-D)
       integer(ip) :: n(3) = 1
-      !> Local extents of the real-space (and spectral) slab
+      !> Local extents of the real-space slab (first one: nx data of the nxp padded)
       integer(ip) :: nl(3) = 1
-      !> Global 0-based offset of the local slab in each direction
+      !> Global 0-based offset of the local real-space slab in each direction
       integer(ip) :: off(3) = 0
+      !> Local extents of the spectral arrays c(nsl(1), nsl(2), nsl(3)), nsl(1) = nxh
+      integer(ip) :: nsl(3) = 1
+      !> Global 0-based wavenumber offset along each spectral array index
+      integer(ip) :: soff(3) = 0
+      !> Global axis (1 x, 2 y, 3 z) that each spectral array index runs over
+      integer(ip) :: saxis(3) = [1, 2, 3]
       !> Padded real leading extent 2 (nx/2 + 1) and spectral one nx/2 + 1
       integer(ip) :: nxp = 2, nxh = 1
       !> Number of complex numbers to allocate per field (FFTW-MPI may ask for more than the slab)
@@ -81,7 +94,7 @@ module fold_fft_backend
       end subroutine destroy_iface
    end interface
 
-   public :: field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows
+   public :: field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
 
    !> FFTW planning effort: FFTW_ESTIMATE (instant) or FFTW_MEASURE (seconds, faster transforms)
    integer, parameter :: FOLD_PLAN_ESTIMATE = 0, FOLD_PLAN_MEASURE = 1
@@ -96,7 +109,7 @@ contains
       call field_free(f)
       f%mem = fftw_alloc_complex(int(max(self%alloc_complex, 1_i8), c_size_t))
       call c_f_pointer(f%mem, f%r, [self%nxp, self%nl(2), self%nl(3)])
-      call c_f_pointer(f%mem, f%c, [self%nxh, self%nl(2), self%nl(3)])
+      call c_f_pointer(f%mem, f%c, self%nsl)
       f%r = 0.0_dp
    end subroutine backend_alloc_field
 
@@ -133,6 +146,14 @@ contains
       f%r => null()
       f%c => null()
    end subroutine field_free
+
+   !> Spectral layout in the real-space order: c(nxh, nl(2), nl(3)) (serial, 2-D MPI).
+   subroutine spectral_natural(self)
+      class(fft_backend_t), intent(inout) :: self
+      self%nsl = [self%nxh, self%nl(2), self%nl(3)]
+      self%soff = [0_ip, self%off(2), self%off(3)]
+      self%saxis = [1_ip, 2_ip, 3_ip]
+   end subroutine spectral_natural
 
    !> FFTW planner flag for a planning-effort code.
    pure function plan_flag(effort) result(flag)

@@ -1,6 +1,12 @@
 !> FFTW-MPI slab backend: each rank owns a slab of the slowest Fortran index
-!> (z in 3-D, y in 2-D) in real and in Fourier space (no transposed output,
-!> so both spaces share one layout and the solver code is unchanged).
+!> (z in 3-D, y in 2-D) in real space. A distributed transform is local 1-D/2-D
+!> FFTs plus global transposes (all-to-alls); FFTW-MPI's natural output needs two
+!> (to distribute y for the z transform, and back), the transposed output only one.
+!> In 3-D the spectrum is therefore left transposed by default: c(nxh, n3, local
+!> n2), y distributed (FFTW_MPI_TRANSPOSED_OUT on r2c, FFTW_MPI_TRANSPOSED_IN on
+!> c2r); the solver works mode by mode through the backend's spectral map
+!> (fold_fft_backend). In 2-D the transposed output would distribute the x
+!> wavenumbers and put them second, so the 2-D spectrum keeps the natural layout.
 !> Executable only (needs MPI); the solver sees it as an fft_backend_t.
 module fold_fft_mpi
    use, intrinsic :: iso_c_binding
@@ -8,7 +14,7 @@ module fold_fft_mpi
                       MPI_DOUBLE_PRECISION, MPI_SUM, MPI_MAX
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag
+   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag, spectral_natural
    implicit none
    private
 
@@ -37,8 +43,9 @@ contains
    end subroutine fft_mpi_start
 
    !> Make the distributed plans once (collective over comm). fftw_mpi_init must
-   !> have been called after MPI_Init.
-   subroutine fft_mpi_create(self, comm, dim, n, effort, stat, errmsg)
+   !> have been called after MPI_Init. transposed (3-D only, default true): leave
+   !> the spectrum transposed (one all-to-all per transform instead of two).
+   subroutine fft_mpi_create(self, comm, dim, n, effort, stat, errmsg, transposed)
       type(fft_mpi_t), intent(inout) :: self
       type(MPI_Comm), intent(in) :: comm
       integer(ip), intent(in) :: dim
@@ -46,7 +53,10 @@ contains
       integer, intent(in) :: effort
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(c_intptr_t) :: alloc, local_n, local_0
+      logical, intent(in), optional :: transposed
+      integer(c_intptr_t) :: alloc, local_n, local_0, local_n1, local_1
+      integer(c_int) :: flag_fwd, flag_bwd
+      logical :: tr
       type(fft_field_t) :: scratch
 
       stat = FOLD_OK
@@ -61,6 +71,8 @@ contains
          write (errmsg, '(a,3(1x,i0))') "fft_mpi_create: every grid size must be >= 2, got", n(1:dim)
          return
       end if
+      tr = dim == 3
+      if (present(transposed)) tr = transposed .and. dim == 3
       call slab_destroy(self)
       self%comm = comm
       call MPI_Comm_rank(comm, self%rank)
@@ -72,31 +84,47 @@ contains
       self%nxp = 2*self%nxh
       self%nl = self%n
       self%off = 0
-      if (dim == 3) then
+      flag_fwd = plan_flag(effort)
+      flag_bwd = plan_flag(effort)
+      if (dim == 3 .and. tr) then
+         ! row-major (n3, n2, nxh) in, (n2, n3, nxh) out: Fortran c(nxh, n3, local n2)
+         alloc = fftw_mpi_local_size_3d_transposed(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
+                                                   int(self%nxh, c_intptr_t), comm%MPI_VAL, local_n, local_0, &
+                                                   local_n1, local_1)
+         self%nl(3) = int(local_n, ip)
+         self%off(3) = int(local_0, ip)
+         self%nsl = [self%nxh, self%n(3), int(local_n1, ip)]
+         self%soff = [0_ip, 0_ip, int(local_1, ip)]
+         self%saxis = [1_ip, 3_ip, 2_ip]
+         flag_fwd = ior(flag_fwd, FFTW_MPI_TRANSPOSED_OUT)
+         flag_bwd = ior(flag_bwd, FFTW_MPI_TRANSPOSED_IN)
+      else if (dim == 3) then
          alloc = fftw_mpi_local_size_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
                                         int(self%nxh, c_intptr_t), comm%MPI_VAL, local_n, local_0)
          self%nl(3) = int(local_n, ip)
          self%off(3) = int(local_0, ip)
+         call spectral_natural(self)
       else
          alloc = fftw_mpi_local_size_2d(int(self%n(2), c_intptr_t), int(self%nxh, c_intptr_t), &
                                         comm%MPI_VAL, local_n, local_0)
          self%nl(2) = int(local_n, ip)
          self%off(2) = int(local_0, ip)
+         call spectral_natural(self)
       end if
       self%alloc_complex = max(int(alloc, i8), 1_i8)
       call self%alloc_field(scratch)
       if (dim == 3) then
          self%fwd = fftw_mpi_plan_dft_r2c_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
                                              int(self%n(1), c_intptr_t), scratch%r, scratch%c, comm%MPI_VAL, &
-                                             plan_flag(effort))
+                                             flag_fwd)
          self%bwd = fftw_mpi_plan_dft_c2r_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
                                              int(self%n(1), c_intptr_t), scratch%c, scratch%r, comm%MPI_VAL, &
-                                             plan_flag(effort))
+                                             flag_bwd)
       else
          self%fwd = fftw_mpi_plan_dft_r2c_2d(int(self%n(2), c_intptr_t), int(self%n(1), c_intptr_t), &
-                                             scratch%r, scratch%c, comm%MPI_VAL, plan_flag(effort))
+                                             scratch%r, scratch%c, comm%MPI_VAL, flag_fwd)
          self%bwd = fftw_mpi_plan_dft_c2r_2d(int(self%n(2), c_intptr_t), int(self%n(1), c_intptr_t), &
-                                             scratch%c, scratch%r, comm%MPI_VAL, plan_flag(effort))
+                                             scratch%c, scratch%r, comm%MPI_VAL, flag_bwd)
       end if
       call field_free(scratch)
    end subroutine fft_mpi_create

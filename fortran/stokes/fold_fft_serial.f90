@@ -4,7 +4,7 @@ module fold_fft_serial
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag
+   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag, spectral_natural
    implicit none
    private
 
@@ -58,6 +58,7 @@ contains
       self%off = 0
       self%nxh = self%n(1)/2 + 1
       self%nxp = 2*self%nxh
+      call spectral_natural(self)
       self%alloc_complex = int(self%nxh, i8)*self%n(2)*self%n(3)
       self%rank = 0
       self%nranks = 1

@@ -115,11 +115,12 @@ module fold_stokes_fft
       type(fft_field_t) :: eta
       !> Velocity u~ at voxel centres after stokes_fft_velocity (dim fields) [m/s]
       type(fft_field_t), allocatable :: vel(:)
-      !> Staggered Fourier coefficients i phase u^ (unnormalised FFT) of u~ and the CG vectors (nxh, n2l, n3l, dim)
+      !> Staggered Fourier coefficients i phase u^ (unnormalised FFT) of u~ and the CG vectors
+      !> (nxh, nsl(2), nsl(3), dim; spectral layout of the backend)
       complex(dp), allocatable :: x(:, :, :, :), r(:, :, :, :), p(:, :, :, :), q(:, :, :, :)
       !> Solution of the solve before the last one (FOLD_GUESS_EXTRAPOLATE only; else size 0)
       complex(dp), allocatable :: x_prev(:, :, :, :)
-      !> Real derivative vector q of each mode (dim, nxh, n2l, n3l) [1/m]
+      !> Real derivative vector q of each mode (dim, nxh, nsl(2), nsl(3)) [1/m]
       real(dp), allocatable :: kv(:, :, :, :)
       !> 1/|q|^2, zero on removed modes (mean, Nyquist/hourglass) [m^2]
       real(dp), allocatable :: ik2(:, :, :)
@@ -226,9 +227,10 @@ contains
          call s%fft%alloc_field(s%vel(c))
       end do
       call s%fft%alloc_field(s%eta)
+      ! Fourier-space arrays take the backend's spectral layout (fold_fft_backend)
       nxh = s%fft%nxh
-      n2 = s%grid%nl(2)
-      n3 = s%grid%nl(3)
+      n2 = s%fft%nsl(2)
+      n3 = s%fft%nsl(3)
       allocate (s%x(nxh, n2, n3, s%dim), s%r(nxh, n2, n3, s%dim), s%p(nxh, n2, n3, s%dim), s%q(nxh, n2, n3, s%dim))
       allocate (s%kv(s%dim, nxh, n2, n3), s%ik2(nxh, n2, n3), s%cosprod(nxh, n2, n3))
       if (set%guess == FOLD_GUESS_EXTRAPOLATE) then
@@ -266,10 +268,11 @@ contains
       if (stat /= FOLD_OK) return
       dim = s%dim
       ait = transpose(s%grid%Ainv)
-      do k = 1, s%grid%nl(3)
-         do j = 1, s%grid%nl(2)
+      do k = 1, s%fft%nsl(3)
+         do j = 1, s%fft%nsl(2)
             do i = 1, s%fft%nxh
-               m = [i - 1, j - 1 + s%grid%off(2), k - 1 + s%grid%off(3)]
+               ! global wavenumber index of the local mode (spectral layout of the backend)
+               m(s%fft%saxis) = [i - 1, j - 1, k - 1] + s%fft%soff
                th = 2.0_dp*pi*real(m, dp)/real(s%grid%n, dp)
                nnyq = count(2*m(1:dim) == s%grid%n(1:dim))
                lat = 0.0_dp
@@ -362,8 +365,8 @@ contains
       ! right-hand side b = -P B^H (2 eta E), from one FFT of 2 eta
       s%work(1)%r = 2.0_dp*s%eta%r
       call s%fft%r2c(s%work(1))
-      do k = 1, s%grid%nl(3)
-         do j = 1, s%grid%nl(2)
+      do k = 1, s%fft%nsl(3)
+         do j = 1, s%fft%nsl(2)
             do i = 1, s%fft%nxh
                if (s%ik2(i, j, k) == 0.0_dp) then
                   s%r(i, j, k, :) = 0.0_dp
@@ -529,8 +532,8 @@ contains
       complex(dp) :: uu(3)
       ! staggered variable: B u = sym(kv (x) u')
       if (s%dim == 3) then
-         do k = 1, s%grid%nl(3)
-            do j = 1, s%grid%nl(2)
+         do k = 1, s%fft%nsl(3)
+            do j = 1, s%fft%nsl(2)
                do i = 1, s%fft%nxh
                   d(1) = s%kv(1, i, j, k)
                   d(2) = s%kv(2, i, j, k)
@@ -548,8 +551,8 @@ contains
             end do
          end do
       else
-         do k = 1, s%grid%nl(3)
-            do j = 1, s%grid%nl(2)
+         do k = 1, s%fft%nsl(3)
+            do j = 1, s%fft%nsl(2)
                do i = 1, s%fft%nxh
                   d(1) = s%kv(1, i, j, k)
                   d(2) = s%kv(2, i, j, k)
@@ -584,8 +587,8 @@ contains
          s%work(c)%r(1:nx, :, :) = (two_over_n*s%eta%r(1:nx, :, :))*s%work(c)%r(1:nx, :, :)
          call s%fft%r2c(s%work(c))
       end do
-      do k = 1, s%grid%nl(3)
-         do j = 1, s%grid%nl(2)
+      do k = 1, s%fft%nsl(3)
+         do j = 1, s%fft%nsl(2)
             do i = 1, s%fft%nxh
                if (s%ik2(i, j, k) == 0.0_dp) then
                   au(i, j, k, :) = 0.0_dp
@@ -614,8 +617,8 @@ contains
       complex(dp), intent(inout) :: u(:, :, :, :)
       integer(ip) :: i, j, k
       complex(dp) :: f(3)
-      do k = 1, s%grid%nl(3)
-         do j = 1, s%grid%nl(2)
+      do k = 1, s%fft%nsl(3)
+         do j = 1, s%fft%nsl(2)
             do i = 1, s%fft%nxh
                if (s%ik2(i, j, k) == 0.0_dp) then
                   u(i, j, k, :) = 0.0_dp
@@ -670,7 +673,7 @@ contains
 
    ! ------------------------------------------------------------------ CG kernels
    ! Explicit-shape dummies: the compiler sees contiguous, non-aliased arrays and
-   ! vectorises; the 3-D spectral arrays (nxh, n2l, n3l) are passed as (nxh, njk).
+   ! vectorises; the 3-D spectral arrays (nxh, nsl(2), nsl(3)) are passed as (nxh, njk).
 
    !> x += a_prev p_old; p = M^-1 r + beta p_old; strain of p into work(1:nc)%c.
    subroutine cg_direction_strain(s, a_prev, beta)
@@ -678,7 +681,7 @@ contains
       real(dp), intent(in) :: a_prev, beta
       integer(ip) :: nxh, njk
       nxh = s%fft%nxh
-      njk = s%grid%nl(2)*s%grid%nl(3)
+      njk = s%fft%nsl(2)*s%fft%nsl(3)
       if (s%dim == 3) then
          call direction_strain3(nxh*njk, s%r, s%p, s%x, s%kv, s%ik2, 1.0_dp/s%eta0, a_prev, beta, &
                                 s%work(1)%c, s%work(2)%c, s%work(4)%c, s%work(5)%c, s%work(6)%c)
@@ -751,7 +754,7 @@ contains
       real(dp) :: pq
       integer(ip) :: nxh, njk
       nxh = s%fft%nxh
-      njk = s%grid%nl(2)*s%grid%nl(3)
+      njk = s%fft%nsl(2)*s%fft%nsl(3)
       if (s%dim == 3) then
          pq = apply3(nxh, njk, s%work(1)%c, s%work(2)%c, s%work(4)%c, s%work(5)%c, s%work(6)%c, &
                      s%kv, s%ik2, s%wx, s%p, s%q)
@@ -831,7 +834,7 @@ contains
       type(stokes_fft_t), intent(inout) :: s
       real(dp), intent(in) :: alpha
       real(dp) :: rz
-      rz = update_r(s%fft%nxh, s%grid%nl(2)*s%grid%nl(3), s%dim, alpha, s%q, s%ik2, s%wx, s%r)/s%eta0
+      rz = update_r(s%fft%nxh, s%fft%nsl(2)*s%fft%nsl(3), s%dim, alpha, s%q, s%ik2, s%wx, s%r)/s%eta0
    end function cg_update_r
 
    function update_r(nxh, njk, dim, alpha, q, ik2, wx, r) result(v)

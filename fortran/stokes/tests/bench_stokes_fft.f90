@@ -2,8 +2,10 @@
 !>
 !> Usage: bench_stokes_fft N [kappa] [repeats] [mode] [shape] [backend]
 !>   backend "auto" (default): serial FFTW on one rank (what fold_run and the Python
-!>     extension use; fused c2r -> product -> r2c), FFTW-MPI slabs on several;
-!>     "mpi": FFTW-MPI slabs even on one rank (unfused).
+!>     extension use), FFTW-MPI slabs on several (spectrum left transposed: one
+!>     all-to-all per transform); "mpi": FFTW-MPI slabs even on one rank;
+!>     "natural": FFTW-MPI slabs with the spectrum in the real-space order (two
+!>     all-to-alls per transform; the layout before the transposed one).
 !>   mode "cost" (default): wall time of one CG iteration in units of one real 3-D
 !>     FFT of the same grid, two ways: against a "hot" FFT (r2c + c2r of one field,
 !>     repeated; K's original unit) and against the FFTs as the iteration sees them
@@ -17,6 +19,17 @@
 !>     (benchmarks/bench_stokes_step.py: the unit of its FFT-equivalents per step)
 !>   mode "iters": CG iterations from a zero guess to tol 1e-6 (relative
 !>     preconditioned residual); one line: ITERS n= kappa= iterations= residual=
+!>   mode "batch": the ncg = 5 strain fields of an iteration transformed c2r + r2c
+!>     one field at a time through the backend (t_sep) and as one FFTW-MPI plan of
+!>     howmany = 5 interleaved fields (transposed spectrum; t_batch), which merges the
+!>     5 all-to-alls of a pass into one of 5 times the size; seconds per field and
+!>     transform, one line per repeat: BATCH n= ranks= t_sep= t_batch= ratio=
+!>   mode "a2a": MPI_Alltoall alone, the parameters of the all-to-all model of
+!>     docs/physics.md#parallel-scaling-of-the-slab-decomposition: t_small, one
+!>     all-to-all of 8 bytes per rank pair (latency), and t_big, one of the blocks of a
+!>     transposed transform (16 (n/2 + 1) n^2 / P^2 bytes per pair); bw = bytes each
+!>     rank sends to the others / t_big; one line per repeat:
+!>       A2A n= ranks= t_small= t_big= bytes_pair= bw=
 !> Geometry (shape): "sphere" (default), radius N/8 voxels, or "spheroid", a prolate
 !> spheroid of semi-axes 1/4 and 1/32 (aspect ratio 8; 4 voxels per diameter at
 !> N = 64) along (1, 1, 1)/sqrt(3); binary chi, in a unit cell on a sheared
@@ -25,8 +38,8 @@
 program bench_stokes_fft
    use, intrinsic :: iso_c_binding
    use mpi_f08
-   use fold_kinds, only: dp, ip, msg_len
-   use fold_fft_backend, only: fft_backend_t, FOLD_PLAN_MEASURE
+   use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_fft_backend, only: fft_backend_t, FOLD_PLAN_MEASURE, FOLD_PLAN_ESTIMATE
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
    use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_stokes_fft
@@ -45,6 +58,13 @@ program bench_stokes_fft
    character(len=msg_len) :: msg
    character(len=32) :: arg, mode, shape, backend
    real(dp) :: ax(3), along
+   type(c_ptr) :: bmem, bfwd, bbwd
+   real(dp), pointer :: rb(:)
+   complex(dp), pointer :: cb(:)
+   integer(c_intptr_t) :: balloc, bln0, bl0, bln1, bl1
+   real(dp), allocatable :: sbuf(:), rbuf(:)
+   integer :: nblk
+   real(dp) :: t_small
 
    call MPI_Init()
    call fft_mpi_start()
@@ -73,6 +93,8 @@ program bench_stokes_fft
    if (command_argument_count() >= 6) call get_command_argument(6, backend)
    ax = 1.0_dp/sqrt(3.0_dp)
    set%plan_effort = FOLD_PLAN_MEASURE
+   ! the all-to-all timing makes no FFT: instant plans
+   if (trim(mode) == "a2a") set%plan_effort = FOLD_PLAN_ESTIMATE
    set%warm_start = .false.
    if (trim(mode) == "iters") then
       set%tol = 1.0e-6_dp
@@ -83,12 +105,13 @@ program bench_stokes_fft
    end if
    if (nranks == 1 .and. trim(backend) /= "mpi") then
       allocate (serial)
-      call fft_serial_create(serial, 3, [n, n, n], FOLD_PLAN_MEASURE, stat, msg)
+      call fft_serial_create(serial, 3, [n, n, n], set%plan_effort, stat, msg)
       call check("fft_serial_create")
       call move_alloc(serial, fft)
    else
       allocate (slab)
-      call fft_mpi_create(slab, MPI_COMM_WORLD, 3, [n, n, n], FOLD_PLAN_MEASURE, stat, msg)
+      call fft_mpi_create(slab, MPI_COMM_WORLD, 3, [n, n, n], set%plan_effort, stat, msg, &
+                          transposed=(trim(backend) /= "natural"))
       call check("fft_mpi_create")
       call move_alloc(slab, fft)
    end if
@@ -124,6 +147,67 @@ program bench_stokes_fft
          call cpu_time(c1)
          t_fft = (MPI_Wtime() - t0)/100
          if (rank == 0) print '(a,i0,a,es12.5,a,es12.5)', "FFT n=", n, " t_fft_wall=", t_fft, " t_fft_cpu=", (c1 - c0)/100
+      end do
+   else if (trim(mode) == "batch") then
+      ! howmany = 5 interleaved fields (component fastest), transposed spectrum
+      balloc = fftw_mpi_local_size_many_transposed(3, [int(n, c_intptr_t), int(n, c_intptr_t), int(n/2 + 1, c_intptr_t)], &
+                                                   5_c_intptr_t, FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK, &
+                                                   MPI_COMM_WORLD%MPI_VAL, bln0, bl0, bln1, bl1)
+      bmem = fftw_alloc_complex(int(max(balloc, 1_c_intptr_t), c_size_t))
+      call c_f_pointer(bmem, rb, [2*max(balloc, 1_c_intptr_t)])
+      call c_f_pointer(bmem, cb, [max(balloc, 1_c_intptr_t)])
+      bfwd = fftw_mpi_plan_many_dft_r2c(3, [int(n, c_intptr_t), int(n, c_intptr_t), int(n, c_intptr_t)], 5_c_intptr_t, &
+                                        FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK, rb, cb, MPI_COMM_WORLD%MPI_VAL, &
+                                        ior(FFTW_MEASURE, FFTW_MPI_TRANSPOSED_OUT))
+      bbwd = fftw_mpi_plan_many_dft_c2r(3, [int(n, c_intptr_t), int(n, c_intptr_t), int(n, c_intptr_t)], 5_c_intptr_t, &
+                                        FFTW_MPI_DEFAULT_BLOCK, FFTW_MPI_DEFAULT_BLOCK, cb, rb, MPI_COMM_WORLD%MPI_VAL, &
+                                        ior(FFTW_MEASURE, FFTW_MPI_TRANSPOSED_IN))
+      rb = 0.0_dp
+      do rep = 1, nrep
+         call MPI_Barrier(MPI_COMM_WORLD)
+         t0 = MPI_Wtime()
+         do i = 1, 10
+            do c = 1, s%ncg
+               call s%fft%c2r(s%work(s%cg_comp(c)))
+               call s%fft%r2c(s%work(s%cg_comp(c)))
+            end do
+         end do
+         call MPI_Barrier(MPI_COMM_WORLD)
+         t_seq = (MPI_Wtime() - t0)/(20*s%ncg)
+         t0 = MPI_Wtime()
+         do i = 1, 10
+            call fftw_mpi_execute_dft_c2r(bbwd, cb, rb)
+            call fftw_mpi_execute_dft_r2c(bfwd, rb, cb)
+         end do
+         call MPI_Barrier(MPI_COMM_WORLD)
+         t_fft = (MPI_Wtime() - t0)/(20*s%ncg)
+         if (rank == 0) print '(a,i0,a,i0,a,es10.3,a,es10.3,a,f6.3)', "BATCH n=", n, " ranks=", nranks, &
+            " t_sep=", t_seq, " t_batch=", t_fft, " ratio=", t_fft/t_seq
+      end do
+      call fftw_destroy_plan(bfwd)
+      call fftw_destroy_plan(bbwd)
+      call fftw_free(bmem)
+   else if (trim(mode) == "a2a") then
+      nblk = max(1, int(2*int(n/2 + 1, i8)*n*n/int(nranks, i8)**2))
+      allocate (sbuf(nblk*nranks), rbuf(nblk*nranks))
+      sbuf = 1.0_dp
+      rbuf = 0.0_dp
+      do rep = 1, nrep
+         call MPI_Barrier(MPI_COMM_WORLD)
+         t0 = MPI_Wtime()
+         do i = 1, 1000
+            call MPI_Alltoall(sbuf, 1, MPI_DOUBLE_PRECISION, rbuf, 1, MPI_DOUBLE_PRECISION, MPI_COMM_WORLD)
+         end do
+         t_small = (MPI_Wtime() - t0)/1000
+         call MPI_Barrier(MPI_COMM_WORLD)
+         t0 = MPI_Wtime()
+         do i = 1, 20
+            call MPI_Alltoall(sbuf, nblk, MPI_DOUBLE_PRECISION, rbuf, nblk, MPI_DOUBLE_PRECISION, MPI_COMM_WORLD)
+         end do
+         t_it = (MPI_Wtime() - t0)/20
+         if (rank == 0) print '(a,i0,a,i0,a,es10.3,a,es10.3,a,i0,a,es10.3)', "A2A n=", n, " ranks=", nranks, &
+            " t_small=", t_small, " t_big=", t_it, " bytes_pair=", 8*nblk, " bw=", &
+            8.0_dp*nblk*(nranks - 1)/t_it
       end do
    else if (trim(mode) == "iters") then
       call stokes_fft_solve(s, chi, G, stat, msg)

@@ -1,14 +1,18 @@
 !> The FFTW-MPI slab solver reproduces the serial one: same CG iterations, same
-!> velocity field and rigid velocities to solver tolerance, in 3-D (slabs in z)
-!> and 2-D (slabs in y), on a sheared (Lees-Edwards) lattice with spheres, a
-!> spheroid and a fibre. Every rank also runs the serial solve on the whole grid
-!> and compares its own slab. Run with mpirun -np 1 or 2 (meson suite 'stokes').
+!> velocity field and rigid velocities to solver tolerance, in 3-D (slabs in z;
+!> transposed spectrum, y distributed, and the natural one; an odd n2 that splits
+!> unevenly) and 2-D (slabs in y), on a sheared (Lees-Edwards) lattice with spheres,
+!> a spheroid and a fibre. Every rank also runs the serial solve on the whole grid
+!> and compares its own slab. Before that, the spectral map of every backend
+!> (nsl, soff, saxis of fold_fft_backend) is checked on one plane wave: its r2c
+!> has one nonzero coefficient, N/2 at the wave's mode, and c2r gives N times it
+!> back. Run with mpirun -np 1 or 2 (meson suite 'stokes').
 program test_stokes_mpi
    use, intrinsic :: iso_c_binding
    use mpi_f08
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
-   use fold_fft_backend, only: fft_backend_t
+   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free
    use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create
    use fold_cell, only: cell_t, cell_init
@@ -24,8 +28,15 @@ program test_stokes_mpi
    call fftw_mpi_init()
    call MPI_Comm_rank(MPI_COMM_WORLD, rank)
    failures = 0
-   call compare(3, [32, 24, 20], failures)
-   call compare(2, [40, 30, 1], failures)
+   call check_spectral_map(3, [12, 10, 9], 0, failures)
+   call check_spectral_map(3, [12, 10, 9], 1, failures)
+   call check_spectral_map(3, [12, 10, 9], 2, failures)
+   call check_spectral_map(2, [12, 10, 1], 0, failures)
+   call check_spectral_map(2, [12, 10, 1], 1, failures)
+   call compare(3, [32, 24, 20], .true., failures)
+   call compare(3, [32, 24, 20], .false., failures)
+   call compare(3, [16, 15, 12], .true., failures)
+   call compare(2, [40, 30, 1], .true., failures)
    call fftw_mpi_cleanup()
    if (failures > 0) then
       if (rank == 0) print '(a,i0,a)', "test_stokes_mpi: ", failures, " check(s) failed"
@@ -36,8 +47,91 @@ program test_stokes_mpi
 
 contains
 
-   subroutine compare(dim, n, failures)
+   !> One backend (kind 0 serial, 1 FFTW-MPI natural, 2 FFTW-MPI transposed) on the
+   !> plane wave cos(2 pi (a x/nx + b y/ny + c z/nz)), a > 0: the half spectrum holds
+   !> N/2 at m = (a, b, c) (read through the backend's map) and zero elsewhere.
+   !> Round-off bound of an FFT of N values bounded by 1: log2(N) eps sum|f| <= log2(N) eps N
+   !> per coefficient (and per value of the c2r of that spectrum); 4 times that is allowed.
+   subroutine check_spectral_map(dim, n, kind, failures)
       integer(ip), intent(in) :: dim, n(3)
+      integer, intent(in) :: kind
+      integer, intent(inout) :: failures
+      class(fft_backend_t), allocatable :: fft
+      type(fft_serial_t), allocatable :: serial
+      type(fft_mpi_t), allocatable :: slab
+      type(fft_field_t) :: f
+      integer(ip) :: i, j, k, g(3), m(3), wave(3)
+      real(dp) :: ntot, thr, err(2), hits(1), expect, pi
+      integer :: stat
+      character(len=msg_len) :: msg
+
+      pi = acos(-1.0_dp)
+      wave = [2, 3, 1]
+      if (dim == 2) wave(3) = 0
+      if (kind == 0) then
+         allocate (serial)
+         call fft_serial_create(serial, dim, n, 0, stat, msg)
+         call move_alloc(serial, fft)
+      else
+         allocate (slab)
+         call fft_mpi_create(slab, MPI_COMM_WORLD, dim, n, 0, stat, msg, transposed=(kind == 2))
+         call move_alloc(slab, fft)
+      end if
+      call check(stat == FOLD_OK, "spectral map: backend: "//trim(msg))
+      if (stat /= FOLD_OK) return
+      if (kind == 2 .and. dim == 3) call check(all(fft%saxis == [1, 3, 2]), "spectral map: 3-D MPI spectrum not transposed")
+      call check(fft%nsl(1) == fft%nxh, "spectral map: first spectral extent is not nx/2 + 1")
+      call fft%alloc_field(f)
+      ntot = real(product(n(1:dim)), dp)
+      thr = 4.0_dp*log(ntot)/log(2.0_dp)*epsilon(1.0_dp)*ntot
+      do k = 1, fft%nl(3)
+         do j = 1, fft%nl(2)
+            do i = 1, n(1)
+               g = [i, j, k] - 1 + fft%off
+               f%r(i, j, k) = cos(2.0_dp*pi*sum(real(wave*g, dp)/real(n, dp)))
+            end do
+         end do
+      end do
+      call fft%r2c(f)
+      err = 0.0_dp
+      hits = 0.0_dp
+      do k = 1, fft%nsl(3)
+         do j = 1, fft%nsl(2)
+            do i = 1, fft%nsl(1)
+               m(fft%saxis) = [i, j, k] - 1 + fft%soff
+               expect = 0.0_dp
+               if (all(m == wave)) then
+                  expect = 0.5_dp*ntot
+                  hits = hits + 1.0_dp
+               end if
+               err(1) = max(err(1), abs(f%c(i, j, k) - expect))
+            end do
+         end do
+      end do
+      call fft%c2r(f)
+      do k = 1, fft%nl(3)
+         do j = 1, fft%nl(2)
+            do i = 1, n(1)
+               g = [i, j, k] - 1 + fft%off
+               err(2) = max(err(2), abs(f%r(i, j, k) - ntot*cos(2.0_dp*pi*sum(real(wave*g, dp)/real(n, dp)))))
+            end do
+         end do
+      end do
+      if (kind /= 0) then
+         call fft%max_all(err)
+         call fft%sum_all(hits)
+      end if
+      call check(nint(hits(1)) == 1, "spectral map: the plane wave's mode is not found exactly once")
+      call check(err(1) <= thr, "spectral map: r2c coefficients off the plane wave")
+      call check(err(2) <= 2.0_dp*thr, "spectral map: c2r does not return N times the plane wave")
+      call field_free(f)
+      call fft%destroy()
+   end subroutine check_spectral_map
+
+   subroutine compare(dim, n, transposed, failures)
+      integer(ip), intent(in) :: dim, n(3)
+      !> 3-D: leave the distributed spectrum transposed (fft_mpi_create)
+      logical, intent(in) :: transposed
       integer, intent(inout) :: failures
       real(dp), parameter :: thr = 1.0e-7_dp
       class(fft_backend_t), allocatable :: fft
@@ -82,7 +176,7 @@ contains
       call check(stat == FOLD_OK, "serial solve: "//trim(msg))
 
       allocate (slab)
-      call fft_mpi_create(slab, MPI_COMM_WORLD, dim, n, 0, stat, msg)
+      call fft_mpi_create(slab, MPI_COMM_WORLD, dim, n, 0, stat, msg, transposed=transposed)
       call check(stat == FOLD_OK, "fft_mpi_create: "//trim(msg))
       call move_alloc(slab, fft)
       call stokes_context_init(ctx_p, fft, set, stat, msg)
@@ -108,7 +202,8 @@ contains
       red = [du, umax]
       call MPI_Allreduce(MPI_IN_PLACE, red, 2, MPI_DOUBLE_PRECISION, MPI_MAX, MPI_COMM_WORLD)
       dv = max(maxval(abs(parts%v - parts_s%v)), maxval(abs(parts%omega - parts_s%omega)))
-      if (rank == 0) print '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a,es9.2)', "dim ", dim, ": iterations serial ", &
+      if (rank == 0) print '(a,i0,a,3(1x,i0),a,l1,a,i0,a,i0,a,es9.2,a,es9.2,a,es9.2)', "dim ", dim, " grid", n, &
+         " transposed ", transposed .and. dim == 3, ": iterations serial ", &
          rec_s%iterations, ", slabs ", rec_p%iterations, "; max |du|/max|u| ", red(1)/red(2), &
          ", max |d(v, omega)| ", dv, ", d eta_eff ", abs(rec_p%bulk%eta_eff - rec_s%bulk%eta_eff)
       ! round-off (summation order of the dot products) may move the last few of
