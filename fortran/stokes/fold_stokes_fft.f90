@@ -407,11 +407,15 @@ contains
       else
          s%x = 0.0_dp
       end if
-      ! Preconditioned CG (Hestenes-Stiefel form) with z = M^-1 r never stored. Each
-      ! iteration makes three passes over the spectrum (see cg_direction_strain,
-      ! cg_apply, cg_update_r) around the 2 nc real FFTs: the direction update
-      ! p = z + beta p and the deferred x += alpha p of the previous iteration ride
-      ! on the strain pass, <p, A p> on the operator pass, <r, M^-1 r> on the r update.
+      ! Preconditioned CG (Hestenes-Stiefel form) with z = M^-1 r and q = A p never
+      ! stored. Each iteration makes two passes over the spectrum and one over real
+      ! space around the 2 ncg real FFTs: the direction update p = z + beta p and the
+      ! deferred x += alpha p of the previous iteration ride on the strain pass
+      ! (cg_direction_strain); <p, A p> = sum_x 2 eta eps(p):eps(p) (Parseval: p is
+      ! divergence-free and zero on removed modes, so P drops out) is summed in real
+      ! space by the viscosity pass (cg_viscous_energy), so that alpha is known before
+      ! the operator pass, which then updates r -= alpha A p and sums <r, M^-1 r>
+      ! without storing A p (cg_apply_update).
       red = [precond_dot(s, s%r), 0.0_dp]
       call s%fft%sum_all(red)
       rz = red(1)
@@ -426,10 +430,13 @@ contains
          it = it + 1
          call cg_direction_strain(s, alpha, beta)
          do c = 1, s%ncg
-            ! back, times 2 eta (the 1/N of the unnormalised c2r folds in), forward
-            call s%fft%c2r_scale_r2c(s%work(s%cg_comp(c)), 2.0_dp/real(grid_total(s%grid), dp), s%eta)
+            call s%fft%c2r(s%work(s%cg_comp(c)))
          end do
-         red = [cg_apply(s), 0.0_dp]
+         ! times 2 eta (the 1/N of the unnormalised c2r folds in); <p, A p> on the way
+         red = [cg_viscous_energy(s, 2.0_dp/real(grid_total(s%grid), dp)), 0.0_dp]
+         do c = 1, s%ncg
+            call s%fft%r2c(s%work(s%cg_comp(c)))
+         end do
          call s%fft%sum_all(red)
          pq = red(1)
          if (.not. (pq > 0.0_dp)) then
@@ -439,7 +446,7 @@ contains
             return
          end if
          alpha = rz/pq
-         red = [cg_update_r(s, alpha), 0.0_dp]
+         red = [cg_apply_update(s, alpha), 0.0_dp]
          call s%fft%sum_all(red)
          rz_new = red(1)
          beta = rz_new/rz
@@ -748,37 +755,104 @@ contains
       end do
    end subroutine direction_strain2
 
-   !> q = P B^H (stress in work(1:nc)%c), zero on removed modes; returns the local <p, q>.
-   function cg_apply(s) result(pq)
+   !> work(cg_comp)%r <- c eta work(cg_comp)%r on the nx data columns (the strain
+   !> of p, unnormalised c2r, becomes the stress); returns the local
+   !> <p, A p> = sum_x c eta E:E with the full (traceless) 3 x 3 (2 x 2) Frobenius
+   !> product, E the strain field as transformed.
+   function cg_viscous_energy(s, c) result(pq)
       type(stokes_fft_t), intent(inout), target :: s
+      real(dp), intent(in) :: c
       real(dp) :: pq
+      integer(ip) :: nrows
+      nrows = s%grid%nl(2)*s%grid%nl(3)
+      if (s%dim == 3) then
+         pq = viscous_energy3(s%grid%n(1), s%fft%nxp, nrows, c, s%eta%r, s%work(1)%r, s%work(2)%r, &
+                              s%work(4)%r, s%work(5)%r, s%work(6)%r)
+      else
+         pq = viscous_energy2(s%grid%n(1), s%fft%nxp, nrows, c, s%eta%r, s%work(1)%r, s%work(3)%r)
+      end if
+   end function cg_viscous_energy
+
+   !> Traceless: E:E = e11^2 + e22^2 + (e11 + e22)^2 + 2 (e12^2 + e13^2 + e23^2).
+   function viscous_energy3(nx, nxp, nrows, c, eta, w1, w2, w4, w5, w6) result(pq)
+      integer(ip), intent(in) :: nx, nxp, nrows
+      real(dp), intent(in) :: c, eta(nxp, nrows)
+      real(dp), intent(inout) :: w1(nxp, nrows), w2(nxp, nrows), w4(nxp, nrows), w5(nxp, nrows), w6(nxp, nrows)
+      real(dp) :: pq
+      integer(ip) :: i, r
+      real(dp) :: ce, e1, e2, e4, e5, e6
+      pq = 0.0_dp
+      do r = 1, nrows
+         do i = 1, nx
+            ce = c*eta(i, r)
+            e1 = w1(i, r)
+            e2 = w2(i, r)
+            e4 = w4(i, r)
+            e5 = w5(i, r)
+            e6 = w6(i, r)
+            pq = pq + ce*(e1*e1 + e2*e2 + (e1 + e2)**2 + 2.0_dp*(e4*e4 + e5*e5 + e6*e6))
+            w1(i, r) = ce*e1
+            w2(i, r) = ce*e2
+            w4(i, r) = ce*e4
+            w5(i, r) = ce*e5
+            w6(i, r) = ce*e6
+         end do
+      end do
+   end function viscous_energy3
+
+   !> Traceless: E:E = 2 e11^2 + 2 e12^2.
+   function viscous_energy2(nx, nxp, nrows, c, eta, w1, w3) result(pq)
+      integer(ip), intent(in) :: nx, nxp, nrows
+      real(dp), intent(in) :: c, eta(nxp, nrows)
+      real(dp), intent(inout) :: w1(nxp, nrows), w3(nxp, nrows)
+      real(dp) :: pq
+      integer(ip) :: i, r
+      real(dp) :: ce, e1, e3
+      pq = 0.0_dp
+      do r = 1, nrows
+         do i = 1, nx
+            ce = c*eta(i, r)
+            e1 = w1(i, r)
+            e3 = w3(i, r)
+            pq = pq + 2.0_dp*ce*(e1*e1 + e3*e3)
+            w1(i, r) = ce*e1
+            w3(i, r) = ce*e3
+         end do
+      end do
+   end function viscous_energy2
+
+   !> r -= alpha P B^H (stress in work(1:nc)%c) (zero on removed modes); returns the
+   !> local <r, M^-1 r>.
+   function cg_apply_update(s, alpha) result(rz)
+      type(stokes_fft_t), intent(inout), target :: s
+      real(dp), intent(in) :: alpha
+      real(dp) :: rz
       integer(ip) :: nxh, njk
       nxh = s%fft%nxh
       njk = s%fft%nsl(2)*s%fft%nsl(3)
       if (s%dim == 3) then
-         pq = apply3(nxh, njk, s%work(1)%c, s%work(2)%c, s%work(4)%c, s%work(5)%c, s%work(6)%c, &
-                     s%kv, s%ik2, s%wx, s%p, s%q)
+         rz = apply_update3(nxh, njk, s%work(1)%c, s%work(2)%c, s%work(4)%c, s%work(5)%c, s%work(6)%c, &
+                            s%kv, s%ik2, s%wx, alpha, s%r)
       else
-         pq = apply2(nxh, njk, s%work(1)%c, s%work(3)%c, s%kv, s%ik2, s%wx, s%p, s%q)
+         rz = apply_update2(nxh, njk, s%work(1)%c, s%work(3)%c, s%kv, s%ik2, s%wx, alpha, s%r)
       end if
-   end function cg_apply
+      rz = rz/s%eta0
+   end function cg_apply_update
 
    !> Traceless stress: sigma_33 = -sigma_11 - sigma_22.
-   function apply3(nxh, njk, w1, w2, w4, w5, w6, kv, ik2, wx, p, q) result(pq)
+   function apply_update3(nxh, njk, w1, w2, w4, w5, w6, kv, ik2, wx, alpha, r) result(v)
       integer(ip), intent(in) :: nxh, njk
       complex(dp), intent(in) :: w1(nxh, njk), w2(nxh, njk), w4(nxh, njk), w5(nxh, njk), w6(nxh, njk)
-      real(dp), intent(in) :: kv(3, nxh, njk), ik2(nxh, njk), wx(nxh)
-      complex(dp), intent(in) :: p(nxh, njk, 3)
-      complex(dp), intent(out) :: q(nxh, njk, 3)
-      real(dp) :: pq
+      real(dp), intent(in) :: kv(3, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
+      complex(dp), intent(inout) :: r(nxh, njk, 3)
+      real(dp) :: v
       integer(ip) :: i, jk
-      complex(dp) :: f1, f2, f3, t
+      complex(dp) :: f1, f2, f3, t, r1, r2, r3
       real(dp) :: k1, k2, k3, keep
-      pq = 0.0_dp
+      v = 0.0_dp
       do jk = 1, njk
          do i = 1, nxh
-            ! staggered (B^H sigma)' = kv . sigma; removed modes (ik2 = 0) give q = 0
-            keep = merge(1.0_dp, 0.0_dp, ik2(i, jk) > 0.0_dp)
+            keep = merge(alpha, 0.0_dp, ik2(i, jk) > 0.0_dp)
             k1 = kv(1, i, jk)
             k2 = kv(2, i, jk)
             k3 = kv(3, i, jk)
@@ -786,75 +860,44 @@ contains
             f2 = k1*w4(i, jk) + k2*w2(i, jk) + k3*w6(i, jk)
             f3 = k1*w5(i, jk) + k2*w6(i, jk) - k3*(w1(i, jk) + w2(i, jk))
             t = (k1*f1 + k2*f2 + k3*f3)*ik2(i, jk)
-            f1 = keep*(f1 - k1*t)
-            f2 = keep*(f2 - k2*t)
-            f3 = keep*(f3 - k3*t)
-            q(i, jk, 1) = f1
-            q(i, jk, 2) = f2
-            q(i, jk, 3) = f3
-            pq = pq + wx(i)*(real(p(i, jk, 1))*real(f1) + aimag(p(i, jk, 1))*aimag(f1) &
-                             + real(p(i, jk, 2))*real(f2) + aimag(p(i, jk, 2))*aimag(f2) &
-                             + real(p(i, jk, 3))*real(f3) + aimag(p(i, jk, 3))*aimag(f3))
+            r1 = r(i, jk, 1) - keep*(f1 - k1*t)
+            r2 = r(i, jk, 2) - keep*(f2 - k2*t)
+            r3 = r(i, jk, 3) - keep*(f3 - k3*t)
+            r(i, jk, 1) = r1
+            r(i, jk, 2) = r2
+            r(i, jk, 3) = r3
+            v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2 &
+                                      + real(r3)**2 + aimag(r3)**2)
          end do
       end do
-   end function apply3
+   end function apply_update3
 
    !> Traceless stress: sigma_22 = -sigma_11.
-   function apply2(nxh, njk, w1, w3, kv, ik2, wx, p, q) result(pq)
+   function apply_update2(nxh, njk, w1, w3, kv, ik2, wx, alpha, r) result(v)
       integer(ip), intent(in) :: nxh, njk
       complex(dp), intent(in) :: w1(nxh, njk), w3(nxh, njk)
-      real(dp), intent(in) :: kv(2, nxh, njk), ik2(nxh, njk), wx(nxh)
-      complex(dp), intent(in) :: p(nxh, njk, 2)
-      complex(dp), intent(out) :: q(nxh, njk, 2)
-      real(dp) :: pq
+      real(dp), intent(in) :: kv(2, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
+      complex(dp), intent(inout) :: r(nxh, njk, 2)
+      real(dp) :: v
       integer(ip) :: i, jk
-      complex(dp) :: f1, f2, t
+      complex(dp) :: f1, f2, t, r1, r2
       real(dp) :: k1, k2, keep
-      pq = 0.0_dp
+      v = 0.0_dp
       do jk = 1, njk
          do i = 1, nxh
-            keep = merge(1.0_dp, 0.0_dp, ik2(i, jk) > 0.0_dp)
+            keep = merge(alpha, 0.0_dp, ik2(i, jk) > 0.0_dp)
             k1 = kv(1, i, jk)
             k2 = kv(2, i, jk)
             f1 = k1*w1(i, jk) + k2*w3(i, jk)
             f2 = k1*w3(i, jk) - k2*w1(i, jk)
             t = (k1*f1 + k2*f2)*ik2(i, jk)
-            f1 = keep*(f1 - k1*t)
-            f2 = keep*(f2 - k2*t)
-            q(i, jk, 1) = f1
-            q(i, jk, 2) = f2
-            pq = pq + wx(i)*(real(p(i, jk, 1))*real(f1) + aimag(p(i, jk, 1))*aimag(f1) &
-                             + real(p(i, jk, 2))*real(f2) + aimag(p(i, jk, 2))*aimag(f2))
+            r1 = r(i, jk, 1) - keep*(f1 - k1*t)
+            r2 = r(i, jk, 2) - keep*(f2 - k2*t)
+            r(i, jk, 1) = r1
+            r(i, jk, 2) = r2
+            v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2)
          end do
       end do
-   end function apply2
-
-   !> r -= alpha q; returns the local <r, M^-1 r>.
-   function cg_update_r(s, alpha) result(rz)
-      type(stokes_fft_t), intent(inout) :: s
-      real(dp), intent(in) :: alpha
-      real(dp) :: rz
-      rz = update_r(s%fft%nxh, s%fft%nsl(2)*s%fft%nsl(3), s%dim, alpha, s%q, s%ik2, s%wx, s%r)/s%eta0
-   end function cg_update_r
-
-   function update_r(nxh, njk, dim, alpha, q, ik2, wx, r) result(v)
-      integer(ip), intent(in) :: nxh, njk, dim
-      real(dp), intent(in) :: alpha, ik2(nxh, njk), wx(nxh)
-      complex(dp), intent(in) :: q(nxh, njk, dim)
-      complex(dp), intent(inout) :: r(nxh, njk, dim)
-      real(dp) :: v
-      integer(ip) :: i, jk, c
-      complex(dp) :: rr
-      v = 0.0_dp
-      do c = 1, dim
-         do jk = 1, njk
-            do i = 1, nxh
-               rr = r(i, jk, c) - alpha*q(i, jk, c)
-               r(i, jk, c) = rr
-               v = v + wx(i)*ik2(i, jk)*(real(rr)**2 + aimag(rr)**2)
-            end do
-         end do
-      end do
-   end function update_r
+   end function apply_update2
 
 end module fold_stokes_fft
