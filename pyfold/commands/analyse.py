@@ -5,6 +5,10 @@ cause): the closure names; the run file (a pyfold run with ``/setup`` and
 ``/initial``, at least two records, root ``status = "ok"`` unless
 ``--allow-failed``, every ``a2`` record an orientation tensor, a finite ``a4``);
 and that ``--out`` can be created and written.
+
+The fits are :func:`pyfold.pipeline.fit_ci_per_closure` (fixed-step RK4 on padded
+record counts, :mod:`pyfold.fast_fit`): their compiled programs are kept in the per-user
+JAX cache (:mod:`pyfold._jax`), so only the first analysis on a machine compiles them.
 """
 from __future__ import annotations
 

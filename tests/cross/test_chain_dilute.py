@@ -30,8 +30,14 @@ def test_analyse_fits_ci_zero_with_the_runs_own_a4_and_judges_closures(dilute_ru
     assert int(results["success"].sel(closure="exact")) == 1
     # Jeffery motion is exact per step, so Folgar–Tucker with the run's a4 reproduces
     # a2 up to the cubic interpolation of a4 between records 0.05 apart (O(h^3);
-    # measured 3.7e-7; linear interpolation gave ~1e-4 and a biased C_I = 1.6e-5)
+    # measured 3.7e-7; linear interpolation gave ~1e-4 and a biased C_I = 1.6e-5) and
+    # the RK4 error of pyfold.fast_fit (one step of 0.05 per record, O(h^4))
     assert float(results["residual_rms"].sel(closure="exact")) < 1e-5
+    # the fit says which step it used and what that step may have moved C_I by: no more
+    # than a tenth of its standard error (pyfold.fast_fit.STEP_ERROR_SHARE)
+    assert float(results["rk4_step"].sel(closure="exact")) <= 0.05 * (1 + 1e-12)
+    exact = results.sel(closure="exact")
+    assert 0.0 <= float(exact["ci_step_error"]) <= max(0.1 * float(exact["ci_stderr"]), 1e-10)
     assert (out / "a2_dns_vs_fitted_ft.png").stat().st_size > 10_000
     assert (out / "closures_vs_dns.png").stat().st_size > 10_000
 

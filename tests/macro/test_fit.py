@@ -217,3 +217,83 @@ def test_fit_recovers_two_rsc_parameters_ci_and_kappa():
     assert res.values["ci"] == pytest.approx(0.01, rel=1e-5)
     assert res.values["kappa"] == pytest.approx(0.2, rel=1e-5)
     assert res.covariance.shape == (2, 2)
+
+
+# --------------------------------------------------------------------------- fixed-step RK4 fit (pyfold analyse)
+
+
+def test_rk4_fit_recovers_ci_from_noise_free_data_within_its_step_error(clean_data):
+    """pyfold.fast_fit solves the least squares of fit_parameters with fixed-step RK4.
+    On noise-free data the standard error is ~0, so the step is halved until the
+    Richardson estimate of the C_I shift is below the optimiser's relative floor
+    (FIT_RTOL) or MAX_REFINEMENTS is reached; what remains is that estimate (exact up
+    to O(h^5), a factor 2 covers it) plus the optimiser's tolerance."""
+    from pyfold import fast_fit
+
+    a2 = clean_data["a2"].values
+    res = fast_fit.fit_ci_rk4(CLOSURE, TIMES, a2, SHEAR, XI, ci_start=0.03)
+    assert res.success, res.message
+    assert res.n_points == (TIMES.size - 1) * 6
+    bound = 2.0 * res.step_error + 2.0 * (fast_fit.FIT_RTOL * CI_TRUE + fast_fit.FIT_ATOL)
+    assert abs(res.ci - CI_TRUE) <= bound, (res.ci, res.step_error, res.step)
+    assert res.a2.shape == a2.shape
+    np.testing.assert_allclose(res.a2[0], a2[0], atol=0)  # started from the first record
+
+
+def test_rk4_fit_agrees_with_the_adaptive_fit_on_noisy_data():
+    """The same loss as fit_parameters: the optima differ by the RK4 step's shift (kept
+    below STEP_ERROR_SHARE = 0.1 of the standard error), the optimiser's stop (OPT_SHARE =
+    1e-3 of it) and the adaptive solve's error (rtol 1e-9, negligible); the standard
+    errors share the formula and differ by the step error of J."""
+    from pyfold import fast_fit
+
+    sigma = 1e-3
+    model = FolgarTucker(ci=CI_TRUE, xi=XI, closure=CLOSURE)
+    data = synthetic_dataset(model, isotropic_a2(3), SHEAR, TIMES, noise=sigma, seed=20240611)
+    ref = fit_parameters(data, dataclasses.replace(model, ci=0.03), ("ci",))
+    res = fast_fit.fit_ci_rk4(CLOSURE, TIMES, data["a2"].values, SHEAR, XI, ci_start=0.03)
+    assert res.success, res.message
+    se = ref.stderr["ci"]
+    assert res.step_error <= fast_fit.STEP_ERROR_SHARE * res.stderr
+    assert abs(res.ci - ref.values["ci"]) <= (fast_fit.STEP_ERROR_SHARE + 2 * fast_fit.OPT_SHARE) * se + res.step_error
+    assert res.stderr == pytest.approx(se, rel=1e-2)
+    # |rms(r + e) - rms(r)| <= rms(e) (triangle inequality), e the RK4 error of a2: at the
+    # step 0.5 below 6e-5 over a strain of 400 (pyfold.report.PREDICTION_MAX_STEP), a
+    # tenth of the noise here
+    assert res.residual_rms == pytest.approx(ref.residual_rms, abs=0.1 * sigma)
+
+
+def test_rk4_fit_with_the_populations_own_a4_holds_ci_zero_on_its_bound():
+    """The Jeffery population of test_fit_recovers_ci_zero_on_its_bound_from_jeffery_population_with_exact_a4,
+    fitted with its a4 interpolated in time (cubic Hermite, as TabulatedA4) inside RK4:
+    C_I = 0 up to the bias of the interpolation error of a4 over records 0.05 apart
+    (O(h^3); the linear interpolation of that test, O(h^2), biased the unbounded C_I by
+    -1.7e-5), within the 1e-6 that test allows; the a2 left is that interpolation
+    error, below the 1e-5 of tests/cross/test_chain_dilute.py (same interpolation, same
+    record spacing)."""
+    from pyfold.fast_fit import fit_ci_rk4
+    from pyfold.models import jeffery_vectors
+
+    rng = np.random.default_rng(7)
+    p0 = rng.normal(size=(400, 3))
+    p0 /= np.linalg.norm(p0, axis=1, keepdims=True)
+    t = np.linspace(0.0, 10.0, 201)
+    p = np.asarray(jeffery_vectors(jnp.asarray(p0), jnp.asarray(SHEAR), jnp.asarray(t), XI))
+    a2 = np.asarray(a2_from_vectors(jnp.asarray(p)))
+    a4 = np.asarray(a4_from_vectors(jnp.asarray(p)))
+    res = fit_ci_rk4("exact", t, a2, SHEAR, XI, a4=a4, ci_start=0.01)
+    assert res.success, res.message
+    assert 0.0 <= res.ci <= 1e-6
+    assert res.residual_rms < 1e-5
+    with pytest.raises(InputError, match="a4"):
+        fit_ci_rk4("exact", t, a2, SHEAR, XI)
+    with pytest.raises(InputError, match="bogus"):
+        fit_ci_rk4("bogus", t, a2, SHEAR, XI)
+
+
+def test_rk4_fit_size_classes_are_powers_of_two():
+    from pyfold.fast_fit import MIN_RECORDS, padded_size
+
+    assert padded_size(2) == MIN_RECORDS and padded_size(MIN_RECORDS) == MIN_RECORDS
+    assert padded_size(MIN_RECORDS + 1) == 2 * MIN_RECORDS
+    assert padded_size(801) == 1024 and padded_size(1024) == 1024 and padded_size(1025) == 2048

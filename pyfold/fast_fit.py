@@ -1,0 +1,355 @@
+"""Trajectory fit of Folgar–Tucker's ``C_I`` by fixed-step RK4 on fixed array shapes (``pyfold analyse``).
+
+The problem is the one of :func:`pyfold.fit.fit_parameters` with ``params=("ci",)``
+and unit weights:
+
+    min_{C_I >= 0}  sum_{k >= 1} sum_{i <= j} (a_ij(t_k; C_I) - a_ij^run(t_k))^2 ,
+
+Folgar–Tucker started from the run's first record (symmetrised) and closed by a
+registered closure or by the run's own ``a4`` (``"exact"``: the records interpolated
+in time by the piecewise cubic Hermite of :class:`pyfold.closures.TabulatedA4`). What
+differs is how it is solved, so that a run of hundreds of records is fitted in
+seconds and a new process re-uses the compiled programs:
+
+* the orientation equation by classical RK4 with a fixed step: every record interval
+  ``Δt_k`` is cut into ``ceil(γ̇ Δt_k / MAX_STEP)`` equal steps; ``∂a2/∂C_I`` by forward
+  mode (``jax.jvp``) through the same steps;
+* ``C_I`` by Newton's method on the gradient ``J·r`` of the loss in the variable
+  ``v = ln(C_I + CI_SCALE)`` (curvature from the secant of the gradient, Gauss–Newton's
+  ``J·J`` for the first step; a rejected step is shortened to at most a quarter),
+  projected onto ``C_I >= 0`` (a projected step of zero at ``C_I = 0`` is the Karush–Kuhn–Tucker
+  condition of the active bound), the whole loop inside one compiled program;
+* the records padded to a power of two (at least :data:`MIN_RECORDS`) with
+  zero-length intervals and zero weights, so that one program per closure and size
+  class serves every run; the programs carry no host callbacks, so JAX's persistent
+  cache (:mod:`pyfold._jax`) keeps them (a diffrax solve does carry callbacks and is
+  compiled again in every process).
+
+The step error of the fitted value. RK4's global error is ``O(h^4)``: at the optimum
+the run is integrated again with half the step, and ``e = 16/15 (a_h - a_{h/2})``
+estimates the error of ``a_h`` (Richardson). To first order the fit then sits off the
+exact-ODE optimum by ``ΔC_I = -(J·e)/H``, ``J = ∂r/∂C_I``, ``H`` the curvature of half
+the loss (the last secant of its gradient; ``J·J`` without one): the Newton step that
+``e`` induces. If ``|ΔC_I|`` exceeds :data:`STEP_ERROR_SHARE` of the standard
+error of ``C_I`` (or the optimiser's own tolerance, whichever is larger), the step is
+halved and the fit repeated (the same compiled program: the step counts are data), at
+most :data:`MAX_REFINEMENTS` times. ``|ΔC_I|`` is reported with the fit
+(``ci_step_error``). A tenth of the standard error adds half a percent to the total
+error in quadrature: the fixed step does not change what the fit says.
+
+Standard error: ``s^2 / (J·J)``, ``s^2 = RSS / (n - 1)`` (Bard 1974, ch. 7), as in
+:mod:`pyfold.fit`: independent residuals of equal variance assumed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from pyfold._jax import jax, jnp
+from pyfold.errors import InputError
+
+__all__ = ["FastFit", "fit_ci_rk4", "padded_size", "MAX_STEP", "MIN_RECORDS"]
+
+#: Largest RK4 step [1/γ̇]: pyfold.report.PREDICTION_MAX_STEP, whose a2 error over a
+#: strain of 400 is 6e-5 (C_I = 0) and 8e-6 (C_I = 1e-3) against the adaptive solve.
+#: The step error estimate at the optimum decides whether it is small enough for each
+#: fit, and halves it when not. The cost is in the closure evaluations (four per step;
+#: FEC ~0.3 ms each), so the step is no smaller than it needs to be.
+MAX_STEP = 0.5
+#: Smallest padded record count: below it, runs share one size class.
+MIN_RECORDS = 64
+#: Largest share of the standard error of C_I that the step error may take (see module notes).
+STEP_ERROR_SHARE = 0.1
+#: Halvings of the step at most (step 0.25 -> 0.03125 / γ̇).
+MAX_REFINEMENTS = 3
+#: Stop when the next step of C_I is below OPT_SHARE of its standard error (the
+#: optimiser then moves the value by a thousandth of its statistical uncertainty), or
+#: below FIT_RTOL |C_I| + FIT_ATOL (noise-free data, whose standard error is ~0): the
+#: relative first-order test of pyfold.fit (_STEP_TOL = 1e-6), and an absolute floor
+#: far below any resolvable C_I (published values >= 1e-4).
+OPT_SHARE = 1e-3
+FIT_RTOL = 1e-6
+FIT_ATOL = 1e-10
+#: The secant curvature is used only within this factor of Gauss-Newton's J.J.
+SECANT_RANGE = 10.0
+#: Scale of the fitted variable v = ln(C_I + CI_SCALE): the loss's Jacobian in C_I falls
+#: roughly as 1/C_I over the published range (measured on the default run with IBOF:
+#: J.J from 8e5 at C_I = 1e-3 to 9e7 at 2e-4), so in v it is nearly flat and Newton's
+#: steps are good from far away; below CI_SCALE the variable is linear in C_I, so C_I = 0
+#: is reached. The optimum does not depend on it. 1e-6 diffuses a2 by ~1e-3 over a
+#: strain of 400 (2 d C_I γ̇ t), below what a run of a few hundred fibres resolves.
+CI_SCALE = 1e-6
+#: Largest step of v (a factor e^2 on C_I + CI_SCALE).
+MAX_LOG_STEP = 2.0
+#: Iterations at most (the secant converges superlinearly: about ten).
+MAX_ITERATIONS = 60
+
+
+@dataclasses.dataclass(frozen=True)
+class FastFit:
+    """Outcome of :func:`fit_ci_rk4`."""
+
+    closure: str
+    ci: float
+    stderr: float
+    residual_rms: float  # sqrt(RSS / n) [1]
+    n_points: int  # residuals n: (records - 1) x d(d+1)/2
+    success: bool
+    at_bound: bool
+    message: str
+    a2: np.ndarray  # (records, d, d): Folgar-Tucker at the fitted C_I, on the record times
+    step: float  # RK4 step used [1/γ̇] (largest over the record intervals)
+    step_error: float  # |ΔC_I| estimated from the step (module notes)
+    iterations: int
+
+
+def padded_size(n: int) -> int:
+    """The size class of ``n`` records: the next power of two, at least :data:`MIN_RECORDS`."""
+    return max(MIN_RECORDS, 1 << max(0, int(n) - 1).bit_length())
+
+
+_PROGRAMS: dict[tuple[str, int], object] = {}
+
+
+def _program(closure: str, dim: int):
+    """The compiled fit for ``closure`` (a registered name, or ``"exact"``: the table
+    given as data) in ``dim`` dimensions; one per process, its compiled code kept by
+    the persistent cache across processes."""
+    key = (closure, dim)
+    if key in _PROGRAMS:
+        return _PROGRAMS[key]
+    from pyfold.models import FolgarTucker
+
+    iu, ju = np.triu_indices(dim)
+
+    # The rate is its own jitted function: the four RK4 stages, the jvp and the two
+    # integrations of the program trace the closure once.
+    @jax.jit
+    def rate(ci, xi, a, L, t, table):
+        model = FolgarTucker(ci=ci, xi=xi, closure=closure if table is None else table, dim=dim)
+        return model.rate(t, a, L)
+
+    def integrate(ci, xi, a2_0, L, t, n_sub, table):
+        def interval(a, k):
+            h = jnp.where(n_sub[k] > 0, (t[k + 1] - t[k]) / jnp.maximum(n_sub[k], 1), 0.0)
+
+            def step(i, a):
+                s = t[k] + i * h
+                k1 = rate(ci, xi, a, L, s, table)
+                k2 = rate(ci, xi, a + h / 2 * k1, L, s + h / 2, table)
+                k3 = rate(ci, xi, a + h / 2 * k2, L, s + h / 2, table)
+                k4 = rate(ci, xi, a + h * k3, L, s + h, table)
+                return a + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+            a = jax.lax.fori_loop(0, n_sub[k], step, a)
+            return a, a
+
+        _, ys = jax.lax.scan(interval, a2_0, jnp.arange(t.shape[0] - 1))
+        return jnp.concatenate([a2_0[None], ys])
+
+    @jax.jit
+    def fit(ci0, xi, a2_0, L, t, n_sub, target, weight, table):
+        # The variable is v = ln(C_I + CI_SCALE) (module notes); v_min is C_I = 0.
+        v_min = jnp.log(CI_SCALE)
+
+        def ci_of(v):
+            return jnp.where(v <= v_min, 0.0, jnp.exp(v) - CI_SCALE)
+
+        def evaluate(v):
+            ci = ci_of(v)
+            a2, da2 = jax.jvp(lambda c: integrate(c, xi, a2_0, L, t, n_sub, table), (ci,), (jnp.ones_like(ci),))
+            r = (a2[1:, iu, ju] - target) * weight
+            J = da2[1:, iu, ju] * weight * (ci + CI_SCALE)  # dr/dv
+            ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J))
+            r, J = jnp.where(ok, r, 0.0), jnp.where(ok, J, 0.0)
+            loss = jnp.where(ok, jnp.sum(r * r), jnp.inf)
+            return a2, r, J, loss, jnp.sum(J * r), jnp.sum(J * J)
+
+        def newton(v, g, jj, v_o, g_o):
+            # the curvature of the loss / 2: the secant of its gradient g = J.r through the
+            # other evaluated point (superlinear even when the residuals are large), else
+            # Gauss-Newton's J.J; a secant beyond a factor SECANT_RANGE of J.J is not used
+            # (between close points round-off in g makes it meaningless)
+            dv = v - v_o
+            secant = (g - g_o) / jnp.where(dv != 0.0, dv, 1.0)
+            usable = (dv != 0.0) & jnp.isfinite(secant) & (secant > jj / SECANT_RANGE) & (secant < jj * SECANT_RANGE)
+            curv = jnp.where(usable, secant, jj)
+            step = jnp.where(curv > 0.0, -g / jnp.where(curv > 0.0, curv, 1.0), 0.0)
+            step = jnp.clip(step, -MAX_LOG_STEP, MAX_LOG_STEP)
+            return jnp.maximum(v + step, v_min) - v  # projected onto C_I >= 0
+
+        n_res = jnp.sum(weight) * iu.size
+
+        def small(v, step, loss, jj):
+            # the change of C_I below OPT_SHARE of its standard error, or below the floor
+            ci = ci_of(v)
+            stderr = jnp.sqrt(loss / jnp.maximum(n_res - 1, 1) / jnp.where(jj > 0.0, jj, jnp.inf)) * (ci + CI_SCALE)
+            return jnp.abs(ci_of(v + step) - ci) <= jnp.maximum(OPT_SHARE * stderr, FIT_RTOL * ci + FIT_ATOL)
+
+        v0 = jnp.log(ci0 + CI_SCALE)
+        a2, r, J, loss, g, jj = evaluate(v0)
+        step = newton(v0, g, jj, v0, g)
+        state = (v0, a2, r, J, loss, g, jj, v0, g, step, jnp.asarray(0),
+                 small(v0, step, loss, jj) & jnp.isfinite(loss))
+
+        def cond(s):
+            return (s[10] < MAX_ITERATIONS) & ~s[11]
+
+        def body(s):
+            v, a2, r, J, loss, g, jj, _, _, step, it, _ = s
+            trial = v + step
+            a2_t, r_t, J_t, loss_t, g_t, jj_t = evaluate(trial)
+            accept = loss_t < loss
+            # the other point of the secant: the one left behind, or the rejected trial
+            v_o, g_o = jnp.where(accept, v, trial), jnp.where(accept, g, g_t)
+            v, a2, r, J, loss, g, jj = jax.tree_util.tree_map(lambda new, old: jnp.where(accept, new, old),
+                                                              (trial, a2_t, r_t, J_t, loss_t, g_t, jj_t),
+                                                              (v, a2, r, J, loss, g, jj))
+            proposal = newton(v, g, jj, v_o, g_o)
+            # after a rejected step, at most a quarter of it: the loss is smooth in v, so a
+            # short enough step descends
+            shorter = jnp.where(jnp.abs(proposal) < jnp.abs(step) / 4, proposal,
+                                jnp.maximum(v + step / 4, v_min) - v)
+            step = jnp.where(accept, proposal, shorter)
+            return v, a2, r, J, loss, g, jj, v_o, g_o, step, it + 1, small(v, step, loss, jj) & jnp.isfinite(loss)
+
+        v, a2, r, J, loss, g, _, v_o, g_o, _, it, done = jax.lax.while_loop(cond, body, state)
+        ci = ci_of(v)
+        scale = ci + CI_SCALE
+        # curvature of the loss / 2 in C_I at the optimum, from the last secant in v (g = 0
+        # at an interior optimum, so the chain rule's g d2v/dC_I2 term drops out)
+        secant = (g - g_o) / jnp.where(v != v_o, v - v_o, jnp.nan) / scale**2
+        # the same run with half the step, for the step error (module notes)
+        a2_half = integrate(ci, xi, a2_0, L, t, 2 * n_sub, table)
+        return ci, a2, r, J / scale, loss, it, done, a2_half, secant
+
+    _PROGRAMS[key] = fit
+    return fit
+
+
+def _table(t: np.ndarray, a4: np.ndarray, size: int):
+    """The run's a4 as a :class:`pyfold.closures.TabulatedA4` of ``size`` rows: the real
+    records, then rows past the end (times continuing at the last spacing, the last a4,
+    zero slopes) that the integration never reaches. Its interpolation on
+    ``[t[0], t[-1]]`` is that of the unpadded table (the slopes are the real table's)."""
+    import equinox as eqx
+
+    from pyfold.closures import TabulatedA4
+
+    real = TabulatedA4(t, a4)
+    extra = size - len(t)
+    if extra == 0:
+        return real
+    dt = t[-1] - t[-2]
+    t_pad = np.concatenate([t, t[-1] + dt * np.arange(1, extra + 1)])
+    a4_pad = np.concatenate([a4, np.repeat(a4[-1:], extra, axis=0)])
+    table = TabulatedA4(t_pad, a4_pad)
+    slopes = np.concatenate([np.asarray(real.slopes), np.zeros((extra,) + a4.shape[1:])])
+    return eqx.tree_at(lambda m: m.slopes, table, jnp.asarray(slopes))
+
+
+def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: float, *,
+               a4: np.ndarray | None = None, ci_start: float = 1e-3, max_step: float = MAX_STEP) -> FastFit:
+    """Fit Folgar–Tucker's ``C_I`` with ``closure`` to ``a2(t)`` (see the module notes).
+
+    Parameters
+    ----------
+    closure : str
+        A registered closure name (:data:`pyfold.closures.CLOSURES`), or ``"exact"``
+        with ``a4`` given: the run's own fourth-order tensor.
+    t : array (nt,)
+        Record times [s], strictly increasing, ``nt >= 2``.
+    a2 : array (nt, d, d)
+        Recorded second-order tensors; the fit starts from ``a2[0]`` (symmetrised).
+    L : array (d, d)
+        Constant velocity gradient ``L_ij = du_i/dx_j`` [1/s] (a deforming flow, or a
+        rotation: the step is then measured against 1/s).
+    xi : float
+        Shape factor of the fibres.
+    a4 : array (nt, d, d, d, d), optional
+        Required for ``closure="exact"``.
+    ci_start : float
+        Starting value of ``C_I`` (>= 0).
+    max_step : float
+        Largest RK4 step [1/γ̇] before refinement.
+    """
+    from pyfold.kinematics import shear_rate
+
+    t = np.asarray(t, dtype=np.float64)
+    a2 = np.asarray(a2, dtype=np.float64)
+    n, d = len(t), a2.shape[-1]
+    if t.ndim != 1 or n < 2 or np.any(np.diff(t) <= 0.0) or not np.all(np.isfinite(t)):
+        raise InputError(f"time: expected at least 2 strictly increasing finite record times, got shape {t.shape}")
+    if a2.shape != (n, d, d) or d not in (2, 3):
+        raise InputError(f"a2: expected shape ({n}, d, d) with d in {{2, 3}}, got {a2.shape}")
+    if not (ci_start >= 0.0 and math.isfinite(ci_start)):
+        raise InputError(f"ci_start: must be finite and >= 0, got {ci_start!r}")
+    L = np.asarray(L, dtype=np.float64)[:d, :d]
+    size = padded_size(n)
+    table = None
+    if closure == "exact":
+        if a4 is None:
+            raise InputError("a4: closure 'exact' fits with the run's own a4, none given")
+        a4 = np.asarray(a4, dtype=np.float64)
+        if a4.shape != (n,) + (d,) * 4:
+            raise InputError(f"a4: expected shape ({n}, {d}, {d}, {d}, {d}), got {a4.shape}")
+        table = _table(t, a4, size)
+    else:
+        from pyfold.closures import get_closure
+
+        get_closure(closure, d)  # the name, checked with the allowed ones
+
+    rate = float(shear_rate(jnp.asarray(L))) or 1.0
+    iu, ju = np.triu_indices(d)
+    t_pad = np.concatenate([t, np.full(size - n, t[-1])])
+    target = np.zeros((size - 1, iu.size))
+    target[: n - 1] = a2[1:, iu, ju]
+    weight = np.zeros((size - 1, 1))
+    weight[: n - 1] = 1.0
+    a2_0 = 0.5 * (a2[0] + a2[0].T)
+    program = _program(closure, d)
+    f64 = jnp.float64
+    ci, step_error, refinements = float(ci_start), math.nan, 0
+    while True:
+        h = max_step / 2**refinements
+        n_sub = np.zeros(size - 1, dtype=np.int32)
+        # (1 - 1e-12): an interval that is a whole number of steps up to the round-off of
+        # the division (0.5 / 0.5 = 1 + 2e-16) takes that number, not one more
+        n_sub[: n - 1] = np.maximum(1, np.ceil(np.diff(t) * rate / h * (1.0 - 1e-12))).astype(np.int32)
+        out = program(jnp.asarray(ci, f64), jnp.asarray(xi, f64), jnp.asarray(a2_0), jnp.asarray(L),
+                      jnp.asarray(t_pad), jnp.asarray(n_sub), jnp.asarray(target), jnp.asarray(weight), table)
+        ci_j, a2_fit, r, J, loss, iterations, done, a2_half, secant = out
+        ci = float(ci_j)
+        r, J = np.asarray(r).ravel(), np.asarray(J).ravel()
+        rss = float(loss)
+        n_points = (n - 1) * iu.size
+        jj = float(J @ J)
+        stderr = math.sqrt(rss / (n_points - 1) / jj) if n_points > 1 and jj > 0.0 and math.isfinite(rss) else math.nan
+        e = 16.0 / 15.0 * (np.asarray(a2_fit) - np.asarray(a2_half))[1:, iu, ju] * np.asarray(weight)
+        # curvature of the loss / 2 at the optimum: the last secant of its gradient, else J.J
+        curv = float(secant) if math.isfinite(float(secant)) and float(secant) > 0.0 else jj
+        step_error = abs(float(J @ e.ravel()) / curv) if curv > 0.0 else math.nan
+        at_bound = ci == 0.0 and float(J @ r) >= 0.0
+        if at_bound and float(J @ e.ravel()) >= 0.0:
+            step_error = 0.0  # the step error pushes C_I further into the bound: the fit stays on it
+        allowed = max(STEP_ERROR_SHARE * stderr if math.isfinite(stderr) else 0.0, FIT_RTOL * ci + FIT_ATOL)
+        if not (step_error > allowed) or refinements == MAX_REFINEMENTS or not math.isfinite(rss):
+            break
+        refinements += 1
+    h_used = float(np.max(np.diff(t) * rate / np.maximum(n_sub[: n - 1], 1)))
+    converged, finite = bool(done), math.isfinite(rss)
+    if not finite:
+        message = "Folgar-Tucker blew up for every C_I tried (non-finite a2)"
+    elif not converged:
+        message = f"the fit stopped after {int(iterations)} iterations without converging"
+    else:
+        message = f"converged in {int(iterations)} steps"
+        if at_bound:
+            message += " (C_I held on its bound 0: the loss increases into C_I > 0)"
+    if finite and step_error > allowed:
+        message += f"; RK4 step error of C_I {step_error:.2g} above {allowed:.2g} at the smallest step {h_used:.3g}"
+    return FastFit(closure=closure, ci=ci, stderr=stderr, residual_rms=math.sqrt(rss / n_points) if finite else math.nan,
+                   n_points=n_points, success=converged and finite, at_bound=at_bound, message=message,
+                   a2=np.asarray(a2_fit)[:n], step=h_used, step_error=step_error, iterations=int(iterations))
