@@ -61,8 +61,10 @@ def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_o
         raise InputError(f"beta: must be >= 1, got {beta}")
     if not n_l3 > 0.0:
         raise InputError(f"n_l3: must be > 0, got {n_l3}")
-    if not 0.0 < alpha_over_d <= 1.0:
-        raise InputError(f"alpha_over_d: must lie in (0, 1], got {alpha_over_d}")
+    # Only the sign here: the upper bound (alpha <= the fibre radius, alpha_over_d <= 0.5) is
+    # the scene validation's model.alpha rule, which every scene built here goes through.
+    if not alpha_over_d > 0.0:
+        raise InputError(f"alpha_over_d: must be > 0, got {alpha_over_d}")
     if collisions not in ("strategy", "none"):
         raise InputError(f"collisions: 'strategy' or 'none', got {collisions!r}")
     if hydrodynamics not in ("jeffery", "stokes"):
