@@ -27,7 +27,7 @@ Command
 
 Cost on 2 cores
     About (cold + warm) x repeats analyses: a few minutes at 3 repeats on an idle
-    machine (most of it in the FEC closure, ~0.3 ms per evaluation).
+    machine (most of it in compiling; FEC ~0.04 ms per evaluation).
 
 Outputs
     A table on stdout, and ``out/bench_analyse/bench_analyse.json`` (the raw timings).
