@@ -6,11 +6,12 @@
 !>        for constant G (`fold_jeffery_step`), for this rank's block of particles,
 !>        then gathered;
 !>      * stokes (hydrodynamics = 1): the rigid (V, omega) of every particle from the
-!>        fictitious-domain FFT Stokes solve of the configuration at t
-!>        (`fold_stokes_step::stokes_rigid_velocities`; grid distributed over the
-!>        ranks with FFTW-MPI when np > 1, serial FFTW otherwise), combined in time by
-!>        explicit Euler (v_n) or Adams-Bashforth 2 (3/2 v_n - 1/2 v_{n-1}; first
-!>        step Euler). The solve of the configuration at t + dt is made at the end
+!>        fictitious-domain Stokes solve of the configuration at t
+!>        (`fold_stokes_step::stokes_rigid_velocities`, by the one solver the factory
+!>        `fold_stokes_factory` makes from /setup/resolved/stokes_*; for the fft
+!>        backend the grid is distributed over the ranks with FFTW-MPI when np > 1),
+!>        combined in time by `fold_time_scheme`: explicit Euler (v_n) or
+!>        Adams-Bashforth 2 (3/2 v_n - 1/2 v_{n-1}; first step Euler). The solve of the configuration at t + dt is made at the end
 !>        of the step, so every record holds the bulk stress of the configuration at
 !>        its own time; the AB2 history is the uncorrected (hydrodynamic) velocity,
 !>        carried across a Lees-Edwards wrap with the same velocity jump;
@@ -425,7 +426,7 @@ contains
          end if
       end if
       call share_status(stat, errmsg)
-      if (stokes) call stokes_context_destroy(ctx)
+      call stokes_context_destroy(ctx)
       outcome%stat = stat
       outcome%steps_done = setup%nsteps
       outcome%time = t
@@ -571,7 +572,7 @@ contains
          outcome%errmsg = text
          outcome%steps_done = max(good_step, 0_i8)
          outcome%time = good_t
-         if (stokes) call stokes_context_destroy(ctx)
+         call stokes_context_destroy(ctx)
          call h5_stop()
       end subroutine fail
 
@@ -610,7 +611,7 @@ contains
          call MPI_Bcast(kept, 1, MPI_INTEGER8, 0, MPI_COMM_WORLD)
          outcome%steps_done = kept
          outcome%time = real(outcome%steps_done, dp)*setup%dt
-         if (stokes) call stokes_context_destroy(ctx)
+         call stokes_context_destroy(ctx)
          call h5_stop()
       end subroutine fail_io
 

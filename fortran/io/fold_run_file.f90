@@ -202,11 +202,9 @@ contains
       end if
       s%stokes_grid = int(ibuf, ip)
       s%stokes%eta_f = s%viscosity
-      if (h5_exists(file, R//"stokes_backend")) then
-         call get_int(file, R//"stokes_backend", int(FOLD_STOKES_FFT, i8), int(FOLD_STOKES_FFT, i8), iv, stat, errmsg)
-         if (stat /= FOLD_OK) return
-         s%stokes%backend = int(iv, ip)
-      end if
+      call get_int(file, R//"stokes_backend", int(FOLD_STOKES_FFT, i8), int(FOLD_STOKES_FFT, i8), iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      s%stokes%backend = int(iv, ip)
       call get_real(file, R//"stokes_tolerance", tiny(1.0_dp), 1.0_dp - epsilon(1.0_dp), s%stokes%tol, stat, errmsg)
       if (stat /= FOLD_OK) return
       call get_int(file, R//"stokes_max_iterations", 1_i8, 1000000_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
@@ -217,22 +215,14 @@ contains
       s%stokes%derivative = int(iv, ip)
       call get_int(file, R//"stokes_fft_plan", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
       s%stokes%plan_effort = int(iv)
-      if (h5_exists(file, R//"stokes_mixing")) then
-         call get_int(file, R//"stokes_mixing", 0_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes%mixing = int(iv, ip)
-      end if
-      if (h5_exists(file, R//"stokes_subsamples")) then
-         call get_int(file, R//"stokes_subsamples", 1_i8, 8_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes%subsamples = int(iv, ip)
-      end if
-      if (h5_exists(file, R//"stokes_fibre_ends")) then
-         call get_int(file, R//"stokes_fibre_ends", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes%fibre_ends = int(iv, ip)
-      end if
-      if (h5_exists(file, R//"stokes_warm_start")) then
-         call get_int(file, R//"stokes_warm_start", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes%warm_start = iv == 1
-      end if
+      call get_int(file, R//"stokes_mixing", 0_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%mixing = int(iv, ip)
+      call get_int(file, R//"stokes_subsamples", 1_i8, 8_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%subsamples = int(iv, ip)
+      call get_int(file, R//"stokes_fibre_ends", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%fibre_ends = int(iv, ip)
+      call get_int(file, R//"stokes_warm_start", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%warm_start = iv == 1
       call get_int(file, R//"time_scheme", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
       s%time_scheme = int(iv, ip)
       ! optional: run files written before the setting existed used the previous solution
