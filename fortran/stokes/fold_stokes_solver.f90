@@ -47,9 +47,11 @@ module fold_stokes_solver
    !> kappa = 1 is a particle-free fluid (a test of the solver, no rigidity at all).
    real(dp), parameter, public :: FOLD_KAPPA_MIN = 1.0_dp, FOLD_KAPPA_MAX = 1.0e12_dp
 
-   !> Settings of the fictitious-domain solve. The defaults are those of
-   !> pyfold/native/stokes.py StokesSettings; a run reads every field from
-   !> /setup/resolved (fold_run_file), so they matter for direct callers only.
+   !> Settings of the fictitious-domain solve. A run reads every field from
+   !> /setup/resolved (fold_run_file) and the bindings pass every field
+   !> (fortran/bind/stokes_bind.f90), both from the one table of defaults
+   !> pyfold/native/stokes.py DEFAULTS; the defaults below serve Fortran-only callers
+   !> (fortran/stokes/tests).
    type, public :: stokes_settings_t
       !> Backend (FOLD_STOKES_*)
       integer(ip) :: backend = FOLD_STOKES_FFT

@@ -51,7 +51,7 @@ KAPPA_MIN, KAPPA_MAX = 1.0, 1.0e12
 DEFAULTS = {
     "backend": "fft",
     "tolerance": 1.0e-6,
-    "max_iterations": 3000,
+    "max_iterations": 1000,
     "kappa": 1.0e3,
     "derivative": "fd",
     "mixing": "harmonic",
