@@ -141,7 +141,8 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    type(cell_t) :: cell
    type(particle_set_t) :: parts
    type(stokes_record_t) :: rec
-   integer :: c
+   integer(ip) :: c
+   real(dp), pointer, contiguous :: uc(:, :, :)
 
    chi = 0.0_dp
    u = 0.0_dp
@@ -169,7 +170,8 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    if (stat == FOLD_OK .or. stat == FOLD_NOT_CONVERGED) then
       chi = ctx%vox%chi
       do c = 1, dim
-         u(:, :, :, c) = ctx%solver%vel(c)%r(1:n1, :, :)
+         uc => ctx%solver%velocity_field(c)
+         u(:, :, :, c) = uc(1:n1, :, :)
       end do
       v = parts%v
       omega = parts%omega

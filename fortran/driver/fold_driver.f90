@@ -6,11 +6,12 @@
 !>        for constant G (`fold_jeffery_step`), for this rank's block of particles,
 !>        then gathered;
 !>      * stokes (hydrodynamics = 1): the rigid (V, omega) of every particle from the
-!>        fictitious-domain FFT Stokes solve of the configuration at t
-!>        (`fold_stokes_step::stokes_rigid_velocities`; grid distributed over the
-!>        ranks with FFTW-MPI when np > 1, serial FFTW otherwise), combined in time by
-!>        explicit Euler (v_n) or Adams-Bashforth 2 (3/2 v_n - 1/2 v_{n-1}; first
-!>        step Euler). The solve of the configuration at t + dt is made at the end
+!>        fictitious-domain Stokes solve of the configuration at t
+!>        (`fold_stokes_step::stokes_rigid_velocities`, by the one solver the factory
+!>        `fold_stokes_factory` makes from /setup/resolved/stokes_*; for the fft
+!>        backend the grid is distributed over the ranks with FFTW-MPI when np > 1),
+!>        combined in time by `fold_time_scheme`: explicit Euler (v_n) or
+!>        Adams-Bashforth 2 (3/2 v_n - 1/2 v_{n-1}; first step Euler). The solve of the configuration at t + dt is made at the end
 !>        of the step, so every record holds the bulk stress of the configuration at
 !>        its own time; the AB2 history is the uncorrected (hydrodynamic) velocity,
 !>        carried across a Lees-Edwards wrap with the same velocity jump;
@@ -54,12 +55,11 @@ module fold_driver
    use fold_jeffery_step, only: jeffery_stepper_t, jeffery_stepper_init, jeffery_step_velocities
    use fold_h5, only: h5_start, h5_stop
    use fold_run_file, only: run_setup_t, read_run_file, FOLD_HYDRO_STOKES
-   use fold_fft_backend, only: fft_backend_t, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE
-   use fold_fft_serial, only: fft_serial_t, fft_serial_create
-   use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
-   use fold_stokes_fft, only: stokes_settings_t
-   use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_init, stokes_context_destroy, &
-                               stokes_rigid_velocities, FOLD_AB2
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
+   use fold_stokes_factory, only: stokes_solver_create
+   use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
+                               stokes_rigid_velocities
+   use fold_time_scheme, only: FOLD_AB2, scheme_velocity
    use fold_output, only: run_output_t, run_record_t, record_init, output_open, output_resume, output_record, &
                           output_snapshot, output_checkpoint, output_status, output_close, output_failed_status, &
                           output_abandon
@@ -150,7 +150,7 @@ contains
       stokes = setup%hydrodynamics == FOLD_HYDRO_STOKES
       have_prev = .false.
       if (stokes) then
-         call stokes_setup(setup, nranks, ctx, stat, errmsg)
+         call stokes_setup(setup, ctx, stat, errmsg)
          if (stat /= FOLD_OK) then
             call finish_early(stat == FOLD_INPUT_ERROR)
             return
@@ -169,7 +169,7 @@ contains
          if (rank == 0) then
             write (m2, '(i0,2("x",i0))') setup%stokes_grid(1:parts%dim)
             write (output_unit, '(a,a,a,i0,a,es9.2,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(m2), " on ", nranks, &
-               " rank(s), kappa ", setup%stokes_kappa, ", tol ", setup%stokes_tolerance, ", ", &
+               " rank(s), kappa ", setup%stokes%kappa, ", tol ", setup%stokes%tol, ", ", &
                trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
          end if
       end if
@@ -300,13 +300,8 @@ contains
                v_est = v_hyd
                w_est = w_hyd
             end if
-            if (setup%time_scheme == FOLD_AB2 .and. have_prev) then
-               parts%v = 1.5_dp*v_est - 0.5_dp*v_prev
-               parts%omega = 1.5_dp*w_est - 0.5_dp*w_prev
-            else
-               parts%v = v_est
-               parts%omega = w_est
-            end if
+            call scheme_velocity(setup%time_scheme, have_prev, v_est, v_prev, parts%v)
+            call scheme_velocity(setup%time_scheme, have_prev, w_est, w_prev, parts%omega)
             v_prev = v_est
             w_prev = w_est
             have_prev = .true.
@@ -431,7 +426,7 @@ contains
          end if
       end if
       call share_status(stat, errmsg)
-      if (stokes) call stokes_context_destroy(ctx)
+      call stokes_context_destroy(ctx)
       outcome%stat = stat
       outcome%steps_done = setup%nsteps
       outcome%time = t
@@ -577,7 +572,7 @@ contains
          outcome%errmsg = text
          outcome%steps_done = max(good_step, 0_i8)
          outcome%time = good_t
-         if (stokes) call stokes_context_destroy(ctx)
+         call stokes_context_destroy(ctx)
          call h5_stop()
       end subroutine fail
 
@@ -616,7 +611,7 @@ contains
          call MPI_Bcast(kept, 1, MPI_INTEGER8, 0, MPI_COMM_WORLD)
          outcome%steps_done = kept
          outcome%time = real(outcome%steps_done, dp)*setup%dt
-         if (stokes) call stokes_context_destroy(ctx)
+         call stokes_context_destroy(ctx)
          call h5_stop()
       end subroutine fail_io
 
@@ -659,44 +654,21 @@ contains
 
    end subroutine run_driver
 
-   !> FFT backend (FFTW-MPI slabs over MPI_COMM_WORLD when np > 1, else serial FFTW)
-   !> and Stokes context of a run, from the settings of /setup/resolved.
-   subroutine stokes_setup(setup, nranks, ctx, stat, errmsg)
+   !> Stokes solver of a run (fold_stokes_factory, on MPI_COMM_WORLD) from the settings
+   !> of /setup/resolved.
+   subroutine stokes_setup(setup, ctx, stat, errmsg)
       type(run_setup_t), intent(in) :: setup
-      integer, intent(in) :: nranks
       type(stokes_context_t), intent(inout) :: ctx
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      class(fft_backend_t), allocatable :: fft
-      type(fft_serial_t), allocatable :: serial
-      type(fft_mpi_t), allocatable :: slab
-      type(stokes_settings_t) :: set
-      integer :: effort
+      class(stokes_solver_t), allocatable :: solver
 
-      effort = merge(FOLD_PLAN_MEASURE, FOLD_PLAN_ESTIMATE, setup%stokes_fft_plan == 1)
-      if (nranks > 1) then
-         call fft_mpi_start()
-         allocate (slab)
-         call fft_mpi_create(slab, MPI_COMM_WORLD, setup%dim, setup%stokes_grid, effort, stat, errmsg)
-         if (stat == FOLD_OK) call move_alloc(slab, fft)
-      else
-         allocate (serial)
-         call fft_serial_create(serial, setup%dim, setup%stokes_grid, effort, stat, errmsg)
-         if (stat == FOLD_OK) call move_alloc(serial, fft)
-      end if
+      call stokes_solver_create(setup%stokes, setup%dim, setup%stokes_grid, MPI_COMM_WORLD, solver, stat, errmsg)
       if (stat /= FOLD_OK) then
-         errmsg = "/setup/resolved/stokes_grid: "//trim(errmsg)
+         errmsg = "/setup/resolved/stokes_*: "//trim(errmsg)
          return
       end if
-      set%eta_f = setup%viscosity
-      set%kappa = setup%stokes_kappa
-      set%tol = setup%stokes_tolerance
-      set%max_iter = setup%stokes_max_iterations
-      set%derivative = setup%stokes_derivative
-      set%guess = setup%stokes_initial_guess
-      set%plan_effort = effort
-      call stokes_context_init(ctx, fft, set, stat, errmsg)
-      if (stat /= FOLD_OK) errmsg = "/setup/resolved/stokes_*: "//trim(errmsg)
+      call stokes_context_attach(ctx, solver)
    end subroutine stokes_setup
 
    !> Surface gaps of a configuration as it is (zero velocities over a vanishing

@@ -5,15 +5,19 @@
 !> micro contract. h5py stores C-ordered arrays, so `/initial/x` of Python shape
 !> (n, dim) is read here as the Fortran `x(dim, n)`, and the velocity gradient
 !> stored with `G[i, j] == G_ij` comes in transposed and is transposed back.
-!> The Stokes settings (`stokes_grid`, `stokes_tolerance`, `stokes_max_iterations`,
-!> `stokes_kappa`, `stokes_derivative`, `stokes_fft_plan`, `time_scheme`) are read
-!> only when `hydrodynamics` = 1, so Jeffery run files need not carry them.
+!> The Stokes settings (`stokes_grid`, `stokes_backend`, `stokes_tolerance`,
+!> `stokes_max_iterations`, `stokes_kappa`, `stokes_derivative`, `stokes_fft_plan`,
+!> `stokes_mixing`, `stokes_subsamples`, `stokes_fibre_ends`, `stokes_warm_start`,
+!> `time_scheme`; optional `stokes_initial_guess`, `stokes_solve_every`) are read
+!> only when `hydrodynamics` = 1, so Jeffery run files need not carry them; every
+!> setting that changes results is read, none is left at a default of the solver.
 !> Any problem is returned as FOLD_INPUT_ERROR (wrong content) or FOLD_IO_ERROR
 !> (missing dataset, unreadable file) with the dataset path and the allowed range.
 module fold_run_file
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
    use fold_particles, only: particle_set_t, particles_init, particles_check
+   use fold_stokes_solver, only: stokes_settings_t, FOLD_STOKES_FFT, FOLD_KAPPA_MIN, FOLD_KAPPA_MAX
    use fold_h5, only: hid_t, hsize_t, h5_open_file, h5_close_file, h5_exists, h5_shape, &
                       h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
    implicit none
@@ -69,20 +73,10 @@ module fold_run_file
       ! ---- Stokes hydrodynamics only (read when hydrodynamics = 1)
       !> Voxel counts of the Stokes grid along a1, a2, a3 (n(3) = 1 in 2-D)
       integer(ip) :: stokes_grid(3) = 1
-      !> CG tolerance (relative preconditioned residual) and iteration cap
-      real(dp) :: stokes_tolerance = 1.0e-6_dp
-      integer(ip) :: stokes_max_iterations = 1000
-      !> Viscosity contrast kappa of the penalisation [-]
-      real(dp) :: stokes_kappa = 1.0e3_dp
-      !> Derivative scheme: 0 spectral, 1 rotated finite differences (fold_stokes_fft codes)
-      integer(ip) :: stokes_derivative = 1
-      !> FFTW planning: 0 estimate (bitwise reproducible), 1 measure (faster transforms)
-      integer :: stokes_fft_plan = 1
+      !> Settings of the Stokes solver (eta_f = viscosity; every other field from stokes_*)
+      type(stokes_settings_t) :: stokes
       !> Time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2
       integer(ip) :: time_scheme = 1
-      !> CG initial guess: 1 the previous solution, 2 extrapolated from the last two
-      !> (fold_stokes_fft FOLD_GUESS_*; optional key, 1 when absent)
-      integer(ip) :: stokes_initial_guess = 1
       !> A Stokes solve every k-th step, velocities extrapolated in between (optional key, 1 when absent)
       integer(ip) :: stokes_solve_every = 1
    end type run_setup_t
@@ -207,22 +201,35 @@ contains
          return
       end if
       s%stokes_grid = int(ibuf, ip)
-      call get_real(file, R//"stokes_tolerance", tiny(1.0_dp), 1.0_dp - epsilon(1.0_dp), s%stokes_tolerance, stat, errmsg)
+      s%stokes%eta_f = s%viscosity
+      call get_int(file, R//"stokes_backend", int(FOLD_STOKES_FFT, i8), int(FOLD_STOKES_FFT, i8), iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      s%stokes%backend = int(iv, ip)
+      call get_real(file, R//"stokes_tolerance", tiny(1.0_dp), 1.0_dp - epsilon(1.0_dp), s%stokes%tol, stat, errmsg)
       if (stat /= FOLD_OK) return
       call get_int(file, R//"stokes_max_iterations", 1_i8, 1000000_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
-      s%stokes_max_iterations = int(iv, ip)
-      call get_real(file, R//"stokes_kappa", 1.0_dp, 1.0e12_dp, s%stokes_kappa, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%max_iter = int(iv, ip)
+      call get_real(file, R//"stokes_kappa", FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, s%stokes%kappa, stat, errmsg)
+      if (stat /= FOLD_OK) return
       call get_int(file, R//"stokes_derivative", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
-      s%stokes_derivative = int(iv, ip)
+      s%stokes%derivative = int(iv, ip)
       call get_int(file, R//"stokes_fft_plan", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
-      s%stokes_fft_plan = int(iv)
+      s%stokes%plan_effort = int(iv)
+      call get_int(file, R//"stokes_mixing", 0_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%mixing = int(iv, ip)
+      call get_int(file, R//"stokes_subsamples", 1_i8, 8_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%subsamples = int(iv, ip)
+      call get_int(file, R//"stokes_fibre_ends", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%fibre_ends = int(iv, ip)
+      call get_int(file, R//"stokes_warm_start", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      s%stokes%warm_start = iv == 1
       call get_int(file, R//"time_scheme", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
       s%time_scheme = int(iv, ip)
       ! optional: run files written before the setting existed used the previous solution
-      s%stokes_initial_guess = 1
+      s%stokes%guess = 1
       if (h5_exists(file, R//"stokes_initial_guess")) then
          call get_int(file, R//"stokes_initial_guess", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes_initial_guess = int(iv, ip)
+         s%stokes%guess = int(iv, ip)
       end if
       s%stokes_solve_every = 1
       if (h5_exists(file, R//"stokes_solve_every")) then

@@ -18,7 +18,7 @@
 module fold_rigid_fit
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
-   use fold_fft_backend, only: fft_backend_t, fft_field_t
+   use fold_stokes_solver, only: stokes_solver_t
    use fold_voxelise, only: voxel_set_t
    use fold_particles, only: particle_set_t
    use fold_cell, only: cell_t, cell_mean_velocity
@@ -27,28 +27,30 @@ module fold_rigid_fit
 
    public :: rigid_fit
 
+   !> A field of the solver on the local slab
+   type :: field_ref_t
+      real(dp), pointer, contiguous :: r(:, :, :) => null()
+   end type field_ref_t
+
 contains
 
    !> Fit (V, omega) of every particle: writes parts%v, parts%omega and resid.
-   subroutine rigid_fit(fft, cell, vox, vel, eta, eta_f, kappa, parts, resid, stat, errmsg)
-      !> FFT backend (for the sums over ranks)
-      class(fft_backend_t), intent(in) :: fft
+   subroutine rigid_fit(solver, cell, vox, parts, resid, stat, errmsg)
+      !> Solver after a solve and compute_velocity: u~ and the viscosity at the voxel
+      !> centres, eta_f and kappa of its settings, the sums over ranks
+      class(stokes_solver_t), intent(in) :: solver
       !> Cell: mean flow u_mean = G.(x - c)
       type(cell_t), intent(in) :: cell
       !> Voxel lists of the particles (local slab)
       type(voxel_set_t), intent(in) :: vox
-      !> u~ at voxel centres, one field per component [m/s]
-      type(fft_field_t), intent(in) :: vel(:)
-      !> Viscosity at voxel centres [Pa s]
-      type(fft_field_t), intent(in) :: eta
-      !> Fluid viscosity [Pa s] and contrast [-]
-      real(dp), intent(in) :: eta_f, kappa
       type(particle_set_t), intent(inout) :: parts
       !> Rigidity residual of each particle [-]
       real(dp), intent(out) :: resid(:)
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
 
+      type(field_ref_t) :: vel(3), eta
+      real(dp) :: eta_f, kappa
       integer(ip), parameter :: nm3 = 16, nm2 = 7
       integer(ip) :: dim, k, nm, c, info
       integer(i8) :: e
@@ -58,11 +60,17 @@ contains
       stat = FOLD_OK
       errmsg = ""
       dim = parts%dim
-      if (vox%n /= parts%n .or. size(resid) < parts%n .or. size(vel) < dim) then
+      if (vox%n /= parts%n .or. size(resid) < parts%n .or. solver%dim /= dim) then
          stat = FOLD_INPUT_ERROR
          write (errmsg, '(a,i0,a,i0)') "rigid_fit: voxel lists for ", vox%n, " particles, set has ", parts%n
          return
       end if
+      do c = 1, dim
+         vel(c)%r => solver%velocity_field(c)
+      end do
+      eta%r => solver%viscosity_field()
+      eta_f = solver%set%eta_f
+      kappa = solver%set%kappa
       G = cell%G
       if (dim == 2) then
          G(3, :) = 0.0_dp
@@ -98,7 +106,7 @@ contains
          end do
       end do
       ! sum the whole moment table over ranks in one reduction
-      call sum_table(fft, mom)
+      call sum_table(solver, mom)
 
       do k = 1, parts%n
          if (.not. (mom(1, k) > 0.0_dp)) then
@@ -157,7 +165,7 @@ contains
             dev(k) = dev(k) + vox%frac(e)*penalty_weight(e)*sum(u(1:dim)**2)
          end do
       end do
-      call fft%sum_all(dev)
+      call solver%sum_all(dev)
       Ed = 0.5_dp*(G + transpose(G))
       gnorm = sqrt(2.0_dp*sum(Ed**2))
       if (.not. (gnorm > 0.0_dp)) gnorm = sqrt(sum(G**2))
@@ -182,13 +190,13 @@ contains
 
    end subroutine rigid_fit
 
-   subroutine sum_table(fft, t)
-      class(fft_backend_t), intent(in) :: fft
+   subroutine sum_table(solver, t)
+      class(stokes_solver_t), intent(in) :: solver
       real(dp), intent(inout), target, contiguous :: t(:, :)
       real(dp), pointer :: flat(:)
       if (size(t) == 0) return
       flat(1:size(t)) => t
-      call fft%sum_all(flat)
+      call solver%sum_all(flat)
    end subroutine sum_table
 
    pure function cross(a, b) result(c)

@@ -54,59 +54,19 @@ module fold_stokes_fft
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
    use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, FOLD_PLAN_ESTIMATE
    use fold_grid, only: grid_t, grid_init, grid_set_lattice, grid_total
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, &
+                                 FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, FOLD_MIX_HARMONIC, &
+                                 FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE
    implicit none
    private
 
-   !> Derivative discretisation: spectral (i k) or rotated finite differences (Willot 2015)
-   integer(ip), parameter, public :: FOLD_DERIV_SPECTRAL = 0, FOLD_DERIV_FD = 1
-
-   !> Viscosity of a partially covered voxel: arithmetic eta_f (1 + (kappa-1) chi),
-   !> harmonic 1/eta = (1-chi)/eta_f + chi/(kappa eta_f), geometric eta_f kappa^chi
-   integer(ip), parameter, public :: FOLD_MIX_ARITHMETIC = 0, FOLD_MIX_HARMONIC = 1, FOLD_MIX_GEOMETRIC = 2
-
-   !> Initial guess of a warm-started solve: the previous solution x_n (its Fourier
-   !> coefficients in lattice coordinates, re-projected on the new lattice), or the
-   !> linear extrapolation 2 x_n - x_(n-1) of the last two. (Translating the stored
-   !> field along a1 by a fraction of the offset change was tried and only made the
-   !> guess worse: measured on a sphere at the cell centre, no shift is the best.)
-   integer(ip), parameter, public :: FOLD_GUESS_PREVIOUS = 1, FOLD_GUESS_EXTRAPOLATE = 2
-
-   !> Settings of the fictitious-domain solve.
-   type, public :: stokes_settings_t
-      !> Fluid viscosity eta_f [Pa s]
-      real(dp) :: eta_f = 1.0_dp
-      !> Viscosity contrast kappa = eta_solid/eta_f (>= 1) [-]
-      real(dp) :: kappa = 1.0e3_dp
-      !> Relative preconditioned residual at which CG stops [-]
-      real(dp) :: tol = 1.0e-6_dp
-      !> CG iteration cap
-      integer(ip) :: max_iter = 3000
-      !> FOLD_DERIV_SPECTRAL or FOLD_DERIV_FD
-      integer(ip) :: derivative = FOLD_DERIV_FD
-      !> Sub-samples per voxel edge for the partial-volume chi (1..8)
-      integer(ip) :: subsamples = 3
-      !> Fibre ends for voxelisation: 0 flat cylinder, 1 capsule
-      integer(ip) :: fibre_ends = 0
-      !> FFTW planning effort (FOLD_PLAN_ESTIMATE / FOLD_PLAN_MEASURE)
-      integer :: plan_effort = FOLD_PLAN_ESTIMATE
-      !> Mixing rule of the viscosity in partially covered voxels (FOLD_MIX_*)
-      integer(ip) :: mixing = FOLD_MIX_HARMONIC
-      !> Start CG from the previous solution (re-projected on the new lattice)
-      logical :: warm_start = .true.
-      !> Initial guess of a warm start (FOLD_GUESS_*): the last solution, or the linear
-      !> extrapolation 2 x_n - x_(n-1) of the last two (re-projected on the new lattice)
-      integer(ip) :: guess = FOLD_GUESS_PREVIOUS
-   end type stokes_settings_t
+   ! the settings and codes of the seam, re-exported for callers of this backend
+   public :: stokes_settings_t, stokes_settings_check, FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, &
+             FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE
 
    !> Solver state: plans, grid, work fields and the Fourier-space solution.
-   type, public :: stokes_fft_t
-      type(stokes_settings_t) :: set
-      type(grid_t) :: grid
+   type, extends(stokes_solver_t), public :: stokes_fft_t
       class(fft_backend_t), allocatable :: fft
-      !> Dimension and number of strain components (6 in 3-D, 3 in 2-D)
-      integer(ip) :: dim = 3, nc = 6
-      !> Component pairs (11, 22, 33, 12, 13, 23) or (11, 22, 12)
-      integer(ip) :: ci(6) = 0, cj(6) = 0
       !> Strain components transformed in a CG iteration (traceless: 33 or 22 dropped)
       integer(ip) :: ncg = 5, cg_comp(5) = 0
       !> Strain/stress work fields (nc); after a solve: strain of u~ if requested
@@ -128,59 +88,31 @@ module fold_stokes_fft
       real(dp), allocatable :: cosprod(:, :, :)
       !> Hermitian weight of each x wavenumber in the half spectrum (1 or 2)
       real(dp), allocatable :: wx(:)
-      !> Residual after each iteration of the last solve (history(0) = initial)
-      real(dp), allocatable :: history(:)
-      !> Iterations and residual of the last solve
-      integer(ip) :: iterations = 0
-      real(dp) :: residual = 0.0_dp
       !> Reference viscosity of the preconditioner [Pa s]
       real(dp) :: eta0 = 1.0_dp
-      !> Mean strain rate E of the last solve [1/s]
-      real(dp) :: E(3, 3) = 0.0_dp
       logical :: have_guess = .false., lattice_set = .false.
       !> x_prev holds the solution before x (a second guess for the extrapolation)
       logical :: have_prev = .false.
+   contains
+      procedure :: set_lattice => stokes_fft_set_lattice
+      procedure :: solve => stokes_fft_solve
+      procedure :: compute_velocity => stokes_fft_velocity
+      procedure :: compute_strain => stokes_fft_strain
+      procedure :: velocity_field => fft_velocity_field
+      procedure :: strain_field => fft_strain_field
+      procedure :: viscosity_field => fft_viscosity_field
+      procedure :: sum_all => fft_sum_all
+      procedure :: max_all => fft_max_all
+      procedure :: destroy => stokes_fft_destroy
    end type stokes_fft_t
 
    public :: stokes_fft_init, stokes_fft_set_lattice, stokes_fft_solve, stokes_fft_velocity, &
-             stokes_fft_strain, stokes_fft_destroy, stokes_settings_check
+             stokes_fft_strain, stokes_fft_destroy
 
    real(dp), parameter :: pi = acos(-1.0_dp)
    complex(dp), parameter :: iu = (0.0_dp, 1.0_dp)
 
 contains
-
-   !> Check a settings record; names the offending field and its allowed range.
-   subroutine stokes_settings_check(set, stat, errmsg)
-      type(stokes_settings_t), intent(in) :: set
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      stat = FOLD_INPUT_ERROR
-      errmsg = ""
-      if (.not. (set%eta_f > 0.0_dp)) then
-         write (errmsg, '(a,es10.3)') "stokes settings: eta_f must be > 0, got ", set%eta_f
-      else if (.not. (set%kappa >= 1.0_dp .and. set%kappa <= 1.0e12_dp)) then
-         write (errmsg, '(a,es10.3)') "stokes settings: kappa must be in [1, 1e12], got ", set%kappa
-      else if (.not. (set%tol > 0.0_dp .and. set%tol < 1.0_dp)) then
-         write (errmsg, '(a,es10.3)') "stokes settings: tol must be in (0, 1), got ", set%tol
-      else if (set%max_iter < 1) then
-         write (errmsg, '(a,i0)') "stokes settings: max_iter must be >= 1, got ", set%max_iter
-      else if (set%derivative /= FOLD_DERIV_SPECTRAL .and. set%derivative /= FOLD_DERIV_FD) then
-         write (errmsg, '(a,i0)') "stokes settings: derivative must be 0 (spectral) or 1 (finite differences), got ", &
-            set%derivative
-      else if (set%subsamples < 1 .or. set%subsamples > 8) then
-         write (errmsg, '(a,i0)') "stokes settings: subsamples must be in 1..8, got ", set%subsamples
-      else if (set%mixing < FOLD_MIX_ARITHMETIC .or. set%mixing > FOLD_MIX_GEOMETRIC) then
-         write (errmsg, '(a,i0)') "stokes settings: mixing must be 0 (arithmetic), 1 (harmonic) or 2 (geometric), got ", &
-            set%mixing
-      else if (set%fibre_ends /= 0 .and. set%fibre_ends /= 1) then
-         write (errmsg, '(a,i0)') "stokes settings: fibre_ends must be 0 (flat) or 1 (capped), got ", set%fibre_ends
-      else if (set%guess /= FOLD_GUESS_PREVIOUS .and. set%guess /= FOLD_GUESS_EXTRAPOLATE) then
-         write (errmsg, '(a,i0)') "stokes settings: guess must be 1 (previous) or 2 (extrapolate), got ", set%guess
-      else
-         stat = FOLD_OK
-      end if
-   end subroutine stokes_settings_check
 
    !> Take over an FFT backend (serial or MPI, plans already made) and allocate
    !> every work array once.
@@ -255,7 +187,7 @@ contains
 
    !> Set the lattice A (columns a1..a3) and rebuild the per-mode tables.
    subroutine stokes_fft_set_lattice(s, A, stat, errmsg)
-      type(stokes_fft_t), intent(inout) :: s
+      class(stokes_fft_t), intent(inout) :: s
       !> Lattice basis [m]
       real(dp), intent(in) :: A(3, 3)
       integer, intent(out) :: stat
@@ -312,7 +244,7 @@ contains
    !> gradient G (G_ij = du_i/dx_j). FOLD_NOT_CONVERGED (message gives the
    !> residual reached) leaves the last iterate in s%x.
    subroutine stokes_fft_solve(s, chi, G, stat, errmsg)
-      type(stokes_fft_t), intent(inout) :: s
+      class(stokes_fft_t), intent(inout) :: s
       !> Solid volume fraction of each local voxel [-]
       real(dp), intent(in) :: chi(:, :, :)
       !> Mean velocity gradient [1/s]
@@ -472,7 +404,7 @@ contains
 
    !> u~ at the voxel centres into s%vel(1:dim)%r(1:nx, :, :) [m/s] (dim c2r FFTs).
    subroutine stokes_fft_velocity(s)
-      type(stokes_fft_t), intent(inout) :: s
+      class(stokes_fft_t), intent(inout) :: s
       integer(ip) :: c
       real(dp) :: scale
       scale = 1.0_dp/real(grid_total(s%grid), dp)
@@ -487,7 +419,7 @@ contains
    !> Strain rate of u~ at the voxel centres into s%work(1:nc)%r(1:nx, :, :) [1/s]
    !> (components ci/cj; nc c2r FFTs).
    subroutine stokes_fft_strain(s)
-      type(stokes_fft_t), intent(inout) :: s
+      class(stokes_fft_t), intent(inout) :: s
       integer(ip) :: c
       real(dp) :: scale
       call strain(s, s%x)
@@ -499,7 +431,7 @@ contains
 
    !> Release plans and storage.
    subroutine stokes_fft_destroy(s)
-      type(stokes_fft_t), intent(inout) :: s
+      class(stokes_fft_t), intent(inout) :: s
       integer :: c
       if (allocated(s%work)) then
          do c = 1, size(s%work)
@@ -527,6 +459,38 @@ contains
       s%have_prev = .false.
       s%lattice_set = .false.
    end subroutine stokes_fft_destroy
+
+   function fft_velocity_field(s, c) result(f)
+      class(stokes_fft_t), intent(in) :: s
+      integer(ip), intent(in) :: c
+      real(dp), pointer, contiguous :: f(:, :, :)
+      f => s%vel(c)%r
+   end function fft_velocity_field
+
+   function fft_strain_field(s, c) result(f)
+      class(stokes_fft_t), intent(in) :: s
+      integer(ip), intent(in) :: c
+      real(dp), pointer, contiguous :: f(:, :, :)
+      f => s%work(c)%r
+   end function fft_strain_field
+
+   function fft_viscosity_field(s) result(f)
+      class(stokes_fft_t), intent(in) :: s
+      real(dp), pointer, contiguous :: f(:, :, :)
+      f => s%eta%r
+   end function fft_viscosity_field
+
+   subroutine fft_sum_all(s, x)
+      class(stokes_fft_t), intent(in) :: s
+      real(dp), intent(inout) :: x(:)
+      call s%fft%sum_all(x)
+   end subroutine fft_sum_all
+
+   subroutine fft_max_all(s, x)
+      class(stokes_fft_t), intent(in) :: s
+      real(dp), intent(inout) :: x(:)
+      call s%fft%max_all(x)
+   end subroutine fft_max_all
 
    ! ------------------------------------------------------------------ internals
 

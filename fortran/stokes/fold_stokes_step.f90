@@ -6,7 +6,7 @@
 !> set are overwritten with the rigid motion fitted to the computed flow
 !> (contacts are resolved afterwards, as for the Jeffery kinematics). The
 !> per-step record holds what docs/physics.md#what-to-record-every-step lists.
-!> stokes_march integrates a set in time (explicit Euler or Adams-Bashforth 2,
+!> stokes_march integrates a set in time (fold_time_scheme: explicit Euler or Adams-Bashforth 2,
 !> exact rotations) for tests and studies; the run driver has its own loop.
 module fold_stokes_step
    use fold_kinds, only: dp, ip, msg_len
@@ -17,15 +17,16 @@ module fold_stokes_step
    use fold_kinematics, only: rigid_update
    use fold_grid, only: shear_lattice
    use fold_voxelise, only: voxel_set_t, voxelise
-   use fold_stokes_fft, only: stokes_fft_t, stokes_settings_t, stokes_fft_init, stokes_fft_set_lattice, &
-                              stokes_fft_solve, stokes_fft_velocity, stokes_fft_destroy
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
+   use fold_stokes_fft, only: stokes_fft_t, stokes_fft_init
+   use fold_time_scheme, only: FOLD_EULER, FOLD_AB2, scheme_velocity
    use fold_rigid_fit, only: rigid_fit
    use fold_stress, only: bulk_stress_t, bulk_stress
    implicit none
    private
 
-   !> Time-stepping schemes of stokes_march
-   integer(ip), parameter, public :: FOLD_EULER = 1, FOLD_AB2 = 2
+   ! the time-scheme codes, re-exported for callers of stokes_march
+   public :: FOLD_EULER, FOLD_AB2
 
    !> What one Stokes step reports (recorded every step).
    type, public :: stokes_record_t
@@ -43,29 +44,49 @@ module fold_stokes_step
 
    !> Solver + voxel storage kept across steps.
    type, public :: stokes_context_t
-      type(stokes_fft_t) :: solver
+      class(stokes_solver_t), allocatable :: solver
       type(voxel_set_t) :: vox
       !> Rigidity residual of each particle after the last step [-]
       real(dp), allocatable :: rigidity(:)
    end type stokes_context_t
 
-   public :: stokes_context_init, stokes_context_destroy, stokes_rigid_velocities, stokes_march
+   public :: stokes_context_init, stokes_context_attach, stokes_context_destroy, stokes_rigid_velocities, stokes_march
 
 contains
 
-   !> Take over an FFT backend (serial or MPI) and allocate once.
+   !> Take over an FFT backend (serial or MPI) and allocate once: an FFT solver
+   !> (fold_stokes_factory makes a solver of any backend from the settings).
    subroutine stokes_context_init(ctx, fft, set, stat, errmsg)
       type(stokes_context_t), intent(inout) :: ctx
       class(fft_backend_t), allocatable, intent(inout) :: fft
       type(stokes_settings_t), intent(in) :: set
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      call stokes_fft_init(ctx%solver, fft, set, stat, errmsg)
+      type(stokes_fft_t), allocatable :: s
+      call stokes_context_destroy(ctx)
+      allocate (s)
+      call stokes_fft_init(s, fft, set, stat, errmsg)
+      if (stat /= FOLD_OK) then
+         call s%destroy()
+         return
+      end if
+      call move_alloc(s, ctx%solver)
    end subroutine stokes_context_init
+
+   !> Take over a solver made by the factory.
+   subroutine stokes_context_attach(ctx, solver)
+      type(stokes_context_t), intent(inout) :: ctx
+      class(stokes_solver_t), allocatable, intent(inout) :: solver
+      call stokes_context_destroy(ctx)
+      call move_alloc(solver, ctx%solver)
+   end subroutine stokes_context_attach
 
    subroutine stokes_context_destroy(ctx)
       type(stokes_context_t), intent(inout) :: ctx
-      call stokes_fft_destroy(ctx%solver)
+      if (allocated(ctx%solver)) then
+         call ctx%solver%destroy()
+         deallocate (ctx%solver)
+      end if
       if (allocated(ctx%rigidity)) deallocate (ctx%rigidity)
    end subroutine stokes_context_destroy
 
@@ -83,9 +104,14 @@ contains
       integer :: solve_stat, st
       character(len=msg_len) :: solve_msg
 
+      if (.not. allocated(ctx%solver)) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "stokes_rigid_velocities: the context has no solver (stokes_context_init first)"
+         return
+      end if
       if (cell%walls) then
          stat = FOLD_INPUT_ERROR
-         errmsg = "stokes_rigid_velocities: the FFT Stokes solver needs a fully periodic cell (walls = false)"
+         errmsg = "stokes_rigid_velocities: the Stokes solver needs a fully periodic cell (walls = false)"
          return
       end if
       if (cell%dim /= ctx%solver%dim .or. parts%dim /= ctx%solver%dim) then
@@ -96,12 +122,12 @@ contains
       end if
       call particles_check(parts, stat, errmsg)
       if (stat /= FOLD_OK) return
-      call stokes_fft_set_lattice(ctx%solver, shear_lattice(cell%lengths, cell%shear_offset), stat, errmsg)
+      call ctx%solver%set_lattice(shear_lattice(cell%lengths, cell%shear_offset), stat, errmsg)
       if (stat /= FOLD_OK) return
       call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
                     stat, errmsg)
       if (stat /= FOLD_OK) return
-      call stokes_fft_solve(ctx%solver, ctx%vox%chi, cell%G, solve_stat, solve_msg)
+      call ctx%solver%solve(ctx%vox%chi, cell%G, solve_stat, solve_msg)
       if (solve_stat /= FOLD_OK .and. solve_stat /= FOLD_NOT_CONVERGED) then
          stat = solve_stat
          errmsg = solve_msg
@@ -111,13 +137,12 @@ contains
       rec%residual = ctx%solver%residual
       rec%residual0 = ctx%solver%history(0)
       rec%converged = solve_stat == FOLD_OK
-      call stokes_fft_velocity(ctx%solver)
+      call ctx%solver%compute_velocity()
       if (allocated(ctx%rigidity)) then
          if (size(ctx%rigidity) /= parts%n) deallocate (ctx%rigidity)
       end if
       if (.not. allocated(ctx%rigidity)) allocate (ctx%rigidity(parts%n))
-      call rigid_fit(ctx%solver%fft, cell, ctx%vox, ctx%solver%vel, ctx%solver%eta, ctx%solver%set%eta_f, &
-                     ctx%solver%set%kappa, parts, ctx%rigidity, st, errmsg)
+      call rigid_fit(ctx%solver, cell, ctx%vox, parts, ctx%rigidity, st, errmsg)
       if (st /= FOLD_OK) then
          stat = st
          return
@@ -181,10 +206,8 @@ contains
          end if
          v_now = parts%v
          w_now = parts%omega
-         if (scheme == FOLD_AB2 .and. step > 1) then
-            parts%v = 1.5_dp*v_now - 0.5_dp*v_old
-            parts%omega = 1.5_dp*w_now - 0.5_dp*w_old
-         end if
+         call scheme_velocity(scheme, step > 1, v_now, v_old, parts%v)
+         call scheme_velocity(scheme, step > 1, w_now, w_old, parts%omega)
          call rigid_update(parts, dt)
          v_old = v_now
          w_old = w_now

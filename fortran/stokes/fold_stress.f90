@@ -14,7 +14,7 @@ module fold_stress
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_grid, only: grid_total
-   use fold_stokes_fft, only: stokes_fft_t, stokes_fft_strain
+   use fold_stokes_solver, only: stokes_solver_t
    implicit none
    private
 
@@ -37,17 +37,23 @@ module fold_stress
 
    public :: bulk_stress
 
+   !> A field of the solver on the local slab
+   type :: field_ref_t
+      real(dp), pointer, contiguous :: r(:, :, :) => null()
+   end type field_ref_t
+
 contains
 
    !> Bulk stress of the last solve of s (computes the strain of u~: nc FFTs).
    subroutine bulk_stress(s, chi, out, stat, errmsg)
-      type(stokes_fft_t), intent(inout) :: s
+      class(stokes_solver_t), intent(inout) :: s
       !> Characteristic function on the local slab (nx, n2l, n3l) [-]
       real(dp), intent(in) :: chi(:, :, :)
       type(bulk_stress_t), intent(out) :: out
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(ip) :: c, a, b, nx, i, j, k
+      type(field_ref_t) :: work(6), eta
       real(dp) :: red(2*6 + 4), ee, eps(6), mult(6), et, diss, solid, chisum, ntot, ef, pen
 
       stat = FOLD_OK
@@ -58,7 +64,11 @@ contains
          errmsg = "bulk_stress: chi does not match the solver grid"
          return
       end if
-      call stokes_fft_strain(s)
+      call s%compute_strain()
+      do c = 1, s%nc
+         work(c)%r => s%strain_field(c)
+      end do
+      eta%r => s%viscosity_field()
       ef = s%set%eta_f
       mult = 0.0_dp
       do c = 1, s%nc
@@ -68,9 +78,9 @@ contains
       do k = 1, s%grid%nl(3)
          do j = 1, s%grid%nl(2)
             do i = 1, nx
-               et = s%eta%r(i, j, k)
+               et = eta%r(i, j, k)
                do c = 1, s%nc
-                  eps(c) = s%E(s%ci(c), s%cj(c)) + s%work(c)%r(i, j, k)
+                  eps(c) = s%E(s%ci(c), s%cj(c)) + work(c)%r(i, j, k)
                end do
                diss = sum(mult(1:s%nc)*eps(1:s%nc)**2)
                red(1:s%nc) = red(1:s%nc) + 2.0_dp*et*eps(1:s%nc)
@@ -84,7 +94,7 @@ contains
             end do
          end do
       end do
-      call s%fft%sum_all(red)
+      call s%sum_all(red)
       ntot = real(grid_total(s%grid), dp)
       red = red/ntot
       do c = 1, s%nc

@@ -23,12 +23,44 @@ import numpy as np
 from pyfold.errors import InputError, checked
 from pyfold.native import load
 
+# Code tables of the Stokes settings, one per enumeration: the integers are those of
+# fortran/stokes/fold_stokes_solver.f90 (FOLD_STOKES_*, FOLD_DERIV_*, FOLD_MIX_*,
+# FOLD_ENDS_*, FOLD_GUESS_*), fold_time_scheme.f90 (FOLD_EULER, FOLD_AB2) and
+# fold_fft_backend.f90 (FOLD_PLAN_*); the scene schema, the normaliser (what
+# /setup/resolved holds) and these bindings use them, and
+# tests/micro/test_code_tables.py checks them against the Fortran sources.
+BACKENDS = {"fft": 1}
 DERIVATIVES = {"spectral": 0, "fd": 1}
 MIXINGS = {"arithmetic": 0, "harmonic": 1, "geometric": 2}
 FIBRE_ENDS = {"flat": 0, "capped": 1}
 GUESSES = {"previous": 1, "extrapolate": 2}
 SCHEMES = {"euler": 1, "ab2": 2}
+FFT_PLANS = {"estimate": 0, "measure": 1}
 SHAPES = {"fibre": 1, "sphere": 2, "spheroid": 3}
+
+#: Bounds of the viscosity contrast kappa = eta_solid / eta_f (fold_stokes_solver
+#: FOLD_KAPPA_MIN, FOLD_KAPPA_MAX; fold_run_file refuses the same range). kappa = 1 is
+#: a particle-free fluid, a test of the solver; the rigidity error falls like 1/kappa
+#: (docs/physics.md#fictitious-domain-penalisation) and 1e12 keeps kappa eta_f and the
+#: CG residuals within double precision.
+KAPPA_MIN, KAPPA_MAX = 1.0, 1.0e12
+
+#: The one source of the defaults of every solver setting that changes results: the
+#: scene schema (pyfold.scene.schema.StokesSettings, names of the scene file) and
+#: StokesSettings below (names of the bindings) both take them from here.
+DEFAULTS = {
+    "backend": "fft",
+    "tolerance": 1.0e-6,
+    "max_iterations": 1000,
+    "kappa": 1.0e3,
+    "derivative": "fd",
+    "mixing": "harmonic",
+    "subsamples": 3,
+    "fibre_ends": "flat",
+    "warm_start": True,
+    "initial_guess": "previous",
+    "fft_plan": "measure",
+}
 
 
 @dataclass(frozen=True)
@@ -38,7 +70,7 @@ class StokesSettings:
     Attributes
     ----------
     eta_f : fluid viscosity [Pa s], > 0.
-    kappa : viscosity contrast η_solid/η_f, in [1, 1e12]; rigidity error ~ 1/κ,
+    kappa : viscosity contrast η_solid/η_f, in [KAPPA_MIN, KAPPA_MAX]; rigidity error ~ 1/κ,
         CG iterations ~ √κ.
     tol : relative preconditioned residual at which CG stops, in (0, 1).
     max_iter : CG iteration cap, >= 1.
@@ -53,32 +85,37 @@ class StokesSettings:
     warm_start : start CG from the previous step's solution (time marching only).
     guess : initial guess of a warm start: ``"previous"`` (the last solution) or
         ``"extrapolate"`` (2 x_n − x_(n−1) of the last two).
-    measure_plans : FFTW_MEASURE plans (seconds to make, faster transforms).
+    measure_plans : FFTW_MEASURE plans (seconds to make, faster transforms; repeated
+        runs agree to the solver tolerance) or FFTW_ESTIMATE (bitwise reproducible).
+    backend : the Stokes backend (only ``"fft"``).
+
+    Defaults: :data:`DEFAULTS` (shared with the scene file).
     """
 
     eta_f: float = 1.0
-    kappa: float = 1.0e3
-    tol: float = 1.0e-6
-    max_iter: int = 3000
-    derivative: str = "fd"
-    mixing: str = "harmonic"
-    subsamples: int = 3
-    fibre_ends: str = "flat"
-    warm_start: bool = True
-    guess: str = "previous"
-    measure_plans: bool = False
+    kappa: float = DEFAULTS["kappa"]
+    tol: float = DEFAULTS["tolerance"]
+    max_iter: int = DEFAULTS["max_iterations"]
+    derivative: str = DEFAULTS["derivative"]
+    mixing: str = DEFAULTS["mixing"]
+    subsamples: int = DEFAULTS["subsamples"]
+    fibre_ends: str = DEFAULTS["fibre_ends"]
+    warm_start: bool = DEFAULTS["warm_start"]
+    guess: str = DEFAULTS["initial_guess"]
+    measure_plans: bool = DEFAULTS["fft_plan"] == "measure"
+    backend: str = DEFAULTS["backend"]
 
     def __post_init__(self) -> None:
         if not self.eta_f > 0:
             raise InputError(f"eta_f: must be > 0, got {self.eta_f}")
-        if not 1.0 <= self.kappa <= 1e12:
-            raise InputError(f"kappa: must be in [1, 1e12], got {self.kappa}")
+        if not KAPPA_MIN <= self.kappa <= KAPPA_MAX:
+            raise InputError(f"kappa: must be in [{KAPPA_MIN:g}, {KAPPA_MAX:g}], got {self.kappa}")
         if not 0.0 < self.tol < 1.0:
             raise InputError(f"tol: must be in (0, 1), got {self.tol}")
         if int(self.max_iter) < 1:
             raise InputError(f"max_iter: must be >= 1, got {self.max_iter}")
         for key, table in (("derivative", DERIVATIVES), ("mixing", MIXINGS), ("fibre_ends", FIBRE_ENDS),
-                           ("guess", GUESSES)):
+                           ("guess", GUESSES), ("backend", BACKENDS)):
             if getattr(self, key) not in table:
                 raise InputError(f"{key}: must be one of {sorted(table)}, got {getattr(self, key)!r}")
         if not 1 <= int(self.subsamples) <= 8:

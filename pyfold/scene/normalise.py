@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from pyfold.errors import InputError
+from pyfold.native import stokes as stokes_codes
 from pyfold.scene import shapes
 from pyfold.scene._problems import Problems
 from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY,
@@ -22,10 +23,11 @@ __all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "HYDRODYNAMICS
            "SPHERE_INTERACTION_FRACTION"]
 
 HYDRODYNAMICS_CODES = {"jeffery": 0, "stokes": 1}
-TIME_SCHEME_CODES = {"euler": 1, "ab2": 2}
-DERIVATIVE_CODES = {"spectral": 0, "fd": 1}
-FFT_PLAN_CODES = {"estimate": 0, "measure": 1}
-INITIAL_GUESS_CODES = {"previous": 1, "extrapolate": 2}
+# the Stokes code tables are those of the bindings (pyfold.native.stokes), shared with Fortran
+TIME_SCHEME_CODES = stokes_codes.SCHEMES
+DERIVATIVE_CODES = stokes_codes.DERIVATIVES
+FFT_PLAN_CODES = stokes_codes.FFT_PLANS
+INITIAL_GUESS_CODES = stokes_codes.GUESSES
 #: Spheres: hydrodynamic interactions "matter" for ``auto`` from this total volume
 #: fraction on. Batchelor & Green (1972, J. Fluid Mech. 56:401):
 #: eta/eta_f = 1 + 2.5 phi + 6.2 phi^2; the pair term is 2.48 phi of the single-particle
@@ -178,12 +180,20 @@ class ResolvedScene:
         return {
             "stokes_grid": (np.array(self.stokes_grid, np.int32), "1",
                             "Stokes grid voxel counts along a1, a2, a3 (1 along a3 in 2-D)"),
+            "stokes_backend": (np.int32(stokes_codes.BACKENDS[st.backend]), "1", "Stokes backend: 1 fft"),
             "stokes_tolerance": (float(st.tolerance), "1", "relative preconditioned CG residual of a Stokes solve"),
             "stokes_max_iterations": (np.int32(st.max_iterations), "1", "CG iteration cap of a Stokes solve"),
             "stokes_kappa": (float(st.kappa), "1", "viscosity contrast kappa = eta_solid / eta_fluid"),
             "stokes_derivative": (np.int32(DERIVATIVE_CODES[st.derivative]), "1",
                                   "0 spectral, 1 rotated finite differences (Willot 2015)"),
             "stokes_fft_plan": (np.int32(FFT_PLAN_CODES[st.fft_plan]), "1", "FFTW planning: 0 estimate, 1 measure"),
+            "stokes_mixing": (np.int32(stokes_codes.MIXINGS[st.mixing]), "1",
+                              "viscosity of partially covered voxels: 0 arithmetic, 1 harmonic, 2 geometric"),
+            "stokes_subsamples": (np.int32(st.subsamples), "1", "sub-samples per voxel edge of the partial-volume chi"),
+            "stokes_fibre_ends": (np.int32(stokes_codes.FIBRE_ENDS[st.fibre_ends]), "1",
+                                  "fibre ends of the voxelisation: 0 flat, 1 capped"),
+            "stokes_warm_start": (np.int32(st.warm_start), "1",
+                                  "1: each CG solve starts from the previous solution, 0: from zero"),
             "stokes_initial_guess": (np.int32(INITIAL_GUESS_CODES[st.initial_guess]), "1",
                                      "CG initial guess: 1 previous solution, 2 extrapolated from the last two"),
             "stokes_solve_every": (np.int32(st.solve_every), "1",

@@ -18,6 +18,9 @@ from typing import Annotated, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
+from pyfold.native.stokes import DEFAULTS as _STOKES
+from pyfold.native.stokes import KAPPA_MAX, KAPPA_MIN
+
 __all__ = [
     "Cell",
     "Flow",
@@ -172,16 +175,24 @@ class Model(_Table):
 
 
 class StokesSettings(_Table):
-    """Settings of the fictitious-domain FFT Stokes solver (``fortran/stokes``)."""
+    """Settings of the fictitious-domain Stokes solver (``fortran/stokes``).
 
+    Defaults, code tables and the kappa range come from :mod:`pyfold.native.stokes`
+    (``DEFAULTS``, ``KAPPA_MIN``/``KAPPA_MAX``), the one place the bindings take them
+    from too; every field below that changes results is written to
+    ``/setup/resolved`` and read from there by ``fold_run``.
+    """
+
+    #: Stokes backend: "fft" (FFT-preconditioned CG on the periodic cell)
+    backend: Literal["fft"] = _STOKES["backend"]
     #: relative (preconditioned) residual at which the conjugate-gradient solve stops [-]
-    tolerance: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] = 1e-6
-    #: CG iteration cap per solve; reaching it stops the run (exit 1, residual reported)
-    max_iterations: Annotated[int, Field(ge=1, le=1_000_000)] = 1000
+    tolerance: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] = _STOKES["tolerance"]
+    #: CG iteration cap per solve; reaching it stops the run (exit 1, residual reached)
+    max_iterations: Annotated[int, Field(ge=1, le=1_000_000)] = _STOKES["max_iterations"]
     #: viscosity contrast of the penalisation eta_solid / eta_fluid (seed: 1e3); rigidity
     #: error ~ 1/kappa, CG iterations ~ sqrt(kappa) (docs/physics.md#fictitious-domain-penalisation,
     #: docs/physics.md#solver-vs-contrast) [-]
-    kappa: Annotated[float, Field(gt=1, le=1e12), AfterValidator(_finite)] = 1e3
+    kappa: Annotated[float, Field(ge=KAPPA_MIN, le=KAPPA_MAX), AfterValidator(_finite)] = _STOKES["kappa"]
     #: grid cells per diameter of the thinnest particle (4-8, docs/physics.md#resolution) [-]
     cells_per_diameter: Annotated[int, Field(ge=1, le=64)] = 4
     #: largest Stokes grid (voxel count) allowed: "auto" falls back to jeffery above it,
@@ -189,14 +200,24 @@ class StokesSettings(_Table):
     max_grid_points: Annotated[int, Field(ge=8, le=2**31 - 1)] = 64**3
     #: derivative scheme: "fd" (rotated finite differences, Willot 2015; no Gibbs ringing)
     #: or "spectral" (i k, Nyquist modes removed)
-    derivative: Literal["fd", "spectral"] = "fd"
+    derivative: Literal["fd", "spectral"] = _STOKES["derivative"]
+    #: viscosity of a partially covered voxel: "harmonic" 1/eta = (1-chi)/eta_f + chi/(kappa eta_f),
+    #: "arithmetic" eta_f (1 + (kappa-1) chi) (inflates particles by ~h/2) or "geometric"
+    #: eta_f kappa^chi (docs/physics.md#viscosity-of-partially-covered-voxels)
+    mixing: Literal["harmonic", "arithmetic", "geometric"] = _STOKES["mixing"]
+    #: sub-samples per voxel edge of the partial-volume chi (1..8) [-]
+    subsamples: Annotated[int, Field(ge=1, le=8)] = _STOKES["subsamples"]
+    #: fibre ends of the voxelised particle: "flat" cylinder or "capped" (the contact capsule)
+    fibre_ends: Literal["flat", "capped"] = _STOKES["fibre_ends"]
+    #: start each CG solve from the previous solution (see initial_guess) or from zero
+    warm_start: bool = _STOKES["warm_start"]
     #: FFTW planning: "measure" (faster transforms, plans timed at start-up; repeated runs
     #: agree to the solver tolerance) or "estimate" (bitwise reproducible)
-    fft_plan: Literal["measure", "estimate"] = "measure"
+    fft_plan: Literal["measure", "estimate"] = _STOKES["fft_plan"]
     #: initial guess of each CG solve: "previous" (the last step's solution) or
     #: "extrapolate" (2 u_n - u_(n-1) of the last two solutions); measured by
     #: benchmarks/bench_stokes_step.py (2 % fewer iterations on the dense-fibre scene)
-    initial_guess: Literal["previous", "extrapolate"] = "previous"
+    initial_guess: Literal["previous", "extrapolate"] = _STOKES["initial_guess"]
     #: a Stokes solve every k-th step only; in between the rigid velocities are the linear
     #: extrapolation in time of the last two solves (contacts still every step). A
     #: speed-accuracy setting (benchmarks/bench_stokes_step.py); 1 = a solve every step

@@ -101,7 +101,7 @@ MALFORMED = [
                                      _set("particles[0].direction", [0.0, 0.0, 0.0])), ["particles[0].direction", "non-zero"]),
     ("duplicate family names", _set("particles", [SPHERES, dict(SPHERES, radius=0.05)]), ["particles[1].name", "unique"]),
     ("negative seed", _set("numerics.seed", -1), ["numerics.seed", "greater than or equal to 0"]),
-    ("kappa <= 1", _set("numerics.stokes", {"kappa": 0.5}), ["numerics.stokes.kappa", "greater than 1"]),
+    ("kappa < 1", _set("numerics.stokes", {"kappa": 0.5}), ["numerics.stokes.kappa", "greater than or equal to 1"]),
     ("missing numerics", _set("numerics", None), ["numerics", "required key is missing"]),
     ("integer as real is fine but real as integer is not", _set("particles[0].count", 8.0),
      ["particles[0].count", "must be an integer"]),

@@ -69,11 +69,16 @@ def stokes_settings(**kw):
 #: Stokes settings of /setup/resolved (what the scene layer writes for hydrodynamics = stokes)
 STOKES_DEFAULTS = {
     "stokes_grid": (32, 32, 32),
+    "stokes_backend": np.int64(1),
     "stokes_tolerance": 1e-6,
     "stokes_max_iterations": np.int64(1000),
     "stokes_kappa": 1e3,
     "stokes_derivative": np.int64(1),
     "stokes_fft_plan": np.int64(FFT_PLAN == "measure"),
+    "stokes_mixing": np.int64(1),
+    "stokes_subsamples": np.int64(3),
+    "stokes_fibre_ends": np.int64(0),
+    "stokes_warm_start": np.int64(1),
     "time_scheme": np.int64(2),
 }
 

@@ -143,7 +143,9 @@ contains
       type(cell_t) :: cell
       type(particle_set_t) :: parts, parts_s
       real(dp) :: G(3, 3), lengths(3), du, umax, dv, red(2)
-      integer :: stat, c, off, nl
+      integer :: stat, off, nl
+      integer(ip) :: c
+      real(dp), pointer, contiguous :: up(:, :, :), us(:, :, :)
       character(len=msg_len) :: msg
 
       G = 0.0_dp
@@ -190,14 +192,14 @@ contains
       umax = 0.0_dp
       do c = 1, dim
          if (nl == 0) cycle
+         up => ctx_p%solver%velocity_field(c)
+         us => ctx_s%solver%velocity_field(c)
          if (dim == 3) then
-            du = max(du, maxval(abs(ctx_p%solver%vel(c)%r(1:n(1), :, :) - &
-                                    ctx_s%solver%vel(c)%r(1:n(1), :, off + 1:off + nl))))
+            du = max(du, maxval(abs(up(1:n(1), :, :) - us(1:n(1), :, off + 1:off + nl))))
          else
-            du = max(du, maxval(abs(ctx_p%solver%vel(c)%r(1:n(1), :, 1) - &
-                                    ctx_s%solver%vel(c)%r(1:n(1), off + 1:off + nl, 1))))
+            du = max(du, maxval(abs(up(1:n(1), :, 1) - us(1:n(1), off + 1:off + nl, 1))))
          end if
-         umax = max(umax, maxval(abs(ctx_s%solver%vel(c)%r(1:n(1), :, :))))
+         umax = max(umax, maxval(abs(us(1:n(1), :, :))))
       end do
       red = [du, umax]
       call MPI_Allreduce(MPI_IN_PLACE, red, 2, MPI_DOUBLE_PRECISION, MPI_MAX, MPI_COMM_WORLD)

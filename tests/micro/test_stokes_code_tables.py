@@ -1,0 +1,152 @@
+"""The integer codes of /setup/resolved and of the bindings are the same in Python and
+Fortran, and both sides refuse the same Stokes settings.
+
+Each enumeration has one table in Python (pyfold.native.stokes, pyfold.scene.normalise,
+pyfold.scene.shapes) and one set of named constants in Fortran; the tables are
+compared in both directions against the Fortran sources, so a constant added on one
+side only (a new backend, a new mixing rule) fails here. The kappa range is stated
+once in Python (KAPPA_MIN, KAPPA_MAX); the scene schema must accept exactly that
+range and fold_run must refuse a run file outside it with exit 2 naming the dataset.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+from test_run_common import STOKES_DEFAULTS, require_fold_run, run_fold, write_run_file, xi_of
+
+from pyfold.native import stokes
+from pyfold.scene import parse_scene, shapes
+from pyfold.scene.normalise import COLLISION_CODES, HYDRODYNAMICS_CODES, ON_CAP_CODES
+from pyfold.scene.schema import StokesSettings
+
+REPO = Path(__file__).resolve().parents[2]
+FORTRAN = REPO / "fortran"
+
+#: (Python table, Fortran source, prefix of the Fortran constants, Python name -> suffix)
+TABLES = {
+    "backend": (stokes.BACKENDS, "stokes/fold_stokes_solver.f90", "FOLD_STOKES_", None),
+    "derivative": (stokes.DERIVATIVES, "stokes/fold_stokes_solver.f90", "FOLD_DERIV_", {"fd": "FD"}),
+    "mixing": (stokes.MIXINGS, "stokes/fold_stokes_solver.f90", "FOLD_MIX_", None),
+    "fibre_ends": (stokes.FIBRE_ENDS, "stokes/fold_stokes_solver.f90", "FOLD_ENDS_", None),
+    "initial_guess": (stokes.GUESSES, "stokes/fold_stokes_solver.f90", "FOLD_GUESS_", None),
+    "time_scheme": (stokes.SCHEMES, "stokes/fold_time_scheme.f90", "FOLD_", {"euler": "EULER", "ab2": "AB2"}),
+    "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_backend.f90", "FOLD_PLAN_", None),
+    "hydrodynamics": (HYDRODYNAMICS_CODES, "io/fold_run_file.f90", "FOLD_HYDRO_", None),
+    "collisions": (COLLISION_CODES, "contact/fold_contacts.f90", "FOLD_CONTACT_", None),
+    "on_contact_cap": (ON_CAP_CODES, "contact/fold_contacts.f90", "FOLD_ON_CAP_", None),
+    "shape": (shapes.SHAPE_CODES, "particles/fold_particles.f90", "FOLD_", None),
+}
+
+_CONST = re.compile(r"\b(FOLD_[A-Z0-9_]+)\s*=\s*([-+0-9.eEdD]+)(?:_dp)?")
+
+
+def fortran_constants(source: str) -> dict[str, float]:
+    """Every ``FOLD_* = number`` of the ``parameter`` statements of a Fortran source."""
+    out = {}
+    for line in (FORTRAN / source).read_text().splitlines():
+        code = line.split("!", 1)[0]
+        if "parameter" not in code:
+            continue
+        for name, value in _CONST.findall(code):
+            out[name] = float(value.replace("d", "e").replace("D", "e"))
+    return out
+
+
+@pytest.mark.parametrize("key", sorted(TABLES))
+def test_stokes_and_run_file_code_tables_agree_with_fortran(key):
+    table, source, prefix, rename = TABLES[key]
+    consts = fortran_constants(source)
+    expected = {prefix + (rename or {}).get(name, name.upper()): code for name, code in table.items()}
+    for fname, code in expected.items():
+        assert fname in consts, f"{key}: {fname} missing from fortran/{source}"
+        assert consts[fname] == code, f"{key}: {fname} = {consts[fname]} in Fortran, {code} in Python"
+    if key == "time_scheme":
+        # the prefix FOLD_ is shared with other constants of the module: check the value set
+        assert set(consts.values()) == set(table.values())
+    elif key == "shape":
+        assert {consts[n] for n in ("FOLD_FIBRE", "FOLD_SPHERE", "FOLD_SPHEROID")} == set(table.values())
+    else:
+        extra = {n for n in consts if n.startswith(prefix)} - set(expected)
+        assert not extra, f"{key}: Fortran constants without a Python name: {sorted(extra)}"
+
+
+def test_scene_choices_are_the_keys_of_the_stokes_code_tables():
+    """Every word the scene accepts for a Stokes setting has a code, and every code a word."""
+    fields = StokesSettings.model_fields
+    for key, table in (("backend", stokes.BACKENDS), ("derivative", stokes.DERIVATIVES),
+                       ("mixing", stokes.MIXINGS), ("fibre_ends", stokes.FIBRE_ENDS),
+                       ("initial_guess", stokes.GUESSES), ("fft_plan", stokes.FFT_PLANS)):
+        assert set(fields[key].annotation.__args__) == set(table), key
+
+
+def test_stokes_defaults_have_one_source():
+    scene, native = StokesSettings(), stokes.StokesSettings()
+    d = stokes.DEFAULTS
+    assert {k: getattr(scene, k) for k in d} == d
+    assert (native.tol, native.max_iter, native.kappa, native.derivative, native.mixing, native.subsamples,
+            native.fibre_ends, native.warm_start, native.guess, native.backend) == (
+        d["tolerance"], d["max_iterations"], d["kappa"], d["derivative"], d["mixing"], d["subsamples"],
+        d["fibre_ends"], d["warm_start"], d["initial_guess"], d["backend"])
+    assert native.measure_plans == (d["fft_plan"] == "measure")
+
+
+def test_stokes_kappa_bounds_are_stated_once_and_fortran_uses_them():
+    consts = fortran_constants("stokes/fold_stokes_solver.f90")
+    assert (consts["FOLD_KAPPA_MIN"], consts["FOLD_KAPPA_MAX"]) == (stokes.KAPPA_MIN, stokes.KAPPA_MAX)
+    # the run-file reader takes its range from those constants, not from literals
+    assert "FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, s%stokes%kappa" in (FORTRAN / "io/fold_run_file.f90").read_text()
+
+
+# the next representable numbers outside the range: the smallest violation there is
+BELOW, ABOVE = np.nextafter(stokes.KAPPA_MIN, 0.0), np.nextafter(stokes.KAPPA_MAX, np.inf)
+
+
+@pytest.mark.parametrize("kappa", [stokes.KAPPA_MIN, stokes.KAPPA_MAX])
+def test_stokes_kappa_at_the_bounds_is_accepted_by_scene_and_bindings(kappa):
+    assert StokesSettings(kappa=kappa).kappa == kappa
+    assert stokes.StokesSettings(kappa=kappa).kappa == kappa
+
+
+@pytest.mark.parametrize("kappa", [BELOW, ABOVE])
+def test_stokes_kappa_outside_the_bounds_is_refused_by_scene_bindings_and_fold_run(kappa, tmp_path):
+    with pytest.raises(ValidationError, match="kappa"):
+        StokesSettings(kappa=float(kappa))
+    with pytest.raises(ValueError, match="kappa"):
+        stokes.StokesSettings(kappa=float(kappa))
+    require_fold_run()
+    path = tmp_path / "kappa.h5"
+    write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.1, length=0.6, xi=xi_of(3.0),
+                   shape=[3], stokes={"stokes_grid": (8, 8, 8), "stokes_kappa": float(kappa)})
+    proc = run_fold(path)
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    assert "/setup/resolved/stokes_kappa" in proc.stderr, proc.stderr
+
+
+@pytest.mark.parametrize("key", ["stokes_backend", "stokes_mixing", "stokes_subsamples", "stokes_fibre_ends",
+                                 "stokes_warm_start"])
+def test_stokes_setting_missing_from_the_run_file_is_refused_not_defaulted(key, tmp_path):
+    assert key in STOKES_DEFAULTS
+    require_fold_run()
+    path = tmp_path / "missing.h5"
+    write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.1, length=0.6, xi=xi_of(3.0),
+                   shape=[3], stokes={"stokes_grid": (8, 8, 8)}, drop=(key,))
+    proc = run_fold(path)
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    assert f"/setup/resolved/{key}" in proc.stderr, proc.stderr
+
+
+def test_normalised_stokes_scene_writes_every_solver_setting():
+    """What the scene sets reaches /setup/resolved as codes of the shared tables."""
+    text = (REPO / "data/scenes/stokes_small.toml").read_text().replace(
+        "[numerics.stokes]", '[numerics.stokes]\nmixing = "geometric"\nsubsamples = 5\n'
+        'fibre_ends = "capped"\nwarm_start = false\nfft_plan = "estimate"')
+    res = parse_scene(text).resolved_datasets()
+    got = {k: int(res[k][0]) for k in ("stokes_backend", "stokes_mixing", "stokes_subsamples", "stokes_fibre_ends",
+                                       "stokes_warm_start", "stokes_fft_plan")}
+    assert got == {"stokes_backend": stokes.BACKENDS["fft"], "stokes_mixing": stokes.MIXINGS["geometric"],
+                   "stokes_subsamples": 5, "stokes_fibre_ends": stokes.FIBRE_ENDS["capped"], "stokes_warm_start": 0,
+                   "stokes_fft_plan": stokes.FFT_PLANS["estimate"]}
