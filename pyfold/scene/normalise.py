@@ -16,6 +16,7 @@ from pyfold.errors import InputError
 from pyfold.native import stokes as stokes_codes
 from pyfold.scene import shapes
 from pyfold.scene._problems import Problems
+from pyfold.scene.hydrodynamics_evidence import auto_evidence
 from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY,
                                  Scene)
 
@@ -977,6 +978,10 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
             hydrodynamics = "stokes"
             reasons.insert(0, f"hydrodynamics = stokes (auto): {regime_text}, hydrodynamic interactions matter and "
                            f"the {grid_text} is within numerics.stokes.max_grid_points = {st.max_grid_points}")
+        # The measured effect of neglecting hydrodynamics on C_I in this regime (fibres), and
+        # what the chosen model costs in C_I accuracy (pyfold/scene/hydrodynamics_evidence.py).
+        if regime != "spheres" and not has_spheres and dim == 3:
+            reasons[0] += auto_evidence(regime, hydrodynamics)
     else:
         extra = f" ({grid_text})" if hydrodynamics == "stokes" else ""
         reasons.insert(0, f"hydrodynamics = {hydrodynamics} (requested){extra}")
