@@ -15,7 +15,7 @@ module fold_stokes_factory
    use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_STOKES_FFT
-   use fold_stokes_fft, only: stokes_fft_t, stokes_fft_init
+   use fold_stokes_fft, only: stokes_fft_new
    implicit none
    private
 
@@ -56,7 +56,6 @@ contains
       class(fft_backend_t), allocatable :: fft
       type(fft_serial_t), allocatable :: serial
       type(fft_mpi_t), allocatable :: slab
-      type(stokes_fft_t), allocatable :: s
       integer :: nranks
 
       call MPI_Comm_size(comm, nranks)
@@ -74,13 +73,7 @@ contains
          errmsg = "grid: "//trim(errmsg)
          return
       end if
-      allocate (s)
-      call stokes_fft_init(s, fft, set, stat, errmsg)
-      if (stat /= FOLD_OK) then
-         call s%destroy()
-         return
-      end if
-      call move_alloc(s, solver)
+      call stokes_fft_new(fft, set, solver, stat, errmsg)
    end subroutine create_fft
 
 end module fold_stokes_factory

@@ -106,7 +106,7 @@ module fold_stokes_fft
       procedure :: destroy => stokes_fft_destroy
    end type stokes_fft_t
 
-   public :: stokes_fft_init, stokes_fft_set_lattice, stokes_fft_solve, stokes_fft_velocity, &
+   public :: stokes_fft_init, stokes_fft_new, stokes_fft_set_lattice, stokes_fft_solve, stokes_fft_velocity, &
              stokes_fft_strain, stokes_fft_destroy
 
    real(dp), parameter :: pi = acos(-1.0_dp)
@@ -184,6 +184,25 @@ contains
       s%have_prev = .false.
       s%lattice_set = .false.
    end subroutine stokes_fft_init
+
+   !> An FFT solver seen through the abstract type: stokes_fft_init on a new object,
+   !> which becomes solver on success (on failure solver stays unallocated).
+   subroutine stokes_fft_new(fft, set, solver, stat, errmsg)
+      !> Backend; moved into the solver (deallocated on return)
+      class(fft_backend_t), allocatable, intent(inout) :: fft
+      type(stokes_settings_t), intent(in) :: set
+      class(stokes_solver_t), allocatable, intent(out) :: solver
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      type(stokes_fft_t), allocatable :: s
+      allocate (s)
+      call stokes_fft_init(s, fft, set, stat, errmsg)
+      if (stat /= FOLD_OK) then
+         call s%destroy()
+         return
+      end if
+      call move_alloc(s, solver)
+   end subroutine stokes_fft_new
 
    !> Set the lattice A (columns a1..a3) and rebuild the per-mode tables.
    subroutine stokes_fft_set_lattice(s, A, stat, errmsg)
