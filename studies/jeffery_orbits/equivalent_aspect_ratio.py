@@ -94,6 +94,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
+from pyfold.kinematics import equivalent_aspect_ratio
 from pyfold.native.stokes import Particles, StokesSettings, solve_particles
 
 # Parameters
@@ -112,24 +113,15 @@ RAW_VARS = ("theta", "omega", "weight", "iterations", "rigidity", "period", "per
 ORDER_RANGE = (0.5, 4.0)  # accepted observed orders; outside, fall back to the finest difference
 
 
-def cox(beta):
-    """Cox (1971) slender-body equivalent aspect ratio 1.24 beta / sqrt(ln beta)."""
-    beta = np.asarray(beta, float)
-    return 1.24 * beta / np.sqrt(np.log(beta))
+def _rule(name):
+    """The published rule ``name`` of pyfold.kinematics (the one place the three are stated),
+    as a NumPy function of beta."""
+    return lambda beta: np.asarray(equivalent_aspect_ratio(np.asarray(beta, float), name), dtype=float)
 
 
-def harris_pittman(beta):
-    """Harris & Pittman (1975) empirical equivalent aspect ratio 1.14 beta^0.844."""
-    return 1.14 * np.asarray(beta, float) ** 0.844
-
-
-def zhang(beta):
-    """Zhang et al. (2011) cubic fit 0.000035 b^3 - 0.00467 b^2 + 0.764 b + 0.404."""
-    b = np.asarray(beta, float)
-    return 0.000035 * b**3 - 0.00467 * b**2 + 0.764 * b + 0.404
-
-
-RULES = {"cox": cox, "harris_pittman": harris_pittman, "zhang": zhang}
+#: Cox (1971), Harris & Pittman (1975), Zhang et al. (2011): beta -> beta_e
+RULES = {name: _rule(name) for name in ("cox", "harris_pittman", "zhang")}
+cox, harris_pittman, zhang = RULES["cox"], RULES["harris_pittman"], RULES["zhang"]
 
 
 def beta_from_period(T, shear_rate: float = SHEAR_RATE):
