@@ -14,7 +14,8 @@ module fold_stokes_factory
    use fold_fft_backend, only: fft_backend_t
    use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_STOKES_FFT
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_STOKES_FFT, &
+      FOLD_STOKES_HYPRE
    use fold_stokes_fft, only: stokes_fft_new
    implicit none
    private
@@ -40,6 +41,9 @@ contains
       select case (set%backend)
       case (FOLD_STOKES_FFT)
          call create_fft(set, dim, n, comm, solver, stat, errmsg)
+      case (FOLD_STOKES_HYPRE)
+         stat = FOLD_INPUT_ERROR
+         errmsg = "stokes settings: backend 2 (hypre) is not available in this build"
       case default
          stat = FOLD_INPUT_ERROR
          write (errmsg, '(a,i0)') "stokes settings: backend must be 1 (fft), got ", set%backend

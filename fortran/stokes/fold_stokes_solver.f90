@@ -23,8 +23,9 @@ module fold_stokes_solver
    implicit none
    private
 
-   !> Backend codes of stokes_settings_t%backend
-   integer(ip), parameter, public :: FOLD_STOKES_FFT = 1
+   !> Backend codes of stokes_settings_t%backend: FFT-preconditioned CG on a periodic
+   !> (Lees-Edwards) lattice; hypre on a staggered grid, for cells with walls
+   integer(ip), parameter, public :: FOLD_STOKES_FFT = 1, FOLD_STOKES_HYPRE = 2
 
    !> Derivative discretisation: spectral (i k) or rotated finite differences (Willot 2015)
    integer(ip), parameter, public :: FOLD_DERIV_SPECTRAL = 0, FOLD_DERIV_FD = 1
@@ -77,6 +78,10 @@ module fold_stokes_solver
       logical :: warm_start = .true.
       !> Initial guess of a warm start (FOLD_GUESS_*)
       integer(ip) :: guess = FOLD_GUESS_PREVIOUS
+      !> No-slip walls at y = 0 and y = Ly (the Couette cell of fold_cell): the
+      !> disturbance flow vanishes there. A property of the cell, which the caller
+      !> copies from it; only a backend that can impose walls accepts it.
+      logical :: walls = .false.
    end type stokes_settings_t
 
    !> What every Stokes backend holds and does.
@@ -171,8 +176,11 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       stat = FOLD_INPUT_ERROR
       errmsg = ""
-      if (set%backend /= FOLD_STOKES_FFT) then
-         write (errmsg, '(a,i0)') "stokes settings: backend must be 1 (fft), got ", set%backend
+      if (set%backend /= FOLD_STOKES_FFT .and. set%backend /= FOLD_STOKES_HYPRE) then
+         write (errmsg, '(a,i0)') "stokes settings: backend must be 1 (fft) or 2 (hypre), got ", set%backend
+      else if (set%backend == FOLD_STOKES_FFT .and. set%walls) then
+         errmsg = "stokes settings: backend 1 (fft) solves fully periodic cells only; a cell with walls needs "// &
+                  "backend 2 (hypre)"
       else if (.not. (set%eta_f > 0.0_dp)) then
          write (errmsg, '(a,es10.3)') "stokes settings: eta_f must be > 0, got ", set%eta_f
       else if (.not. (set%kappa >= FOLD_KAPPA_MIN .and. set%kappa <= FOLD_KAPPA_MAX)) then
