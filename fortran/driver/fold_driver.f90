@@ -662,8 +662,12 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       class(stokes_solver_t), allocatable :: solver
+      type(stokes_settings_t) :: set
 
-      call stokes_solver_create(setup%stokes, setup%dim, setup%stokes_grid, MPI_COMM_WORLD, solver, stat, errmsg)
+      ! walls are a property of the cell (fold_cell): the backend imposes them when set
+      set = setup%stokes
+      set%walls = setup%walls
+      call stokes_solver_create(set, setup%dim, setup%stokes_grid, MPI_COMM_WORLD, solver, stat, errmsg)
       if (stat /= FOLD_OK) then
          errmsg = "/setup/resolved/stokes_*: "//trim(errmsg)
          return
