@@ -14,7 +14,9 @@
 !>        Adams-Bashforth 2 (3/2 v_n - 1/2 v_{n-1}; first step Euler). The solve of the configuration at t + dt is made at the end
 !>        of the step, so every record holds the bulk stress of the configuration at
 !>        its own time; the AB2 history is the uncorrected (hydrodynamic) velocity,
-!>        carried across a Lees-Edwards wrap with the same velocity jump;
+!>        carried across a Lees-Edwards wrap with the same velocity jump. A cell with
+!>        walls (Couette) has neither offset nor wrap in y: its walls go to the
+!>        solver settings (stokes_setup) and the backend imposes them;
 !>   2. contacts: the seed's collision strategy on (v, omega) at the predicted
 !>      configuration (`fold_contacts::resolve_contacts`, corrections summed over ranks
 !>      after every sweep);
