@@ -20,8 +20,8 @@ from pyfold.scene.hydrodynamics_evidence import auto_evidence
 from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY,
                                  Scene)
 
-__all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "backend_mismatch", "HYDRODYNAMICS_CODES", "COLLISION_CODES",
-           "SPHERE_INTERACTION_FRACTION"]
+__all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "backend_mismatch", "HYDRODYNAMICS_CODES",
+           "COLLISION_CODES", "SPHERE_INTERACTION_FRACTION"]
 
 HYDRODYNAMICS_CODES = {"jeffery": 0, "stokes": 1}
 # the Stokes code tables are those of the bindings (pyfold.native.stokes), shared with Fortran

@@ -239,7 +239,8 @@ def plot_snapshots(path: Path, r: dict, lengths, radius: float, case: str, hydro
         ax.set_title(f"t = {r['t'][k]:g} s: {int(r['overlaps'][k])} overlaps")
         ax.set_xlabel("x [m]")
     axes[0].set_ylabel("y [m]")
-    fig.suptitle(f"model.collisions = {CASES[case][0]!r}, α = {CASES[case][1]:g} m, hydrodynamics = {hydrodynamics}; red: overlapping")
+    fig.suptitle(f"model.collisions = {CASES[case][0]!r}, α = {CASES[case][1]:g} m, "
+                 f"hydrodynamics = {hydrodynamics}; red: overlapping")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
