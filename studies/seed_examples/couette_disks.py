@@ -299,7 +299,8 @@ def run(hydrodynamics: str, form: Form, out: Path, analyse_only: bool = False, f
     ds = xr.Dataset(
         {
             "overlaps": (("case", "seed", "time"), stack("overlaps"),
-                         {"units": "1", "long_name": "overlapping disk pairs + disks overlapping a wall, after the step"}),
+                         {"units": "1",
+                          "long_name": "overlapping disk pairs + disks overlapping a wall, after the step"}),
             "in_zone": (("case", "seed", "time"), stack("in_zone"),
                         {"units": "1", "long_name": "disk pairs with gap < alpha + disks nearer than alpha/2 to a "
                                                     "wall (beyond the contact loop's tolerance 64 eps max(L))"}),
