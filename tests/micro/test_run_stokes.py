@@ -97,6 +97,25 @@ def test_stokes_records_carry_units_and_are_consistent(sphere_run):
     assert np.all(ds["rigidity_mean"].values <= ds["rigidity_max"].values)
 
 
+def test_open_run_gives_the_wall_shear_stress_only_for_a_cell_with_walls(sphere_run, tmp_path):
+    """wall_shear_stress is the xy entry of stress (their equality is Stokes momentum
+    balance between walls, docs/scenes.md); a periodic run has none. The file is the
+    periodic run with /setup/resolved/walls set to 1: what the reader derives, not a flow."""
+    import shutil
+
+    import pyfold
+
+    ds, path = sphere_run
+    assert "wall_shear_stress" not in ds
+    walled = tmp_path / "walled.h5"
+    shutil.copy(path, walled)
+    with h5py.File(walled, "a") as f:
+        f["/setup/resolved/walls"][()] = 1
+    got = pyfold.open_run(walled)
+    assert got["wall_shear_stress"].dims == ("time",) and got["wall_shear_stress"].attrs["units"] == "Pa"
+    np.testing.assert_array_equal(got["wall_shear_stress"].values, ds["stress"].sel(i="x", j="y").values)
+
+
 def test_main_job_stokes_summary_reports_every_record_it_names(sphere_run):
     # the summary names its records in one tuple; each must be a variable of a real run
     from pyfold import pipeline
