@@ -106,7 +106,8 @@ def open_run(path: str | Path) -> xr.Dataset:
         ``a2_family(time, family, i, j)``, contact and drift records; Stokes runs
         also ``stokes_iterations``, ``stokes_residual``, ``rigidity_max``,
         ``rigidity_mean``, ``stress(time, i, j)`` [Pa] (deviatoric bulk stress) and
-        ``effective_viscosity(time)`` [Pa s]),
+        ``effective_viscosity(time)`` [Pa s]; with walls also ``wall_shear_stress(time)``
+        [Pa], the xy entry of ``stress``, which equals the stress on the walls in Stokes flow),
         snapshots ``x, p (snapshot, particle, xyz)`` with ``snapshot_time``,
         and the initial state ``initial_x, initial_p (particle, xyz)``,
         ``particle_shape, particle_family, particle_radius, particle_length,
@@ -170,6 +171,13 @@ def open_run(path: str | Path) -> xr.Dataset:
     if "particle_family" in ds:
         ds = ds.assign_coords(family_name=("particle", [names[int(k)] for k in ds["particle_family"].values]))
 
+    if int(res.get("walls", 0)) == 1 and "stress" in ds:
+        # Stokes flow between the walls, periodic in x, no body force: the x-momentum flux
+        # (1/Lx) integral of sigma_xy dx is the same on every plane y = const, so the cell
+        # average of sigma_xy (pressure has no xy part) is the shear stress on the walls.
+        ds["wall_shear_stress"] = ds["stress"].sel(i="x", j="y", drop=True).assign_attrs(
+            units="Pa", long_name="shear stress sigma_xy on the walls (= the cell-averaged sigma_xy of "
+            "stress in Stokes flow between walls)")
     attrs = dict(root_attrs)
     attrs["scene"] = json.dumps(setup.scene)
     attrs["scene_toml"] = setup.scene_toml

@@ -14,7 +14,9 @@
 !>        Adams-Bashforth 2 (3/2 v_n - 1/2 v_{n-1}; first step Euler). The solve of the configuration at t + dt is made at the end
 !>        of the step, so every record holds the bulk stress of the configuration at
 !>        its own time; the AB2 history is the uncorrected (hydrodynamic) velocity,
-!>        carried across a Lees-Edwards wrap with the same velocity jump;
+!>        carried across a Lees-Edwards wrap with the same velocity jump. A cell with
+!>        walls (Couette) has neither offset nor wrap in y: its walls go to the
+!>        solver settings (stokes_setup) and the backend imposes them;
 !>   2. contacts: the seed's collision strategy on (v, omega) at the predicted
 !>      configuration (`fold_contacts::resolve_contacts`, corrections summed over ranks
 !>      after every sweep);
@@ -662,8 +664,12 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       class(stokes_solver_t), allocatable :: solver
+      type(stokes_settings_t) :: set
 
-      call stokes_solver_create(setup%stokes, setup%dim, setup%stokes_grid, MPI_COMM_WORLD, solver, stat, errmsg)
+      ! walls are a property of the cell (fold_cell): the backend imposes them when set
+      set = setup%stokes
+      set%walls = setup%walls
+      call stokes_solver_create(set, setup%dim, setup%stokes_grid, MPI_COMM_WORLD, solver, stat, errmsg)
       if (stat /= FOLD_OK) then
          errmsg = "/setup/resolved/stokes_*: "//trim(errmsg)
          return

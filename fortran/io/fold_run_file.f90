@@ -17,7 +17,7 @@ module fold_run_file
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
    use fold_particles, only: particle_set_t, particles_init, particles_check
-   use fold_stokes_solver, only: stokes_settings_t, FOLD_STOKES_FFT, FOLD_KAPPA_MIN, FOLD_KAPPA_MAX
+   use fold_stokes_solver, only: stokes_settings_t, FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_KAPPA_MIN, FOLD_KAPPA_MAX
    use fold_h5, only: hid_t, hsize_t, h5_open_file, h5_close_file, h5_exists, h5_shape, &
                       h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
    implicit none
@@ -187,13 +187,6 @@ contains
       integer(i8) :: iv
       integer(i8), allocatable :: ibuf(:)
 
-      if (s%walls) then
-         ! The FFT solver is periodic; the wall (hypre) solver is not built.
-         call range_error(R//"hydrodynamics", "1 (stokes) needs a fully periodic cell: the FFT Stokes solver "// &
-                          "cannot impose walls; /setup/resolved/walls must be 0, or use hydrodynamics 0 (jeffery)", &
-                          stat, errmsg)
-         return
-      end if
       call h5_read_int_array(file, R//"stokes_grid", [3_hsize_t], ibuf, stat, errmsg); if (stat /= FOLD_OK) return
       if (any(ibuf(1:s%dim) < 2 .or. ibuf(1:s%dim) > 4096) .or. (s%dim == 2 .and. ibuf(3) /= 1)) then
          call range_error(R//"stokes_grid", "voxel counts in 2 ... 4096 along each of the dim axes, "// &
@@ -202,9 +195,20 @@ contains
       end if
       s%stokes_grid = int(ibuf, ip)
       s%stokes%eta_f = s%viscosity
-      call get_int(file, R//"stokes_backend", int(FOLD_STOKES_FFT, i8), int(FOLD_STOKES_FFT, i8), iv, stat, errmsg)
+      call get_int(file, R//"stokes_backend", int(FOLD_STOKES_FFT, i8), int(FOLD_STOKES_HYPRE, i8), iv, stat, errmsg)
       if (stat /= FOLD_OK) return
       s%stokes%backend = int(iv, ip)
+      ! Each backend solves one kind of cell (pyfold.native.stokes.backend_for): the FFT
+      ! basis is periodic (no walls); the staggered grid is rectangular (no Lees-Edwards lattice).
+      if (s%walls .and. s%stokes%backend /= FOLD_STOKES_HYPRE) then
+         call range_error(R//"stokes_backend", "a cell with walls (/setup/resolved/walls = 1) needs 2 (hypre): "// &
+                          "1 (fft) solves fully periodic cells only", stat, errmsg)
+         return
+      else if (.not. s%walls .and. s%stokes%backend /= FOLD_STOKES_FFT) then
+         call range_error(R//"stokes_backend", "a periodic cell in shear (/setup/resolved/walls = 0) needs 1 (fft): "// &
+                          "2 (hypre) has a rectangular grid, for cells with walls only", stat, errmsg)
+         return
+      end if
       call get_real(file, R//"stokes_tolerance", tiny(1.0_dp), 1.0_dp - epsilon(1.0_dp), s%stokes%tol, stat, errmsg)
       if (stat /= FOLD_OK) return
       call get_int(file, R//"stokes_max_iterations", 1_i8, 1000000_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return

@@ -29,7 +29,7 @@ from pyfold.native import load
 # fold_fft_backend.f90 (FOLD_PLAN_*); the scene schema, the normaliser (what
 # /setup/resolved holds) and these bindings use them, and
 # tests/micro/test_code_tables.py checks them against the Fortran sources.
-BACKENDS = {"fft": 1}
+BACKENDS = {"fft": 1, "hypre": 2}
 DERIVATIVES = {"spectral": 0, "fd": 1}
 MIXINGS = {"arithmetic": 0, "harmonic": 1, "geometric": 2}
 FIBRE_ENDS = {"flat": 0, "capped": 1}
@@ -37,6 +37,24 @@ GUESSES = {"previous": 1, "extrapolate": 2}
 SCHEMES = {"euler": 1, "ab2": 2}
 FFT_PLANS = {"estimate": 0, "measure": 1}
 SHAPES = {"fibre": 1, "sphere": 2, "spheroid": 3}
+
+#: The backend choice that has no code: :func:`backend_for` resolves it from the cell
+#: (the normaliser writes the resolved code to /setup/resolved/stokes_backend).
+AUTO_BACKEND = "auto"
+#: Every word numerics.stokes.backend accepts: the coded backends and "auto".
+BACKEND_CHOICES = (AUTO_BACKEND, *BACKENDS)
+
+
+def backend_for(walls: bool) -> str:
+    """The backend ``"auto"`` stands for: ``"hypre"`` (staggered grid with no-slip
+    walls at y = 0, Ly) in a cell with walls, ``"fft"`` (periodic, Lees–Edwards) otherwise.
+
+    The two backends are not interchangeable: the FFT solver's Fourier basis is
+    periodic, so it cannot impose walls; hypre's staggered grid is rectangular, so it
+    cannot follow the sheared Lees–Edwards lattice of a periodic cell in shear.
+    """
+    return "hypre" if walls else "fft"
+
 
 #: Bounds of the viscosity contrast kappa = eta_solid / eta_f (fold_stokes_solver
 #: FOLD_KAPPA_MIN, FOLD_KAPPA_MAX; fold_run_file refuses the same range). kappa = 1 is
@@ -49,7 +67,7 @@ KAPPA_MIN, KAPPA_MAX = 1.0, 1.0e12
 #: scene schema (pyfold.scene.schema.StokesSettings, names of the scene file) and
 #: StokesSettings below (names of the bindings) both take them from here.
 DEFAULTS = {
-    "backend": "fft",
+    "backend": AUTO_BACKEND,
     "tolerance": 1.0e-6,
     "max_iterations": 1000,
     "kappa": 1.0e3,
@@ -87,7 +105,8 @@ class StokesSettings:
         ``"extrapolate"`` (2 x_n − x_(n−1) of the last two).
     measure_plans : FFTW_MEASURE plans (seconds to make, faster transforms; repeated
         runs agree to the solver tolerance) or FFTW_ESTIMATE (bitwise reproducible).
-    backend : the Stokes backend (only ``"fft"``).
+    backend : the Stokes backend, a word of :data:`BACKEND_CHOICES` (the bindings below
+        solve periodic cells, for which ``"auto"`` is ``"fft"``: :func:`backend_for`).
 
     Defaults: :data:`DEFAULTS` (shared with the scene file).
     """
@@ -115,7 +134,7 @@ class StokesSettings:
         if int(self.max_iter) < 1:
             raise InputError(f"max_iter: must be >= 1, got {self.max_iter}")
         for key, table in (("derivative", DERIVATIVES), ("mixing", MIXINGS), ("fibre_ends", FIBRE_ENDS),
-                           ("guess", GUESSES), ("backend", BACKENDS)):
+                           ("guess", GUESSES), ("backend", BACKEND_CHOICES)):
             if getattr(self, key) not in table:
                 raise InputError(f"{key}: must be one of {sorted(table)}, got {getattr(self, key)!r}")
         if not 1 <= int(self.subsamples) <= 8:

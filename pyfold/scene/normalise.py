@@ -20,8 +20,8 @@ from pyfold.scene.hydrodynamics_evidence import auto_evidence
 from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY,
                                  Scene)
 
-__all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "HYDRODYNAMICS_CODES", "COLLISION_CODES",
-           "SPHERE_INTERACTION_FRACTION"]
+__all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "backend_mismatch", "HYDRODYNAMICS_CODES",
+           "COLLISION_CODES", "SPHERE_INTERACTION_FRACTION"]
 
 HYDRODYNAMICS_CODES = {"jeffery": 0, "stokes": 1}
 # the Stokes code tables are those of the bindings (pyfold.native.stokes), shared with Fortran
@@ -181,7 +181,8 @@ class ResolvedScene:
         return {
             "stokes_grid": (np.array(self.stokes_grid, np.int32), "1",
                             "Stokes grid voxel counts along a1, a2, a3 (1 along a3 in 2-D)"),
-            "stokes_backend": (np.int32(stokes_codes.BACKENDS[st.backend]), "1", "Stokes backend: 1 fft"),
+            "stokes_backend": (np.int32(stokes_codes.BACKENDS[st.backend]), "1",
+                               "Stokes backend: 1 fft (periodic cell), 2 hypre (cell with walls)"),
             "stokes_tolerance": (float(st.tolerance), "1", "relative preconditioned CG residual of a Stokes solve"),
             "stokes_max_iterations": (np.int32(st.max_iterations), "1", "CG iteration cap of a Stokes solve"),
             "stokes_kappa": (float(st.kappa), "1", "viscosity contrast kappa = eta_solid / eta_fluid"),
@@ -777,14 +778,18 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
         problems.add("model.hydrodynamics", "'stokes' is available for simple shear only: the FFT Stokes solver has "
                      f"no deforming (elongational) lattice yet (flow.type = {scene.flow.type!r}); use "
                      "hydrodynamics = 'jeffery'")
-    if model.hydrodynamics == "stokes" and walls:
-        problems.add("model.hydrodynamics", "'stokes' needs a fully periodic cell: the FFT Stokes solver cannot impose "
-                     "the no-slip walls of cell.boundary = 'couette' (a wall-bounded solver is not built); use "
-                     "cell.boundary = 'periodic' (Lees-Edwards shear) or hydrodynamics = 'jeffery'")
     st = scene.numerics.stokes
+    # The backend: "auto" is the backend of the cell (pyfold.native.stokes.backend_for);
+    # an explicit one must be that backend, since neither can do the other's cell.
+    backend = stokes_codes.backend_for(walls)
+    backend_text = backend_mismatch(st.backend, walls)
+    if model.hydrodynamics == "stokes" and backend_text:
+        problems.add("numerics.stokes.backend", backend_text)
     # The Stokes grid is computed only when hydrodynamics can be stokes (requested, or
-    # auto in a periodic simple shear); bounded by max_grid_points before any rounding.
-    stokes_possible = model.hydrodynamics == "stokes" or (model.hydrodynamics == "auto" and shear_flow and not walls)
+    # auto in a simple shear with a backend for the cell); bounded by max_grid_points
+    # before any rounding.
+    stokes_possible = model.hydrodynamics == "stokes" or (model.hydrodynamics == "auto" and shear_flow
+                                                          and not backend_text)
     grid = stokes_grid(lengths[:dim], 2.0 * min(radii), st.cells_per_diameter,
                        max_points=st.max_grid_points) if stokes_possible else None
     grid_points = int(np.prod(grid, dtype=object)) if grid is not None else 0
@@ -796,12 +801,14 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                      f"lower numerics.stokes.cells_per_diameter or the cell size")
     voxel_text = ""
     if grid is not None and grid_points <= st.max_grid_points and good and G is not None and shear_flow:
-        span = _voxel_span_violation(grid, lengths, dim, good, float(G[0, 1]), scene.numerics.t_end)
+        # walls: the lattice stays rectangular (no Lees-Edwards offset widens the span)
+        g_xy = 0.0 if walls else float(G[0, 1])
+        span = _voxel_span_violation(grid, lengths, dim, good, g_xy, scene.numerics.t_end)
         if span is not None:
             ax, voxels, n_ax = span
             better = next((c for c in range(st.cells_per_diameter + 1, 65)
                            if _voxel_span_violation(stokes_grid(lengths[:dim], 2.0 * min(radii), c), lengths, dim,
-                                                    good, float(G[0, 1]), scene.numerics.t_end) is None), None)
+                                                    good, g_xy, scene.numerics.t_end) is None), None)
             voxel_text = (f"a particle spans up to {voxels:.3g} voxels along lattice direction {ax + 1} of the "
                           f"{' x '.join(map(str, grid[:dim]))} Stokes grid, more than {n_ax} - 2 (the voxeliser keeps "
                           "a particle two voxels clear of its own periodic image, fortran/grid/fold_voxelise.f90; "
@@ -963,10 +970,10 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
             reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but the FFT "
                            "Stokes solver has no deforming (elongational) lattice; hydrodynamic interactions are "
                            "neglected, an approximation in this regime")
-        elif walls:
-            reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but the FFT "
-                           "Stokes solver is periodic and this cell has Couette walls; hydrodynamic interactions "
-                           "are neglected, an approximation in this regime")
+        elif backend_text:
+            reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but "
+                           f"numerics.stokes.backend = {st.backend!r} cannot solve this cell ({backend_text}); "
+                           "hydrodynamic interactions are neglected, an approximation in this regime")
         elif voxel_text:
             reasons.insert(0, f"hydrodynamics = jeffery (auto): {regime_text}, interactions matter, but {voxel_text}; "
                            "hydrodynamic interactions are neglected, an approximation in this regime")
@@ -980,11 +987,20 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                            f"the {grid_text} is within numerics.stokes.max_grid_points = {st.max_grid_points}")
         # The measured effect of neglecting hydrodynamics on C_I in this regime (fibres), and
         # what the chosen model costs in C_I accuracy (pyfold/scene/hydrodynamics_evidence.py).
+        # The measured rows are periodic Lees-Edwards cells: none for a cell with walls.
         if regime != "spheres" and not has_spheres and dim == 3:
-            reasons[0] += auto_evidence(regime, hydrodynamics)
+            reasons[0] += (auto_evidence(regime, hydrodynamics) if not walls else
+                           "; no measured C_I evidence for cells with walls (the rows of "
+                           "pyfold/scene/hydrodynamics_evidence.py are periodic cells): this choice rests on the "
+                           "regime alone")
     else:
         extra = f" ({grid_text})" if hydrodynamics == "stokes" else ""
         reasons.insert(0, f"hydrodynamics = {hydrodynamics} (requested){extra}")
+    if hydrodynamics == "stokes":
+        how = "auto: " if st.backend == stokes_codes.AUTO_BACKEND else "requested; "
+        reasons.insert(1, f"Stokes backend = {backend} ({how}" + (
+            "the cell has no-slip walls at y = 0 and y = Ly, which the staggered-grid hypre solver imposes)"
+            if walls else "the cell is periodic, the FFT solver follows its Lees-Edwards lattice)"))
     G3 = np.zeros((3, 3))
     G3[:dim, :dim] = G
     from pyfold.kinematics import shear_rate
@@ -1025,6 +1041,8 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
     normalised = scene.model_copy(update={
         "particles": fam_tables,
         "model": model.model_copy(update={"hydrodynamics": hydrodynamics, "collisions": collisions, "alpha": alpha}),
+        **({"numerics": num.model_copy(update={"stokes": st.model_copy(update={"backend": backend})})}
+           if hydrodynamics == "stokes" else {}),
         "output": out.model_copy(update={
             "interval": every["interval"] * num.dt,
             "snapshot_interval": every["snapshot_interval"] * num.dt,
@@ -1043,6 +1061,21 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
         regime_measure=measure, regime_threshold=longest.aspect_ratio, warnings=tuple(warnings),
         stokes_grid=grid if hydrodynamics == "stokes" else None,
     )
+
+
+def backend_mismatch(choice: str, walls: bool) -> str:
+    """Why ``numerics.stokes.backend = choice`` cannot solve a cell with (``walls``) or
+    without no-slip walls, with the allowed choices; empty when it can (``"auto"``
+    always can: pyfold.native.stokes.backend_for)."""
+    fits = stokes_codes.backend_for(walls)
+    if choice in (stokes_codes.AUTO_BACKEND, fits):
+        return ""
+    allowed = f"allowed: {fits!r} or {stokes_codes.AUTO_BACKEND!r}, got {choice!r}"
+    if walls:
+        return (f"'{choice}' solves fully periodic cells only: its Fourier basis cannot impose the no-slip walls of "
+                f"cell.boundary = 'couette'; {allowed}")
+    return (f"'{choice}' is for cells with walls (cell.boundary = 'couette'): its staggered grid is rectangular and "
+            f"cannot follow the Lees-Edwards lattice of a periodic cell in shear; {allowed}")
 
 
 #: FFT sizes FFTW handles with its fastest codelets: 2^a 3^b 5^c 7^d.

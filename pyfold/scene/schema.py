@@ -183,8 +183,10 @@ class StokesSettings(_Table):
     ``/setup/resolved`` and read from there by ``fold_run``.
     """
 
-    #: Stokes backend: "fft" (FFT-preconditioned CG on the periodic cell)
-    backend: Literal["fft"] = _STOKES["backend"]
+    #: Stokes backend: "fft" (FFT-preconditioned CG on the periodic, Lees-Edwards cell),
+    #: "hypre" (staggered grid with no-slip walls: cell.boundary = "couette" only) or
+    #: "auto" (hypre when the cell has walls, fft otherwise; pyfold.native.stokes.backend_for)
+    backend: Literal["auto", "fft", "hypre"] = _STOKES["backend"]
     #: relative (preconditioned) residual at which the conjugate-gradient solve stops [-]
     tolerance: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] = _STOKES["tolerance"]
     #: CG iteration cap per solve; reaching it stops the run (exit 1, residual reached)

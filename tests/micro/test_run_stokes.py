@@ -15,6 +15,8 @@ import tomli_w
 
 from test_run_common import FFT_PLAN, require_fold_run, run_fold, stokes_settings, write_run_file, xi_of
 
+from pyfold.native import stokes as stokes_codes
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -93,6 +95,25 @@ def test_stokes_records_carry_units_and_are_consistent(sphere_run):
     assert (ds["effective_viscosity"].values[0] - 1.0) / phi == pytest.approx(2.5, rel=0.10)
     assert np.all(ds["rigidity_max"].values < 0.01)  # ~1/kappa, kappa = 1e3
     assert np.all(ds["rigidity_mean"].values <= ds["rigidity_max"].values)
+
+
+def test_open_run_gives_the_wall_shear_stress_only_for_a_cell_with_walls(sphere_run, tmp_path):
+    """wall_shear_stress is the xy entry of stress (their equality is Stokes momentum
+    balance between walls, docs/scenes.md); a periodic run has none. The file is the
+    periodic run with /setup/resolved/walls set to 1: what the reader derives, not a flow."""
+    import shutil
+
+    import pyfold
+
+    ds, path = sphere_run
+    assert "wall_shear_stress" not in ds
+    walled = tmp_path / "walled.h5"
+    shutil.copy(path, walled)
+    with h5py.File(walled, "a") as f:
+        f["/setup/resolved/walls"][()] = 1
+    got = pyfold.open_run(walled)
+    assert got["wall_shear_stress"].dims == ("time",) and got["wall_shear_stress"].attrs["units"] == "Pa"
+    np.testing.assert_array_equal(got["wall_shear_stress"].values, ds["stress"].sel(i="x", j="y").values)
 
 
 def test_main_job_stokes_summary_reports_every_record_it_names(sphere_run):
@@ -199,22 +220,52 @@ def test_dilute_spheroid_follows_jeffery_with_its_discrete_shape_factor(tmp_path
     assert np.abs(theta - orbit(0.8)).max() > 8e-3  # the continuum lambda is distinguishable
 
 
-def test_stokes_with_couette_walls_rejected_with_exit_2(tmp_path, capsys):
+def test_stokes_backend_that_cannot_solve_the_cell_is_refused_with_exit_2(tmp_path, capsys):
+    """fft cannot impose walls; hypre's rectangular grid cannot follow a Lees-Edwards
+    lattice: the scene is refused naming numerics.stokes.backend, the run file naming
+    /setup/resolved/stokes_backend, before any solver is made."""
     from pyfold.cli import main
 
-    scene = _scene(tmp_path, "walls", **{"cell.boundary": "couette"})
-    out = tmp_path / "walls.h5"
-    assert main(["run", str(scene), "-o", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert "model.hydrodynamics" in err and "periodic" in err
-    assert not out.exists()
-    # and fold_run itself refuses such a run file, naming the dataset
+    for name, over in (("fft_walls", {"cell.boundary": "couette", "numerics.stokes.backend": "fft"}),
+                       ("hypre_periodic", {"numerics.stokes.backend": "hypre"})):
+        scene = _scene(tmp_path, name, **over)
+        out = tmp_path / f"{name}.h5"
+        assert main(["run", str(scene), "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert "numerics.stokes.backend" in err and "allowed" in err, err
+        assert not out.exists()
     require_fold_run()
-    path = tmp_path / "walls_direct.h5"
-    write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.1, length=0.2, xi=0.0, shape=[2],
-                   walls=1, stokes={})
-    proc = run_fold(path)
-    assert proc.returncode == 2 and "/setup/resolved/hydrodynamics" in proc.stderr, proc.stderr
+    for name, walls, backend in (("fft_walls_direct", 1, 1), ("hypre_periodic_direct", 0, 2)):
+        path = tmp_path / f"{name}.h5"
+        write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.1, length=0.2, xi=0.0, shape=[2],
+                       walls=walls, stokes={"stokes_backend": np.int64(backend)})
+        proc = run_fold(path)
+        assert proc.returncode == 2 and "/setup/resolved/stokes_backend" in proc.stderr, proc.stderr
+
+
+def test_stokes_in_a_couette_cell_resolves_to_hypre_and_runs_once_the_backend_is_built(tmp_path, capsys):
+    """backend = "auto" in a cell with walls writes code 2 (hypre); fold_run passes the
+    walls to the solver. Until fold_stokes_factory builds hypre it says so (exit 2),
+    and then this test skips; once built, the run must finish with a wall shear stress."""
+    import pyfold
+    from pyfold.cli import main
+    from pyfold.scene import load_scene
+
+    scene = _scene(tmp_path, "walls", **{"cell.boundary": "couette"})
+    res = load_scene(scene)
+    assert res.walls and res.hydrodynamics == "stokes"
+    assert int(res.resolved_datasets()["stokes_backend"][0]) == stokes_codes.BACKENDS["hypre"]
+    require_fold_run()
+    out = tmp_path / "walls.h5"
+    code = main(["run", str(scene), "-o", str(out)])
+    err = capsys.readouterr().err
+    if code == 2 and "not available in this build" in err:
+        pytest.skip("fold_stokes_factory: backend 2 (hypre) not available in this build")
+    assert code == 0, err
+    ds = pyfold.open_run(out)
+    # the sphere at the centre of a sheared gap: the walls carry the shear stress, which
+    # the suspension raises above the fluid's eta * rate (a rigid inclusion)
+    assert np.all(ds["wall_shear_stress"].values > 1.0)
 
 
 def test_stokes_non_convergence_exits_1_with_residual_and_keeps_last_good_state(tmp_path):
@@ -259,7 +310,11 @@ SPHEROIDS = {"shape": "spheroid", "radius": 0.0625, "aspect_ratio": 3.0}
      "exceeds numerics.stokes.max_grid_points"),                                               # 96^3
     (dict(SPHEROIDS, count=20), {"numerics": {"stokes": {"cells_per_diameter": 12, "max_grid_points": 96**3}}},
      "stokes", "within"),
-    (dict(SPHEROIDS, count=20), {"boundary": "couette"}, "jeffery", "Couette walls"),
+    (dict(SPHEROIDS, count=20), {"boundary": "couette"}, "stokes", "no measured C_I evidence for cells with walls"),
+    (dict(SPHEROIDS, count=20), {"boundary": "couette", "numerics": {"stokes": {"backend": "fft"}}}, "jeffery",
+     "numerics.stokes.backend = 'fft' cannot solve this cell"),
+    (dict(SPHEROIDS, count=20), {"numerics": {"stokes": {"backend": "hypre"}}}, "jeffery",
+     "numerics.stokes.backend = 'hypre' cannot solve this cell"),
     ({"shape": "sphere", "radius": 0.1, "volume_fraction": 0.1}, {}, "stokes", "spheres"),     # phi >= 0.05
     ({"shape": "sphere", "radius": 0.1, "volume_fraction": 0.02}, {}, "jeffery", "Batchelor & Green"),
 ])
@@ -269,6 +324,11 @@ def test_auto_picks_stokes_only_when_interactions_matter_and_the_grid_fits(famil
     assert said in r.reason and r.reason.startswith(f"hydrodynamics = {choice} (auto)")
     datasets = r.resolved_datasets()
     assert ("stokes_grid" in datasets) == (choice == "stokes")
+    if choice == "stokes":
+        # "auto" has no code: the resolved backend is written, the cell's one
+        backend = "hypre" if r.walls else "fft"
+        assert int(datasets["stokes_backend"][0]) == stokes_codes.BACKENDS[backend]
+        assert r.scene.numerics.stokes.backend == backend and f"Stokes backend = {backend} (auto" in r.reason
 
 
 def test_bundled_stokes_scene_is_a_stokes_scene_within_budget():

@@ -75,12 +75,33 @@ def test_stokes_and_run_file_code_tables_agree_with_fortran(key):
 
 
 def test_scene_choices_are_the_keys_of_the_stokes_code_tables():
-    """Every word the scene accepts for a Stokes setting has a code, and every code a word."""
+    """Every word the scene accepts for a Stokes setting has a code, and every code a word,
+    except the backend's "auto", which the normaliser resolves to a coded backend."""
     fields = StokesSettings.model_fields
     for key, table in (("backend", stokes.BACKENDS), ("derivative", stokes.DERIVATIVES),
                        ("mixing", stokes.MIXINGS), ("fibre_ends", stokes.FIBRE_ENDS),
                        ("initial_guess", stokes.GUESSES), ("fft_plan", stokes.FFT_PLANS)):
-        assert set(fields[key].annotation.__args__) == set(table), key
+        words = set(fields[key].annotation.__args__)
+        if key == "backend":
+            assert stokes.AUTO_BACKEND in words and stokes.AUTO_BACKEND not in table
+            assert set(stokes.BACKEND_CHOICES) == words
+            words -= {stokes.AUTO_BACKEND}
+        assert words == set(table), key
+
+
+@pytest.mark.parametrize("walls", [False, True])
+def test_auto_backend_resolves_to_the_coded_backend_of_the_cell(walls):
+    """"auto" is hypre with walls, fft without; the other backend is refused for that cell."""
+    chosen = stokes.backend_for(walls)
+    assert chosen in stokes.BACKENDS and chosen == ("hypre" if walls else "fft")
+    boundary = "couette" if walls else "periodic"
+    text = (REPO / "data/scenes/stokes_small.toml").read_text().replace(
+        "[cell]", f'[cell]\nboundary = "{boundary}"').replace('hydrodynamics = "auto"', 'hydrodynamics = "stokes"')
+    res = parse_scene(text)
+    assert int(res.resolved_datasets()["stokes_backend"][0]) == stokes.BACKENDS[chosen]
+    other = next(b for b in stokes.BACKENDS if b != chosen)
+    with pytest.raises(ValueError, match=rf"numerics.stokes.backend: '{other}'.*allowed: '{chosen}' or 'auto'"):
+        parse_scene(text.replace("[numerics.stokes]", f'[numerics.stokes]\nbackend = "{other}"'))
 
 
 def test_stokes_defaults_have_one_source():
