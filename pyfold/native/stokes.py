@@ -139,6 +139,10 @@ class StokesSettings:
                 raise InputError(f"{key}: must be one of {sorted(table)}, got {getattr(self, key)!r}")
         if not 1 <= int(self.subsamples) <= 8:
             raise InputError(f"subsamples: must be in 1..8, got {self.subsamples}")
+        if self.backend not in (AUTO_BACKEND, backend_for(walls=False)):
+            raise InputError(f"backend: these bindings solve fully periodic cells with the FFT solver; "
+                             f"allowed: 'fft' or 'auto', got {self.backend!r} (walled cells run through "
+                             f"fold_run, numerics.stokes.backend)")
 
     def codes(self) -> dict:
         return dict(eta_f=float(self.eta_f), kappa=float(self.kappa), tol=float(self.tol),

@@ -171,3 +171,12 @@ def test_normalised_stokes_scene_writes_every_solver_setting():
     assert got == {"stokes_backend": stokes.BACKENDS["fft"], "stokes_mixing": stokes.MIXINGS["geometric"],
                    "stokes_subsamples": 5, "stokes_fibre_ends": stokes.FIBRE_ENDS["capped"], "stokes_warm_start": 0,
                    "stokes_fft_plan": stokes.FFT_PLANS["estimate"]}
+
+
+def test_the_bindings_refuse_a_backend_they_do_not_run():
+    """The bindings solve periodic cells with the FFT solver only: 'hypre' must not pass
+    validation there and then be solved by FFT."""
+    assert stokes.StokesSettings(backend="auto").backend == "auto"
+    assert stokes.StokesSettings(backend="fft").backend == "fft"
+    with pytest.raises(ValueError, match="backend.*'fft' or 'auto'"):
+        stokes.StokesSettings(backend="hypre")
