@@ -52,7 +52,7 @@ module fold_voxelise
 contains
 
    !> Voxelise every particle of parts on grid; vox keeps its storage between calls.
-   subroutine voxelise(grid, parts, subsamples, ends, vox, stat, errmsg)
+   subroutine voxelise(grid, parts, subsamples, ends, vox, stat, errmsg, walls)
       type(grid_t), intent(in) :: grid
       type(particle_set_t), intent(in) :: parts
       !> Sub-samples per voxel edge (1 .. 8)
@@ -62,13 +62,20 @@ contains
       type(voxel_set_t), intent(inout) :: vox
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> No-slip walls at y = 0 and Ly (Couette cell; default: none): the grid is not
+      !> periodic in y, so the part of a particle beyond a wall (a particle that has
+      !> crossed it, which the contact step reports) is outside the fluid domain and
+      !> is dropped instead of wrapping onto the opposite wall
+      logical, intent(in), optional :: walls
 
       integer(ip) :: k, dim, ns, s1, s2, s3, is, m(3), lo(3), hi(3), g(3), l(3), i1, i2, i3, nsub
       integer(i8) :: cnt
       real(dp), allocatable :: dr(:, :)
       real(dp) :: xk(3), pk(3), c(3), ext(3), span(3), r(3), w, margin, phi, f, hseg
-      logical :: inside_slab
+      logical :: inside_slab, bounded_y
 
+      bounded_y = .false.
+      if (present(walls)) bounded_y = walls
       stat = FOLD_INPUT_ERROR
       errmsg = ""
       dim = grid%dim
@@ -139,6 +146,7 @@ contains
             do i2 = lo(2), hi(2)
                do i1 = lo(1), hi(1)
                   m = [i1, i2, i3]
+                  if (bounded_y .and. (i2 < 0 .or. i2 >= grid%n(2))) cycle
                   g = modulo(m, grid%n)
                   inside_slab = all(g >= grid%off .and. g < grid%off + grid%nl)
                   if (.not. inside_slab) cycle
