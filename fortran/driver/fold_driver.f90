@@ -58,7 +58,7 @@ module fold_driver
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
-                               stokes_rigid_velocities
+                               stokes_rigid_velocities, stokes_context_lubrication
    use fold_time_scheme, only: FOLD_AB2, scheme_velocity
    use fold_output, only: run_output_t, run_record_t, record_init, output_open, output_resume, output_record, &
                           output_snapshot, output_checkpoint, output_status, output_close, output_failed_status, &
@@ -155,6 +155,7 @@ contains
             call finish_early(stat == FOLD_INPUT_ERROR)
             return
          end if
+         call stokes_context_lubrication(ctx, setup%lubrication, setup%alpha)
          allocate (v_hyd(parts%dim, parts%n), w_hyd(3, parts%n), v_prev(parts%dim, parts%n), w_prev(3, parts%n))
          allocate (v_sb(parts%dim, parts%n), w_sb(3, parts%n), v_est(parts%dim, parts%n), w_est(3, parts%n))
          v_sb = 0.0_dp
@@ -173,8 +174,8 @@ contains
                trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
          end if
       end if
-      if (setup%lubrication .and. rank == 0) write (output_unit, '(a)') &
-         "fold_run: note: lubrication = 1 has no effect: the rigid velocities come from the flow, not from a force balance"
+      if (setup%lubrication .and. .not. stokes .and. rank == 0) write (output_unit, '(a)') &
+         "fold_run: note: lubrication = 1 acts with the Stokes solver only (docs/physics.md#lubrication-between-spheres)"
 
       first = int(int(rank, i8)*parts%n/nranks + 1, ip)
       last = int(int(rank + 1, i8)*parts%n/nranks, ip)
