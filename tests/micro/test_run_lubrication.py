@@ -79,3 +79,54 @@ def test_lubrication_beyond_the_threshold_leaves_the_run_bitwise_unchanged(tmp_p
         assert np.array_equal(_velocities(on), _velocities(off))
         assert np.array_equal(on["/checkpoint/x"][()], off["/checkpoint/x"][()])
         assert np.array_equal(on["stress"][()], off["stress"][()])
+
+
+def _scene(dim=3, cell=1.0, hydrodynamics="stokes", cells_per_diameter=4, shape="sphere"):
+    import tomli_w
+
+    from pyfold.scene import parse_scene
+
+    part = {"name": "balls", "shape": shape, "radius": 0.1, "count": 4}
+    if shape == "fibre":
+        part["length"] = 0.3
+    data = {
+        "cell": {"dim": dim, "size": [cell] * dim},
+        "flow": {"type": "simple_shear", "rate": 1.0},
+        "particles": [part],
+        "model": {"hydrodynamics": hydrodynamics, "lubrication": True},
+        "numerics": {"dt": 0.01, "t_end": 0.1, "stokes": {"cells_per_diameter": cells_per_diameter}},
+    }
+    return parse_scene(tomli_w.dumps(data))
+
+
+def test_lubrication_threshold_rule_is_the_fortran_one():
+    """The scene layer's copy of h_c / voxel (for its cell-size check) equals the Fortran parameter."""
+    import re
+    from pathlib import Path
+
+    from pyfold.scene.normalise import LUBRICATION_THRESHOLD_VOXELS
+
+    src = (Path(__file__).resolve().parents[2] / "fortran/contact/fold_lubrication.f90").read_text()
+    found = re.search(r"LUB_THRESHOLD_VOXELS\s*=\s*([0-9.]+)_dp", src)
+    assert found and float(found.group(1)) == LUBRICATION_THRESHOLD_VOXELS
+
+
+def test_lubrication_is_refused_without_spheres_in_3d_and_warned_without_stokes():
+    from pyfold.errors import InputError
+
+    with pytest.raises(InputError, match=r"model\.lubrication.*dim = 2"):
+        _scene(dim=2, hydrodynamics="jeffery")
+    with pytest.raises(InputError, match=r"model\.lubrication.*no sphere family"):
+        _scene(shape="fibre", hydrodynamics="jeffery")
+    jeffery = _scene(hydrodynamics="jeffery")
+    assert any(w.startswith("model.lubrication: has no effect") for w in jeffery.warnings)
+    stokes = _scene()
+    assert stokes.lubrication and not any("lubrication" in w for w in stokes.warnings)
+
+
+def test_lubrication_pair_range_must_fit_the_cell():
+    """1 voxel per diameter: h = 0.2, h_c = 0.4, range 2R + h_c = 0.6 > half the unit cell."""
+    from pyfold.errors import InputError
+
+    with pytest.raises(InputError, match=r"model\.lubrication: the lubrication pair search range 2 R \+ h_c = 0\.6"):
+        _scene(cells_per_diameter=1)
