@@ -205,12 +205,12 @@ contains
          if (resume) then
             if (stokes) then
                call output_resume(out, path, parts, setup%n_families, nranks, step0, t, stat, errmsg, stokes, &
-                                  v_prev, w_prev, have_prev)
+                                  v_prev, w_prev, have_prev, lubrication=setup%lubrication)
             else
                call output_resume(out, path, parts, setup%n_families, nranks, step0, t, stat, errmsg)
             end if
          else
-            call output_open(out, path, parts, setup%n_families, nranks, stat, errmsg, stokes)
+            call output_open(out, path, parts, setup%n_families, nranks, stat, errmsg, stokes, setup%lubrication)
          end if
       end if
       call share_status(stat, errmsg)
@@ -518,6 +518,8 @@ contains
             rec%rigidity_mean = max(rec%rigidity_mean, srec%rigidity_mean)
             rec%stress = srec%bulk%sigma(1:parts%dim, 1:parts%dim)
             rec%effective_viscosity = srec%bulk%eta_eff
+            rec%lubricated_pairs = max(rec%lubricated_pairs, int(srec%lub%pairs, i8))
+            rec%lubrication_correction = max(rec%lubrication_correction, srec%lub%max_correction)
          end if
          if (sstat == FOLD_OK) then
             if (.not. (all(abs(v_hyd) <= huge(1.0_dp)) .and. all(abs(w_hyd) <= huge(1.0_dp)))) then
@@ -775,6 +777,8 @@ contains
       rec%stokes_residual = 0.0_dp
       rec%rigidity_max = 0.0_dp
       rec%rigidity_mean = 0.0_dp
+      rec%lubricated_pairs = 0
+      rec%lubrication_correction = 0.0_dp
    end subroutine reset_record
 
    !> Fold one step's contact statistics and drifts into the interval aggregates.

@@ -30,14 +30,18 @@ ALPHA = 0.01
 EPS = np.finfo(float).eps
 
 
-def _run(tmp_path, name: str, gap: float, lubrication: int) -> h5py.File:
+def _write(path, gap: float, lubrication: int, steps: int = 1) -> None:
     n = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
     half = 0.5 * (2.0 * R + gap)
     x = np.array([[0.5, 0.5, 0.5]]) + np.array([[-1.0], [1.0]]) * half * n
-    path = tmp_path / f"{name}.h5"
     write_run_file(path, x=x, p=[[1.0, 0.0, 0.0]] * 2, radius=R, length=2.0 * R, xi=0.0, shape=[2, 2],
-                   dt=0.01, t_end=0.01, collisions=2, alpha=ALPHA, lubrication=lubrication, checkpoint_every=1,
-                   stokes={"stokes_grid": (N, N, N), "time_scheme": np.int64(1)})
+                   dt=0.01, t_end=0.01 * steps, collisions=2, alpha=ALPHA, lubrication=lubrication,
+                   checkpoint_every=1, stokes={"stokes_grid": (N, N, N), "time_scheme": np.int64(1)})
+
+
+def _run(tmp_path, name: str, gap: float, lubrication: int) -> h5py.File:
+    path = tmp_path / f"{name}.h5"
+    _write(path, gap, lubrication)
     proc = run_fold(path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return h5py.File(path)
@@ -52,6 +56,13 @@ def test_lubrication_slows_the_approach_by_the_closed_form_factor(tmp_path):
     with _run(tmp_path, "off", gap, 0) as off, _run(tmp_path, "on", gap, 1) as on:
         v_off, v_on = _velocities(off), _velocities(on)
         x0 = off["/initial/x"][()]
+        # the records of the lubrication (only in the run that has it): record 0 holds the
+        # solve of the starting configuration, whose correction the step used
+        assert "lubricated_pairs" not in off and "lubrication_correction" not in off
+        pairs, corr = on["lubricated_pairs"][()], on["lubrication_correction"][()]
+        assert on["lubrication_correction"].attrs["units"] in (b"m/s", "m/s")
+    assert pairs[0] == 1
+    assert corr[0] == pytest.approx(np.linalg.norm(v_on[0] - v_off[0]), rel=1e-12)
     n = (x0[0] - x0[1]) / np.linalg.norm(x0[0] - x0[1])  # from sphere 2 to sphere 1
     w_off = np.dot(v_off[0] - v_off[1], n)
     w_on = np.dot(v_on[0] - v_on[1], n)
@@ -79,6 +90,7 @@ def test_lubrication_beyond_the_threshold_leaves_the_run_bitwise_unchanged(tmp_p
         assert np.array_equal(_velocities(on), _velocities(off))
         assert np.array_equal(on["/checkpoint/x"][()], off["/checkpoint/x"][()])
         assert np.array_equal(on["stress"][()], off["stress"][()])
+        assert np.all(on["lubricated_pairs"][()] == 0) and np.all(on["lubrication_correction"][()] == 0.0)
 
 
 def _scene(dim=3, cell=1.0, hydrodynamics="stokes", cells_per_diameter=4, shape="sphere"):
@@ -130,3 +142,25 @@ def test_lubrication_pair_range_must_fit_the_cell():
 
     with pytest.raises(InputError, match=r"model\.lubrication: the lubrication pair search range 2 R \+ h_c = 0\.6"):
         _scene(cells_per_diameter=1)
+
+
+def test_lubrication_records_survive_a_resume(tmp_path):
+    """0 -> 4 steps in one go and 0 -> 2 then --resume to 4: the lubrication records are
+    truncated and continued like the others (5 records), and agree with the uninterrupted
+    run to the Stokes tolerance (the resumed CG starts from zero: not bitwise)."""
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    _write(full, 0.03, 1, steps=4)
+    _write(part, 0.03, 1, steps=2)
+    for path in (full, part):
+        proc = run_fold(path)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+    with h5py.File(part, "a") as f:
+        f["/setup/resolved/t_end"][()] = 0.04
+    proc = run_fold(part, resume=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    with h5py.File(full) as a, h5py.File(part) as b:
+        assert a["lubricated_pairs"].shape == b["lubricated_pairs"].shape == (5,)
+        assert np.all(b["lubricated_pairs"][()] == 1)
+        # Stokes tolerance 1e-6 on velocities of order 0.1 m/s
+        np.testing.assert_allclose(b["lubrication_correction"][()], a["lubrication_correction"][()], rtol=0,
+                                   atol=1e-6)
