@@ -106,7 +106,8 @@ def open_run(path: str | Path) -> xr.Dataset:
         ``a2_family(time, family, i, j)``, contact and drift records; Stokes runs
         also ``stokes_iterations``, ``stokes_residual``, ``rigidity_max``,
         ``rigidity_mean``, ``stress(time, i, j)`` [Pa] (deviatoric bulk stress) and
-        ``effective_viscosity(time)`` [Pa s]),
+        ``effective_viscosity(time)`` [Pa s]; with lubrication ``lubricated_pairs``
+        and ``lubrication_correction`` [m/s]),
         snapshots ``x, p (snapshot, particle, xyz)`` with ``snapshot_time``,
         and the initial state ``initial_x, initial_p (particle, xyz)``,
         ``particle_shape, particle_family, particle_radius, particle_length,
