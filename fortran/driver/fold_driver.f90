@@ -6,8 +6,9 @@
 !>        for constant G (`fold_jeffery_step`), for this rank's block of particles,
 !>        then gathered;
 !>      * stokes (hydrodynamics = 1): the rigid (V, omega) of every particle from the
-!>        fictitious-domain Stokes solve of the configuration at t
-!>        (`fold_stokes_step::stokes_rigid_velocities`, by the one solver the factory
+!>        fictitious-domain Stokes solve of the configuration at t, with the sphere
+!>        lubrication correction when on (`fold_stokes_step::stokes_rigid_velocities`,
+!>        `fold_lubrication`; by the one solver the factory
 !>        `fold_stokes_factory` makes from /setup/resolved/stokes_*; for the fft
 !>        backend the grid is distributed over the ranks with FFTW-MPI when np > 1),
 !>        combined in time by `fold_time_scheme`: explicit Euler (v_n) or
