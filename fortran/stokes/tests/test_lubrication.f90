@@ -382,8 +382,9 @@ contains
       seed = -1.5_dp*pi*R**2*eta*(-U)/h
       call check(abs(f(1) - seed) <= 8.0_dp*eps*abs(seed) .and. all(f(2:3) == 0.0_dp), &
                  "h_c = huge: the seed's force", failures)
-      call check(lubrication_coefficient(R, R, eta, 0.1_dp*h, h, h_c) == lubrication_coefficient(R, R, eta, h, h, h_c), &
-                 "the floor holds the coefficient below gap_min", failures)
+      call check(lubrication_coefficient(R, R, eta, 0.1_dp*h, h, h_c) == &
+                 lubrication_coefficient(R, R, eta, h, h, h_c), "the floor holds the coefficient below gap_min", &
+                 failures)
       call check(lubrication_coefficient(R, R, eta, h_c, 1.0e-3_dp*R, h_c) == 0.0_dp, "zero at h_c", failures)
       call check(lubrication_gap_floor(0.0_dp, h_c) == 1.0e-3_dp*h_c .and. lubrication_gap_floor(0.1_dp*R, h_c) == &
                  0.1_dp*R, "gap floor max(alpha, 1e-3 h_c)", failures)
