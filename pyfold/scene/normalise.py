@@ -1001,6 +1001,10 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
         warnings.append("model.lubrication: has no effect with hydrodynamics = jeffery: the correction adds what the "
                         "Stokes grid cannot resolve to the flow's sphere velocities "
                         "(docs/physics.md#lubrication-between-spheres)")
+    if model.lubrication and hydrodynamics == "stokes":
+        warnings.append("model.lubrication: qualitative only: with the isolated-sphere mobility the correction "
+                        "slows the approach of near pairs 2-8 times below the grid-converged rate "
+                        "(docs/physics.md#lubrication-between-spheres, studies/lubrication/pair_approach.py)")
     if model.lubrication and hydrodynamics == "stokes" and dim == 3:
         # fold_lubrication finds its pairs with the cell lists within 2 R_max + h_c,
         # h_c = 2 voxel widths (voxel = (cell volume / grid points)^(1/3), fold_grid's h)
