@@ -54,6 +54,11 @@
 !> exerts no torque on a sphere. Only sphere-sphere pairs (no sphere-wall term, no
 !> fibre or spheroid); only dim = 3 (a 2-D disk has no isolated Stokes mobility).
 !>
+!> Measured (studies/lubrication/pair_approach.py, docs/physics.md#lubrication-between-spheres):
+!> with this mobility the correction slows two near spheres 2-8 times below the approach
+!> rate the refined Stokes flow converges to; the flow already resolves much of the pair
+!> resistance below h_c, which the isolated-sphere mobility ignores. Qualitative only.
+!>
 !> Pairs come from the cell lists of fold_cell_list (neighbour_pairs, range
 !> 2 R_max + h_c), minimum images from fold_cell (walls, Lees-Edwards and deforming
 !> lattices as for the contacts); every periodic edge must exceed twice that range.
