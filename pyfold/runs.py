@@ -107,7 +107,8 @@ def open_run(path: str | Path) -> xr.Dataset:
         also ``stokes_iterations``, ``stokes_residual``, ``rigidity_max``,
         ``rigidity_mean``, ``stress(time, i, j)`` [Pa] (deviatoric bulk stress) and
         ``effective_viscosity(time)`` [Pa s]; with walls also ``wall_shear_stress(time)``
-        [Pa], the xy entry of ``stress``, which equals the stress on the walls in Stokes flow),
+        [Pa], the xy entry of ``stress``, which equals the stress on the walls in Stokes flow;
+        with lubrication ``lubricated_pairs`` and ``lubrication_correction`` [m/s]),
         snapshots ``x, p (snapshot, particle, xyz)`` with ``snapshot_time``,
         and the initial state ``initial_x, initial_p (particle, xyz)``,
         ``particle_shape, particle_family, particle_radius, particle_length,

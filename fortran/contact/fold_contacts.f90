@@ -121,7 +121,8 @@ module fold_contacts
       integer(ip) :: max_iter = 100
       !> FOLD_ON_CAP_STOP or FOLD_ON_CAP_CONTINUE
       integer(ip) :: on_cap = FOLD_ON_CAP_STOP
-      !> Lubrication forces requested (applied by the Stokes coupling, see lubrication_force)
+      !> Lubrication requested: not used by the contact pass; the Stokes step applies it
+      !> (fold_lubrication, fold_stokes_step)
       logical :: lubrication = .false.
       !> Verlet skin of the candidate-pair list [m]; < 0 (default): alpha + R_max.
       !> Any value >= 0 gives the same corrections (the list is exact); a small one
@@ -170,7 +171,7 @@ module fold_contacts
    end interface
    public :: contact_reduce_i
 
-   public :: resolve_contacts, lubrication_force, transverse_inertia, contact_search_range
+   public :: resolve_contacts, transverse_inertia, contact_search_range
 
    !> Index of the bottom / top wall as a "partner"
    integer(ip), parameter :: WALL_BOTTOM = -1, WALL_TOP = -2
@@ -232,28 +233,6 @@ contains
          end if
       end select
    end function transverse_inertia
-
-   !> Seed's lubrication force on sphere i from sphere j (docs/physics.md#lubrication-between-spheres):
-   !> F_ij = -(3/2) pi R^2 eta ((u_i - u_j).n_ij) / (|O_jO_i| - 2R) n_ij. The gap is
-   !> floored at gap_min (the under-resolved gap the security zone guarantees) [N].
-   pure function lubrication_force(radius, eta, dx, du, gap_min) result(f)
-      !> Sphere radius R [m]
-      real(dp), intent(in) :: radius
-      !> Fluid viscosity [Pa s]
-      real(dp), intent(in) :: eta
-      !> O_i - O_j (minimum image) [m]
-      real(dp), intent(in) :: dx(:)
-      !> u_i - u_j [m/s]
-      real(dp), intent(in) :: du(:)
-      !> Smallest gap used in the denominator (> 0) [m]
-      real(dp), intent(in) :: gap_min
-      real(dp) :: f(size(dx))
-      real(dp), parameter :: pi = acos(-1.0_dp)
-      real(dp) :: dist, n(size(dx))
-      dist = norm2(dx)
-      n = dx/dist
-      f = -1.5_dp*pi*radius**2*eta*dot_product(du, n)/max(dist - 2.0_dp*radius, gap_min)*n
-   end function lubrication_force
 
    !> Centre-distance range of the contact search, 2 max_k (h_k + R_k) + alpha + skin
    !> (h_k the half segment; skin < 0: the default alpha + R_max): every pair whose

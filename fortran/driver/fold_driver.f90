@@ -6,8 +6,9 @@
 !>        for constant G (`fold_jeffery_step`), for this rank's block of particles,
 !>        then gathered;
 !>      * stokes (hydrodynamics = 1): the rigid (V, omega) of every particle from the
-!>        fictitious-domain Stokes solve of the configuration at t
-!>        (`fold_stokes_step::stokes_rigid_velocities`, by the one solver the factory
+!>        fictitious-domain Stokes solve of the configuration at t, with the sphere
+!>        lubrication correction when on (`fold_stokes_step::stokes_rigid_velocities`,
+!>        `fold_lubrication`; by the one solver the factory
 !>        `fold_stokes_factory` makes from /setup/resolved/stokes_*; for the fft
 !>        backend the grid is distributed over the ranks with FFTW-MPI when np > 1),
 !>        combined in time by `fold_time_scheme`: explicit Euler (v_n) or
@@ -60,7 +61,7 @@ module fold_driver
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
-                               stokes_rigid_velocities
+                               stokes_rigid_velocities, stokes_context_lubrication
    use fold_time_scheme, only: FOLD_AB2, scheme_velocity
    use fold_output, only: run_output_t, run_record_t, record_init, output_open, output_resume, output_record, &
                           output_snapshot, output_checkpoint, output_status, output_close, output_failed_status, &
@@ -157,6 +158,7 @@ contains
             call finish_early(stat == FOLD_INPUT_ERROR)
             return
          end if
+         call stokes_context_lubrication(ctx, setup%lubrication, setup%alpha)
          allocate (v_hyd(parts%dim, parts%n), w_hyd(3, parts%n), v_prev(parts%dim, parts%n), w_prev(3, parts%n))
          allocate (v_sb(parts%dim, parts%n), w_sb(3, parts%n), v_est(parts%dim, parts%n), w_est(3, parts%n))
          v_sb = 0.0_dp
@@ -175,8 +177,8 @@ contains
                trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
          end if
       end if
-      if (setup%lubrication .and. rank == 0) write (output_unit, '(a)') &
-         "fold_run: note: lubrication = 1 has no effect: the rigid velocities come from the flow, not from a force balance"
+      if (setup%lubrication .and. .not. stokes .and. rank == 0) write (output_unit, '(a)') &
+         "fold_run: note: lubrication = 1 acts with the Stokes solver only (docs/physics.md#lubrication-between-spheres)"
 
       first = int(int(rank, i8)*parts%n/nranks + 1, ip)
       last = int(int(rank + 1, i8)*parts%n/nranks, ip)
@@ -206,12 +208,12 @@ contains
          if (resume) then
             if (stokes) then
                call output_resume(out, path, parts, setup%n_families, nranks, step0, t, stat, errmsg, stokes, &
-                                  v_prev, w_prev, have_prev)
+                                  v_prev, w_prev, have_prev, lubrication=setup%lubrication)
             else
                call output_resume(out, path, parts, setup%n_families, nranks, step0, t, stat, errmsg)
             end if
          else
-            call output_open(out, path, parts, setup%n_families, nranks, stat, errmsg, stokes)
+            call output_open(out, path, parts, setup%n_families, nranks, stat, errmsg, stokes, setup%lubrication)
          end if
       end if
       call share_status(stat, errmsg)
@@ -519,6 +521,8 @@ contains
             rec%rigidity_mean = max(rec%rigidity_mean, srec%rigidity_mean)
             rec%stress = srec%bulk%sigma(1:parts%dim, 1:parts%dim)
             rec%effective_viscosity = srec%bulk%eta_eff
+            rec%lubricated_pairs = max(rec%lubricated_pairs, int(srec%lub%pairs, i8))
+            rec%lubrication_correction = max(rec%lubrication_correction, srec%lub%max_correction)
          end if
          if (sstat == FOLD_OK) then
             if (.not. (all(abs(v_hyd) <= huge(1.0_dp)) .and. all(abs(w_hyd) <= huge(1.0_dp)))) then
@@ -780,6 +784,8 @@ contains
       rec%stokes_residual = 0.0_dp
       rec%rigidity_max = 0.0_dp
       rec%rigidity_mean = 0.0_dp
+      rec%lubricated_pairs = 0
+      rec%lubrication_correction = 0.0_dp
    end subroutine reset_record
 
    !> Fold one step's contact statistics and drifts into the interval aggregates.

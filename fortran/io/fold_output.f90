@@ -16,6 +16,9 @@
 !>   `stokes_residual(time)`, `rigidity_max(time)`, `rigidity_mean(time)` (worst over
 !>   the interval), `stress(time,i,j)` [Pa] and `effective_viscosity(time)` [Pa s] (the
 !>   configuration at the record time).
+!> Stokes runs with sphere lubrication (output_open(..., lubrication=.true.)) add
+!>   `lubricated_pairs(time)` and `lubrication_correction(time)` [m/s] (largest over the
+!>   interval: pairs closer than h_c, largest |delta v| of fold_lubrication).
 !> `/checkpoint`: latest full state (`step`, `time`, `x`, `p`, `v`, `omega`; Stokes
 !>   runs: the Adams-Bashforth history `v_hydro_prev`, `omega_hydro_prev`) and its
 !>   `checksum` (checkpoint_checksum) for `fold_run --resume`; `/checkpoint_shadow`: a
@@ -85,6 +88,11 @@ module fold_output
       real(dp), allocatable :: stress(:, :)
       !> Effective viscosity Sigma':E / (2 E:E) (= Sigma_xy/gamma_dot in shear) at the record time [Pa s]
       real(dp) :: effective_viscosity = 0.0_dp
+      ! ---- Stokes runs with lubrication only (largest over the interval)
+      !> Sphere pairs closer than the lubrication threshold h_c in a solve
+      integer(i8) :: lubricated_pairs = 0
+      !> Largest lubrication correction |delta v| of a sphere [m/s]
+      real(dp) :: lubrication_correction = 0.0_dp
    end type run_record_t
 
    !> An open run file receiving results.
@@ -95,6 +103,8 @@ module fold_output
       integer(hsize_t) :: n_records = 0, n_snapshots = 0
       !> Stokes hydrodynamics: solver and stress records are written
       logical :: stokes = .false.
+      !> Sphere lubrication (Stokes runs): its records are written
+      logical :: lubrication = .false.
    end type run_output_t
 
    public :: output_open, output_resume, output_record, output_snapshot, output_checkpoint, output_status, &
@@ -106,6 +116,9 @@ module fold_output
    !> Time series of Stokes runs only (besides `stress`)
    character(len=*), parameter :: STOKES_VARS(5) = [character(len=24) :: "stokes_iterations", "stokes_residual", &
       "rigidity_max", "rigidity_mean", "effective_viscosity"]
+   !> Time series of Stokes runs with lubrication only
+   character(len=*), parameter :: LUBRICATION_VARS(2) = [character(len=24) :: "lubricated_pairs", &
+      "lubrication_correction"]
    !> Variables over `snapshot`
    character(len=*), parameter :: SNAPSHOT_VARS(4) = [character(len=24) :: "snapshot", "snapshot_time", "x", "p"]
    !> Root attributes: number of records / snapshots completely written (set after the
@@ -146,7 +159,7 @@ contains
 
    !> Open a run file for writing and lay out the (empty) result variables.
    !> Refuses a file that already holds results (use output_resume).
-   subroutine output_open(out, path, parts, n_families, mpi_ranks, stat, errmsg, stokes)
+   subroutine output_open(out, path, parts, n_families, mpi_ranks, stat, errmsg, stokes, lubrication)
       type(run_output_t), intent(out) :: out
       character(len=*), intent(in) :: path
       type(particle_set_t), intent(in) :: parts
@@ -157,12 +170,15 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       !> Stokes run: also lay out the solver and stress records (default .false.)
       logical, intent(in), optional :: stokes
+      !> Stokes run with lubrication: also its records (default .false.)
+      logical, intent(in), optional :: lubrication
 
       call h5_open_file(path, .true., out%file, stat, errmsg); if (stat /= FOLD_OK) return
       out%dim = parts%dim
       out%n = parts%n
       out%n_families = n_families
       if (present(stokes)) out%stokes = stokes
+      if (present(lubrication)) out%lubrication = lubrication .and. out%stokes
       if (h5_exists(out%file, "time")) then
          stat = FOLD_INPUT_ERROR
          errmsg = trim(path)//": /time exists, the file already holds results (run with --resume to continue)"
@@ -186,7 +202,7 @@ contains
    !> cause of each. A `/checkpoint` without `checksum` and without a shadow (written by
    !> a fold_run of before the checksum: not verifiable) is used with a warning on stderr.
    subroutine output_resume(out, path, parts, n_families, mpi_ranks, step, time, stat, errmsg, stokes, &
-                            v_prev, omega_prev, have_prev)
+                            v_prev, omega_prev, have_prev, lubrication)
       type(run_output_t), intent(out) :: out
       character(len=*), intent(in) :: path
       !> In: the initial set (sizes, shapes); out: x, p, v, omega of the checkpoint
@@ -204,6 +220,8 @@ contains
       !> (dim, n) [m/s] and (3, n) [1/s]; have_prev = .false. when the checkpoint has none
       real(dp), intent(inout), optional :: v_prev(:, :), omega_prev(:, :)
       logical, intent(out), optional :: have_prev
+      !> Stokes run with lubrication: its records are truncated too (default .false.)
+      logical, intent(in), optional :: lubrication
       type(checkpoint_t), target :: main, shadow
       type(checkpoint_t), pointer :: pick
       integer(hsize_t) :: keep
@@ -226,6 +244,7 @@ contains
       out%n = parts%n
       out%n_families = n_families
       if (present(stokes)) out%stokes = stokes
+      if (present(lubrication)) out%lubrication = lubrication .and. out%stokes
 
       call read_checkpoint(out, CKPT_SHADOW, shadow)
       call read_checkpoint(out, CKPT, main, legacy_ok=.not. shadow%present)
@@ -371,6 +390,12 @@ contains
          call h5_var_append_real(out%file, "stress", r, reshape(rec%stress, [size(rec%stress)]), stat, errmsg)
          if (stat /= FOLD_OK) return
          call h5_var_append_real(out%file, "effective_viscosity", r, [rec%effective_viscosity], stat, errmsg)
+         if (stat /= FOLD_OK) return
+      end if
+      if (out%lubrication) then
+         call h5_var_append_int(out%file, "lubricated_pairs", r, [rec%lubricated_pairs], stat, errmsg)
+         if (stat /= FOLD_OK) return
+         call h5_var_append_real(out%file, "lubrication_correction", r, [rec%lubrication_correction], stat, errmsg)
          if (stat /= FOLD_OK) return
       end if
       ! The record is complete on disk before the count says so.
@@ -658,6 +683,7 @@ contains
       character(len=24), allocatable :: names(:)
       names = [character(len=24) :: "time", SCALAR_VARS, "a2", "a4", "a2_family", "a4_family"]
       if (out%stokes) names = [character(len=24) :: names, STOKES_VARS, "stress"]
+      if (out%lubrication) names = [character(len=24) :: names, LUBRICATION_VARS]
    end function record_vars
 
    !> Number of complete entries of the variables `vars`: the count attribute when
@@ -797,6 +823,14 @@ contains
          if (stat /= FOLD_OK) return
          call series("effective_viscosity", FOLD_H5_REAL, "Pa s", &
                      "effective viscosity Sigma:E/(2 E:E) (= Sigma_xy/shear rate in simple shear) at the record time")
+         if (stat /= FOLD_OK) return
+      end if
+      if (out%lubrication) then
+         call series("lubricated_pairs", FOLD_H5_INT, "1", "largest number of sphere pairs closer than the "// &
+                     "lubrication threshold h_c (2 voxels) in a solve since the previous record")
+         if (stat /= FOLD_OK) return
+         call series("lubrication_correction", FOLD_H5_REAL, "m/s", "largest lubrication velocity correction "// &
+                     "|delta v| of a sphere since the previous record")
          if (stat /= FOLD_OK) return
       end if
 

@@ -4,8 +4,12 @@
 !> calls stokes_rigid_velocities every step with the current cell (its
 !> Lees-Edwards offset gives the lattice) and particle set; v and omega of the
 !> set are overwritten with the rigid motion fitted to the computed flow
-!> (contacts are resolved afterwards, as for the Jeffery kinematics). The
-!> per-step record holds what docs/physics.md#what-to-record-every-step lists.
+!> (contacts are resolved afterwards, as for the Jeffery kinematics). With
+!> lubrication on (stokes_context_lubrication) the fitted sphere velocities then get
+!> the lubrication correction of fold_lubrication: threshold h_c = 2 voxel widths of
+!> the solver's grid, floor max(alpha, 1e-3 h_c), the fluid viscosity of the settings
+!> (docs/physics.md#lubrication-between-spheres). The per-step record holds what
+!> docs/physics.md#what-to-record-every-step lists, plus the lubricated pairs.
 !> stokes_march integrates a set in time (fold_time_scheme: explicit Euler or Adams-Bashforth 2,
 !> exact rotations) for tests and studies; the run driver has its own loop.
 module fold_stokes_step
@@ -13,7 +17,7 @@ module fold_stokes_step
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED
    use fold_fft_backend, only: fft_backend_t
    use fold_cell, only: cell_t, cell_set_time, cell_wrap
-   use fold_particles, only: particle_set_t, particles_check
+   use fold_particles, only: particle_set_t, particles_check, FOLD_SPHERE
    use fold_kinematics, only: rigid_update
    use fold_grid, only: shear_lattice
    use fold_voxelise, only: voxel_set_t, voxelise
@@ -22,6 +26,8 @@ module fold_stokes_step
    use fold_time_scheme, only: FOLD_EULER, FOLD_AB2, scheme_velocity
    use fold_rigid_fit, only: rigid_fit
    use fold_stress, only: bulk_stress_t, bulk_stress
+   use fold_lubrication, only: lubrication_stats_t, lubrication_correct, lubrication_threshold, &
+                               lubrication_gap_floor
    implicit none
    private
 
@@ -40,6 +46,8 @@ module fold_stokes_step
       real(dp) :: rigidity_max = 0.0_dp, rigidity_mean = 0.0_dp
       !> Bulk stress, effective viscosity, solid strain ratio, solid fraction
       type(bulk_stress_t) :: bulk
+      !> Lubrication correction (pairs, iterations, largest |delta v|; zero when off)
+      type(lubrication_stats_t) :: lub
    end type stokes_record_t
 
    !> Solver + voxel storage kept across steps.
@@ -48,9 +56,13 @@ module fold_stokes_step
       type(voxel_set_t) :: vox
       !> Rigidity residual of each particle after the last step [-]
       real(dp), allocatable :: rigidity(:)
+      !> Sphere lubrication on, and the security zone alpha its gap floor uses [m]
+      logical :: lubrication = .false.
+      real(dp) :: alpha = 0.0_dp
    end type stokes_context_t
 
    public :: stokes_context_init, stokes_context_attach, stokes_context_destroy, stokes_rigid_velocities, stokes_march
+   public :: stokes_context_lubrication
 
 contains
 
@@ -73,6 +85,16 @@ contains
       call stokes_context_destroy(ctx)
       call move_alloc(solver, ctx%solver)
    end subroutine stokes_context_attach
+
+   !> Switch the sphere lubrication correction on or off; alpha (>= 0) is the security
+   !> zone of the contacts, the floor of the lubrication gap [m].
+   subroutine stokes_context_lubrication(ctx, on, alpha)
+      type(stokes_context_t), intent(inout) :: ctx
+      logical, intent(in) :: on
+      real(dp), intent(in) :: alpha
+      ctx%lubrication = on
+      ctx%alpha = alpha
+   end subroutine stokes_context_lubrication
 
    subroutine stokes_context_destroy(ctx)
       type(stokes_context_t), intent(inout) :: ctx
@@ -144,6 +166,13 @@ contains
          rec%rigidity_max = maxval(ctx%rigidity)
          rec%rigidity_mean = sum(ctx%rigidity)/parts%n
       end if
+      if (ctx%lubrication) then
+         call lubricate(st, errmsg)
+         if (st /= FOLD_OK) then
+            stat = st
+            return
+         end if
+      end if
       call bulk_stress(ctx%solver, ctx%vox%chi, rec%bulk, st, errmsg)
       if (st /= FOLD_OK) then
          stat = st
@@ -151,6 +180,24 @@ contains
       end if
       stat = solve_stat
       errmsg = solve_msg
+
+   contains
+
+      !> parts%v += the lubrication correction of the fitted velocities (every rank
+      !> holds the same particles and fitted velocities, so each computes the same).
+      subroutine lubricate(lstat, lmsg)
+         integer, intent(out) :: lstat
+         character(len=msg_len), intent(out) :: lmsg
+         real(dp), allocatable :: dv(:, :)
+         real(dp) :: h_c
+         allocate (dv(parts%dim, parts%n))
+         h_c = lubrication_threshold(ctx%solver%grid%h)
+         call lubrication_correct(cell, parts%x, parts%radius, parts%shape == FOLD_SPHERE, parts%v, &
+                                  ctx%solver%set%eta_f, h_c, lubrication_gap_floor(ctx%alpha, h_c), dv, rec%lub, &
+                                  lstat, lmsg)
+         if (lstat /= FOLD_OK) return
+         parts%v = parts%v + dv
+      end subroutine lubricate
    end subroutine stokes_rigid_velocities
 
    !> Integrate parts over nsteps steps of dt from time t0 with the Stokes rigid

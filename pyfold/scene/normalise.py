@@ -64,6 +64,9 @@ MAX_STRAIN = 1.0 / _EPS
 #: diameter for quantitative results (docs/physics.md#resolution; at 1-2 voxels per
 #: diameter the effective viscosity is biased by 5-9 %).
 STOKES_QUANTITATIVE_CELLS_PER_DIAMETER = 4
+#: Lubrication threshold gap h_c in voxel widths: LUB_THRESHOLD_VOXELS of
+#: fortran/contact/fold_lubrication.f90 (tests/micro/test_run_lubrication.py keeps the two equal)
+LUBRICATION_THRESHOLD_VOXELS = 2.0
 #: Most time steps the admissibility check of a deforming lattice visits one by one
 #: (the native loop takes ~0.3 s per million); beyond, every k-th step with a margin.
 LATTICE_CHECK_SAMPLES = 1_000_000
@@ -817,9 +820,12 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                     "no cells_per_diameter up to 64 suffices: use smaller particles or a larger cell")
             if model.hydrodynamics == "stokes":
                 problems.add("numerics.stokes.cells_per_diameter", f"{voxel_text}; {hint}, got {st.cells_per_diameter}")
-    if model.lubrication and not any(f.shape == "sphere" for f in good):
-        problems.add("model.lubrication", "the lubrication force (docs/physics.md#lubrication-between-spheres) is defined between spheres; "
-                     "this scene has no sphere family")
+    # The lubrication rule (fortran/contact/fold_lubrication.f90): between spheres, in 3-D,
+    # with the Stokes solver only (elsewhere it is a warning below).
+    if model.lubrication and (dim != 3 or not any(f.shape == "sphere" for f in good)):
+        problems.add("model.lubrication", "the lubrication correction (docs/physics.md#lubrication-between-spheres) is "
+                     "defined between spheres in 3-D (a 2-D disk has no isolated Stokes mobility); this scene has "
+                     + ("no sphere family" if not any(f.shape == "sphere" for f in good) else f"dim = {dim}"))
 
     # fold_run's rule (shapes.cell_range_violation, the one statement of it): with two or
     # more particles every periodic edge must exceed twice the contact search range, so the
@@ -1007,6 +1013,25 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
 
     rate = float(shear_rate(G3))
     warnings = []
+    if model.lubrication and hydrodynamics != "stokes":
+        warnings.append("model.lubrication: has no effect with hydrodynamics = jeffery: the correction adds what the "
+                        "Stokes grid cannot resolve to the flow's sphere velocities "
+                        "(docs/physics.md#lubrication-between-spheres)")
+    if model.lubrication and hydrodynamics == "stokes":
+        warnings.append("model.lubrication: qualitative only: with the isolated-sphere mobility the correction "
+                        "slows the approach of near pairs 2-8 times below the grid-converged rate "
+                        "(docs/physics.md#lubrication-between-spheres, studies/lubrication/pair_approach.py)")
+    if model.lubrication and hydrodynamics == "stokes" and dim == 3:
+        # fold_lubrication finds its pairs with the cell lists within 2 R_max + h_c,
+        # h_c = 2 voxel widths (voxel = (cell volume / grid points)^(1/3), fold_grid's h)
+        voxel = (float(np.prod(lengths[:dim])) / grid_points) ** (1.0 / dim)
+        r_lub = 2.0 * max(f.radius for f in good if f.shape == "sphere") + LUBRICATION_THRESHOLD_VOXELS * voxel
+        if n_total > 1 and min(lengths[:dim]) <= 2.0 * r_lub:
+            problems.add("model.lubrication", f"the lubrication pair search range 2 R + h_c = {r_lub:.6g} "
+                         f"(h_c = {LUBRICATION_THRESHOLD_VOXELS:g} voxels of {voxel:.4g}) must be below half the "
+                         f"smallest periodic side {min(lengths[:dim]):g}; enlarge cell.size, raise "
+                         "numerics.stokes.cells_per_diameter or use smaller spheres")
+            problems.raise_if_any(source)
     for f in good:
         step = rate * 0.5 * f.length * num.dt  # tip displacement relative to the centre per step
         if collisions != "none" and step > 0.5 * alpha:
