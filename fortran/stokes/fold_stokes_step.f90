@@ -110,7 +110,8 @@ contains
    !> (the driver decides: halve the step or stop).
    subroutine stokes_rigid_velocities(ctx, cell, parts, rec, stat, errmsg)
       type(stokes_context_t), intent(inout) :: ctx
-      !> Periodic cell (no walls) with its current Lees-Edwards offset
+      !> Periodic cell with its current Lees-Edwards offset, or a Couette cell with
+      !> walls (then the solver must have been made for walls, set%walls)
       type(cell_t), intent(in) :: cell
       type(particle_set_t), intent(inout) :: parts
       type(stokes_record_t), intent(out) :: rec
@@ -124,9 +125,15 @@ contains
          errmsg = "stokes_rigid_velocities: the context has no solver (stokes_context_init first)"
          return
       end if
-      if (cell%walls) then
+      if (cell%walls .neqv. ctx%solver%set%walls) then
          stat = FOLD_INPUT_ERROR
-         errmsg = "stokes_rigid_velocities: the Stokes solver needs a fully periodic cell (walls = false)"
+         if (cell%walls) then
+            errmsg = "stokes_rigid_velocities: the cell has walls but the solver was made for a periodic cell "// &
+                     "(settings walls = false)"
+         else
+            errmsg = "stokes_rigid_velocities: the solver was made for walls (settings walls = true) but the cell "// &
+                     "is periodic"
+         end if
          return
       end if
       if (cell%dim /= ctx%solver%dim .or. parts%dim /= ctx%solver%dim) then
@@ -140,7 +147,7 @@ contains
       call ctx%solver%set_lattice(shear_lattice(cell%lengths, cell%shear_offset), stat, errmsg)
       if (stat /= FOLD_OK) return
       call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
-                    stat, errmsg)
+                    stat, errmsg, walls=cell%walls)
       if (stat /= FOLD_OK) return
       call ctx%solver%solve(ctx%vox%chi, cell%G, solve_stat, solve_msg)
       if (solve_stat /= FOLD_OK .and. solve_stat /= FOLD_NOT_CONVERGED) then
