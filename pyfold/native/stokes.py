@@ -36,6 +36,8 @@ FIBRE_ENDS = {"flat": 0, "capped": 1}
 GUESSES = {"previous": 1, "extrapolate": 2}
 SCHEMES = {"euler": 1, "ab2": 2}
 FFT_PLANS = {"estimate": 0, "measure": 1}
+#: transforms of the CG operator (fold_stokes_solver FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE); fold_run only
+FFT_PRECISIONS = {"double": 0, "single": 1}
 SHAPES = {"fibre": 1, "sphere": 2, "spheroid": 3}
 
 #: Bounds of the viscosity contrast kappa = eta_solid / eta_f (fold_stokes_solver
@@ -60,6 +62,7 @@ DEFAULTS = {
     "warm_start": True,
     "initial_guess": "previous",
     "fft_plan": "measure",
+    "fft_precision": "double",
 }
 
 

@@ -29,6 +29,7 @@ TIME_SCHEME_CODES = stokes_codes.SCHEMES
 DERIVATIVE_CODES = stokes_codes.DERIVATIVES
 FFT_PLAN_CODES = stokes_codes.FFT_PLANS
 INITIAL_GUESS_CODES = stokes_codes.GUESSES
+FFT_PRECISION_CODES = stokes_codes.FFT_PRECISIONS
 #: Spheres: hydrodynamic interactions "matter" for ``auto`` from this total volume
 #: fraction on. Batchelor & Green (1972, J. Fluid Mech. 56:401):
 #: eta/eta_f = 1 + 2.5 phi + 6.2 phi^2; the pair term is 2.48 phi of the single-particle
@@ -197,6 +198,8 @@ class ResolvedScene:
                                   "1: each CG solve starts from the previous solution, 0: from zero"),
             "stokes_initial_guess": (np.int32(INITIAL_GUESS_CODES[st.initial_guess]), "1",
                                      "CG initial guess: 1 previous solution, 2 extrapolated from the last two"),
+            "stokes_fft_precision": (np.int32(FFT_PRECISION_CODES[st.fft_precision]), "1",
+                                     "precision of the CG operator's FFTs: 0 double, 1 single"),
             "stokes_solve_every": (np.int32(st.solve_every), "1",
                                    "a Stokes solve every k-th step, velocities extrapolated linearly in between"),
             "time_scheme": (np.int32(TIME_SCHEME_CODES[num.time_scheme]), "1",

@@ -35,6 +35,7 @@ TABLES = {
     "initial_guess": (stokes.GUESSES, "stokes/fold_stokes_solver.f90", "FOLD_GUESS_", None),
     "time_scheme": (stokes.SCHEMES, "stokes/fold_time_scheme.f90", "FOLD_", {"euler": "EULER", "ab2": "AB2"}),
     "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_backend.f90", "FOLD_PLAN_", None),
+    "fft_precision": (stokes.FFT_PRECISIONS, "stokes/fold_stokes_solver.f90", "FOLD_FFT_", None),
     "hydrodynamics": (HYDRODYNAMICS_CODES, "io/fold_run_file.f90", "FOLD_HYDRO_", None),
     "collisions": (COLLISION_CODES, "contact/fold_contacts.f90", "FOLD_CONTACT_", None),
     "on_contact_cap": (ON_CAP_CODES, "contact/fold_contacts.f90", "FOLD_ON_CAP_", None),
@@ -79,7 +80,8 @@ def test_scene_choices_are_the_keys_of_the_stokes_code_tables():
     fields = StokesSettings.model_fields
     for key, table in (("backend", stokes.BACKENDS), ("derivative", stokes.DERIVATIVES),
                        ("mixing", stokes.MIXINGS), ("fibre_ends", stokes.FIBRE_ENDS),
-                       ("initial_guess", stokes.GUESSES), ("fft_plan", stokes.FFT_PLANS)):
+                       ("initial_guess", stokes.GUESSES), ("fft_plan", stokes.FFT_PLANS),
+                       ("fft_precision", stokes.FFT_PRECISIONS)):
         assert set(fields[key].annotation.__args__) == set(table), key
 
 
