@@ -48,6 +48,32 @@
 !> stay O(1) in both phases. Residual: sqrt(<r, M^-1 r> / <b, M^-1 b>)
 !> (relative preconditioned, i.e. energy-like, residual).
 !> No allocation happens inside the iteration; the FFT plans are made once.
+!>
+!> Single-precision transforms (settings fft_precision = FOLD_FFT_SINGLE). The 2 ncg
+!> transforms of each iteration (and of the warm start's r = b - A x) run on fftwf
+!> plans over the first half of the work fields' memory (fft_field_t%rs/cs): the
+!> direction pass rounds the strain to single as it writes it, the viscosity pass
+!> multiplies by 2 eta/N held in single and sums <p, A p> in double, the update pass
+!> widens the stress to double. x, r, p, the preconditioner, every dot product and
+!> the residual stay double, and so do the right-hand side, the velocity and strain
+!> outputs and stokes_fft_true_residual. CG therefore runs with a perturbed operator
+!> A + dA, |dA p| <= eps |A p| in the sense of the stress field, with
+!>     eps = (2 log2 N + 4) u_s,   u_s = 2^-24,  N voxels:
+!> each of the two transforms adds at most log2 N roundings per value (one per
+!> butterfly stage of a radix-2 FFT; Higham 2002, Accuracy and Stability of Numerical
+!> Algorithms, sec. 24.1), plus four roundings to single (strain, 2 eta/N, product,
+!> stress). With a perturbed product the recursive residual keeps falling, while the
+!> true one, b - A x_k, differs from it by the accumulated sum of alpha_i dA p_i
+!> (Greenbaum 1997, SIAM J. Matrix Anal. Appl. 18:535; van der Vorst & Ye 2000,
+!> SIAM J. Sci. Comput. 22:835), i.e. it stalls at a relative level ~eps. A tolerance
+!> >= eps is thus reached by the true residual within a factor 2 (checked by
+!> fortran/stokes/tests/test_stokes_single.f90); below it the reported residual would
+!> overstate the accuracy, so stokes_fft_init refuses tol < eps (single_tol_min; 2.5e-6
+!> at 72^3, 2.7e-6 at 128^3) with a message naming fft_precision. Measured stall of the
+!> true residual (sphere of radius 0.2 cell, 32^3, tol 1e-11): 1.5e-7 to 1.9e-7 for
+!> kappa = 10, 1e3 and 1e6, against eps = 2.0e-6, no kappa dependence seen. The
+!> working tolerances 1e-3..1e-5 are 2..4 orders above the perturbation; the default
+!> 1e-6 and the reference 1e-10 of the benchmarks stay double.
 module fold_stokes_fft
    use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
    use, intrinsic :: iso_c_binding, only: c_float, c_float_complex
@@ -741,6 +767,19 @@ contains
    end subroutine extrapolate_guess
 
    ! ------------------------------------------------------------------ CG kernels
+   ! Every per-mode factor is real: rx(a, z) = a z written on the two parts, 2
+   ! multiplications, where Fortran's a*z converts a to complex and makes 4 (gfortran
+   ! keeps the 0 * imaginary products for the sign of zero), which made the two
+   ! spectral passes compute-bound.
+
+   !> a z for a real a and a complex z, on the real and imaginary parts.
+   elemental function rx(a, z) result(w)
+      real(dp), intent(in) :: a
+      complex(dp), intent(in) :: z
+      complex(dp) :: w
+      w = cmplx(a*real(z, dp), a*aimag(z), kind=dp)
+   end function rx
+
    ! Explicit-shape dummies: the compiler sees contiguous, non-aliased arrays and
    ! vectorises; the 3-D spectral arrays (nxh, nsl(2), nsl(3)) are passed as (nxh, njk).
 
@@ -786,23 +825,23 @@ contains
       real(dp) :: z, d1, d2, d3
       do m = 1, n
          z = ik2(m)*inv_eta0
-         x1(m) = x1(m) + a_prev*pp1(m)
-         x2(m) = x2(m) + a_prev*pp2(m)
-         x3(m) = x3(m) + a_prev*pp3(m)
-         p1 = z*r1(m) + beta*pp1(m)
-         p2 = z*r2(m) + beta*pp2(m)
-         p3 = z*r3(m) + beta*pp3(m)
+         x1(m) = x1(m) + rx(a_prev, pp1(m))
+         x2(m) = x2(m) + rx(a_prev, pp2(m))
+         x3(m) = x3(m) + rx(a_prev, pp3(m))
+         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
+         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
+         p3 = rx(z, r3(m)) + rx(beta, pp3(m))
          pp1(m) = p1
          pp2(m) = p2
          pp3(m) = p3
          d1 = kv(1, m)
          d2 = kv(2, m)
          d3 = kv(3, m)
-         w1(m) = d1*p1
-         w2(m) = d2*p2
-         w4(m) = 0.5_dp*(d1*p2 + d2*p1)
-         w5(m) = 0.5_dp*(d1*p3 + d3*p1)
-         w6(m) = 0.5_dp*(d2*p3 + d3*p2)
+         w1(m) = rx(d1, p1)
+         w2(m) = rx(d2, p2)
+         w4(m) = rx(0.5_dp, (rx(d1, p2) + rx(d2, p1)))
+         w5(m) = rx(0.5_dp, (rx(d1, p3) + rx(d3, p1)))
+         w6(m) = rx(0.5_dp, (rx(d2, p3) + rx(d3, p2)))
       end do
    end subroutine direction_strain3
 
@@ -818,16 +857,16 @@ contains
       real(dp) :: z, d1, d2
       do m = 1, n
          z = ik2(m)*inv_eta0
-         x1(m) = x1(m) + a_prev*pp1(m)
-         x2(m) = x2(m) + a_prev*pp2(m)
-         p1 = z*r1(m) + beta*pp1(m)
-         p2 = z*r2(m) + beta*pp2(m)
+         x1(m) = x1(m) + rx(a_prev, pp1(m))
+         x2(m) = x2(m) + rx(a_prev, pp2(m))
+         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
+         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
          pp1(m) = p1
          pp2(m) = p2
          d1 = kv(1, m)
          d2 = kv(2, m)
-         w1(m) = d1*p1
-         w3(m) = 0.5_dp*(d1*p2 + d2*p1)
+         w1(m) = rx(d1, p1)
+         w3(m) = rx(0.5_dp, (rx(d1, p2) + rx(d2, p1)))
       end do
    end subroutine direction_strain2
 
@@ -975,13 +1014,13 @@ contains
             k1 = kv(1, i, jk)
             k2 = kv(2, i, jk)
             k3 = kv(3, i, jk)
-            f1 = k1*w1(i, jk) + k2*w4(i, jk) + k3*w5(i, jk)
-            f2 = k1*w4(i, jk) + k2*w2(i, jk) + k3*w6(i, jk)
-            f3 = k1*w5(i, jk) + k2*w6(i, jk) - k3*(w1(i, jk) + w2(i, jk))
-            t = (k1*f1 + k2*f2 + k3*f3)*ik2(i, jk)
-            r1 = q1(i, jk) - alpha*(f1 - k1*t)
-            r2 = q2(i, jk) - alpha*(f2 - k2*t)
-            r3 = q3(i, jk) - alpha*(f3 - k3*t)
+            f1 = rx(k1, w1(i, jk)) + rx(k2, w4(i, jk)) + rx(k3, w5(i, jk))
+            f2 = rx(k1, w4(i, jk)) + rx(k2, w2(i, jk)) + rx(k3, w6(i, jk))
+            f3 = rx(k1, w5(i, jk)) + rx(k2, w6(i, jk)) - rx(k3, (w1(i, jk) + w2(i, jk)))
+            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2) + rx(k3, f3))
+            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
+            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
+            r3 = q3(i, jk) - rx(alpha, (f3 - rx(k3, t)))
             q1(i, jk) = r1
             q2(i, jk) = r2
             q3(i, jk) = r3
@@ -1006,11 +1045,11 @@ contains
          do i = 1, nxh
             k1 = kv(1, i, jk)
             k2 = kv(2, i, jk)
-            f1 = k1*w1(i, jk) + k2*w3(i, jk)
-            f2 = k1*w3(i, jk) - k2*w1(i, jk)
-            t = (k1*f1 + k2*f2)*ik2(i, jk)
-            r1 = q1(i, jk) - alpha*(f1 - k1*t)
-            r2 = q2(i, jk) - alpha*(f2 - k2*t)
+            f1 = rx(k1, w1(i, jk)) + rx(k2, w3(i, jk))
+            f2 = rx(k1, w3(i, jk)) - rx(k2, w1(i, jk))
+            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2))
+            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
+            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
             q1(i, jk) = r1
             q2(i, jk) = r2
             v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2)
@@ -1036,23 +1075,23 @@ contains
       real(dp) :: z, d1, d2, d3
       do m = 1, n
          z = ik2(m)*inv_eta0
-         x1(m) = x1(m) + a_prev*pp1(m)
-         x2(m) = x2(m) + a_prev*pp2(m)
-         x3(m) = x3(m) + a_prev*pp3(m)
-         p1 = z*r1(m) + beta*pp1(m)
-         p2 = z*r2(m) + beta*pp2(m)
-         p3 = z*r3(m) + beta*pp3(m)
+         x1(m) = x1(m) + rx(a_prev, pp1(m))
+         x2(m) = x2(m) + rx(a_prev, pp2(m))
+         x3(m) = x3(m) + rx(a_prev, pp3(m))
+         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
+         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
+         p3 = rx(z, r3(m)) + rx(beta, pp3(m))
          pp1(m) = p1
          pp2(m) = p2
          pp3(m) = p3
          d1 = kv(1, m)
          d2 = kv(2, m)
          d3 = kv(3, m)
-         w1(m) = cmplx(d1*p1, kind=c_float_complex)
-         w2(m) = cmplx(d2*p2, kind=c_float_complex)
-         w4(m) = cmplx(0.5_dp*(d1*p2 + d2*p1), kind=c_float_complex)
-         w5(m) = cmplx(0.5_dp*(d1*p3 + d3*p1), kind=c_float_complex)
-         w6(m) = cmplx(0.5_dp*(d2*p3 + d3*p2), kind=c_float_complex)
+         w1(m) = cmplx(rx(d1, p1), kind=c_float_complex)
+         w2(m) = cmplx(rx(d2, p2), kind=c_float_complex)
+         w4(m) = cmplx(rx(0.5_dp, (rx(d1, p2) + rx(d2, p1))), kind=c_float_complex)
+         w5(m) = cmplx(rx(0.5_dp, (rx(d1, p3) + rx(d3, p1))), kind=c_float_complex)
+         w6(m) = cmplx(rx(0.5_dp, (rx(d2, p3) + rx(d3, p2))), kind=c_float_complex)
       end do
    end subroutine direction_strain3_sp
 
@@ -1068,16 +1107,16 @@ contains
       real(dp) :: z, d1, d2
       do m = 1, n
          z = ik2(m)*inv_eta0
-         x1(m) = x1(m) + a_prev*pp1(m)
-         x2(m) = x2(m) + a_prev*pp2(m)
-         p1 = z*r1(m) + beta*pp1(m)
-         p2 = z*r2(m) + beta*pp2(m)
+         x1(m) = x1(m) + rx(a_prev, pp1(m))
+         x2(m) = x2(m) + rx(a_prev, pp2(m))
+         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
+         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
          pp1(m) = p1
          pp2(m) = p2
          d1 = kv(1, m)
          d2 = kv(2, m)
-         w1(m) = cmplx(d1*p1, kind=c_float_complex)
-         w3(m) = cmplx(0.5_dp*(d1*p2 + d2*p1), kind=c_float_complex)
+         w1(m) = cmplx(rx(d1, p1), kind=c_float_complex)
+         w3(m) = cmplx(rx(0.5_dp, (rx(d1, p2) + rx(d2, p1))), kind=c_float_complex)
       end do
    end subroutine direction_strain2_sp
 
@@ -1159,13 +1198,13 @@ contains
             s4 = cmplx(w4(i, jk), kind=dp)
             s5 = cmplx(w5(i, jk), kind=dp)
             s6 = cmplx(w6(i, jk), kind=dp)
-            f1 = k1*s1 + k2*s4 + k3*s5
-            f2 = k1*s4 + k2*s2 + k3*s6
-            f3 = k1*s5 + k2*s6 - k3*(s1 + s2)
-            t = (k1*f1 + k2*f2 + k3*f3)*ik2(i, jk)
-            r1 = q1(i, jk) - alpha*(f1 - k1*t)
-            r2 = q2(i, jk) - alpha*(f2 - k2*t)
-            r3 = q3(i, jk) - alpha*(f3 - k3*t)
+            f1 = rx(k1, s1) + rx(k2, s4) + rx(k3, s5)
+            f2 = rx(k1, s4) + rx(k2, s2) + rx(k3, s6)
+            f3 = rx(k1, s5) + rx(k2, s6) - rx(k3, (s1 + s2))
+            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2) + rx(k3, f3))
+            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
+            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
+            r3 = q3(i, jk) - rx(alpha, (f3 - rx(k3, t)))
             q1(i, jk) = r1
             q2(i, jk) = r2
             q3(i, jk) = r3
@@ -1192,11 +1231,11 @@ contains
             k2 = kv(2, i, jk)
             s1 = cmplx(w1(i, jk), kind=dp)
             s3 = cmplx(w3(i, jk), kind=dp)
-            f1 = k1*s1 + k2*s3
-            f2 = k1*s3 - k2*s1
-            t = (k1*f1 + k2*f2)*ik2(i, jk)
-            r1 = q1(i, jk) - alpha*(f1 - k1*t)
-            r2 = q2(i, jk) - alpha*(f2 - k2*t)
+            f1 = rx(k1, s1) + rx(k2, s3)
+            f2 = rx(k1, s3) - rx(k2, s1)
+            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2))
+            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
+            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
             q1(i, jk) = r1
             q2(i, jk) = r2
             v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2)
