@@ -1120,8 +1120,10 @@ contains
       end do
    end subroutine direction_strain2_sp
 
-   !> viscous_energy3 on single-precision fields; ceta = c eta (single), the sum in double
-   !> per row (a row's partial sum in single would add nx round-offs).
+   !> viscous_energy3 on single-precision fields; ceta = c eta (single). Each row's
+   !> sum is formed in single (nx terms: relative error <= nx u_s, which only shifts the
+   !> step length alpha; x and r move by the same alpha p, so the recursion stays
+   !> consistent), the rows are summed in double.
    function viscous_energy3_sp(nx, nxp, nrows, ceta, w1, w2, w4, w5, w6) result(pq)
       integer(ip), intent(in) :: nx, nxp, nrows
       real(c_float), intent(in) :: ceta(nxp, nrows)
@@ -1129,11 +1131,10 @@ contains
                                       w6(nxp, nrows)
       real(dp) :: pq
       integer(ip) :: i, r
-      real(c_float) :: ce, e1, e2, e4, e5, e6
-      real(dp) :: row
+      real(c_float) :: ce, e1, e2, e4, e5, e6, row
       pq = 0.0_dp
       do r = 1, nrows
-         row = 0.0_dp
+         row = 0.0_c_float
          do i = 1, nx
             ce = ceta(i, r)
             e1 = w1(i, r)
@@ -1141,39 +1142,38 @@ contains
             e4 = w4(i, r)
             e5 = w5(i, r)
             e6 = w6(i, r)
-            row = row + real(ce, dp)*(real(e1, dp)**2 + real(e2, dp)**2 + (real(e1, dp) + real(e2, dp))**2 &
-                                      + 2.0_dp*(real(e4, dp)**2 + real(e5, dp)**2 + real(e6, dp)**2))
+            row = row + ce*(e1*e1 + e2*e2 + (e1 + e2)**2 + 2.0_c_float*(e4*e4 + e5*e5 + e6*e6))
             w1(i, r) = ce*e1
             w2(i, r) = ce*e2
             w4(i, r) = ce*e4
             w5(i, r) = ce*e5
             w6(i, r) = ce*e6
          end do
-         pq = pq + row
+         pq = pq + real(row, dp)
       end do
    end function viscous_energy3_sp
 
-   !> viscous_energy2 on single-precision fields (ceta = c eta).
+   !> viscous_energy2 on single-precision fields (ceta = c eta; rows summed in single
+   !> as in viscous_energy3_sp).
    function viscous_energy2_sp(nx, nxp, nrows, ceta, w1, w3) result(pq)
       integer(ip), intent(in) :: nx, nxp, nrows
       real(c_float), intent(in) :: ceta(nxp, nrows)
       real(c_float), intent(inout) :: w1(nxp, nrows), w3(nxp, nrows)
       real(dp) :: pq
       integer(ip) :: i, r
-      real(c_float) :: ce, e1, e3
-      real(dp) :: row
+      real(c_float) :: ce, e1, e3, row
       pq = 0.0_dp
       do r = 1, nrows
-         row = 0.0_dp
+         row = 0.0_c_float
          do i = 1, nx
             ce = ceta(i, r)
             e1 = w1(i, r)
             e3 = w3(i, r)
-            row = row + 2.0_dp*real(ce, dp)*(real(e1, dp)**2 + real(e3, dp)**2)
+            row = row + 2.0_c_float*ce*(e1*e1 + e3*e3)
             w1(i, r) = ce*e1
             w3(i, r) = ce*e3
          end do
-         pq = pq + row
+         pq = pq + real(row, dp)
       end do
    end function viscous_energy2_sp
 
