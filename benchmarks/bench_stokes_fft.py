@@ -178,8 +178,7 @@ def precision_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> 
             print(f"{r:>5} {n:>5}^3 {before:>17} {d['t_iter_cpu']:>14.3e} {f['t_iter_cpu']:>10.3e} "
                   f"{d['t_iter_cpu'] / d['t_fft_cpu']:>10.2f} {f['t_iter_cpu'] / f['t_fft_cpu']:>6.2f} "
                   f"{d['t_iter_cpu'] / f['t_iter_cpu']:>8.2f} {f['t_fft_sp'] / f['t_fft']:>11.2f}", flush=True)
-    print("
-median [min, max] over rounds (CPU time of this process; FFT-eq = iteration / one hot double FFT)")
+    print("\nmedian [min, max] over rounds (CPU time of this process; FFT-eq = iteration / one hot double FFT)")
     for n, v in rows.items():
         for key, vals in (("FFT-eq/iter double", [d["t_iter_cpu"] / d["t_fft_cpu"] for d, _ in v]),
                           ("FFT-eq/iter single", [f["t_iter_cpu"] / f["t_fft_cpu"] for _, f in v]),
