@@ -68,7 +68,7 @@
 !> SIAM J. Sci. Comput. 22:835), i.e. it stalls at a relative level ~eps. A tolerance
 !> >= eps is thus reached by the true residual within a factor 2 (checked by
 !> fortran/stokes/tests/test_stokes_single.f90); below it the reported residual would
-!> overstate the accuracy, so stokes_fft_init refuses tol < eps (single_tol_min; 2.5e-6
+!> overstate the accuracy, so stokes_fft_init refuses tol < eps (single_tol_min; 2.4e-6
 !> at 72^3, 2.7e-6 at 128^3) with a message naming fft_precision. Measured stall of the
 !> true residual (sphere of radius 0.2 cell, 32^3, tol 1e-11): 1.5e-7 to 1.9e-7 for
 !> kappa = 10, 1e3 and 1e6, against eps = 2.0e-6, no kappa dependence seen. The

@@ -215,7 +215,7 @@ class StokesSettings(_Table):
     #: agree to the solver tolerance) or "estimate" (bitwise reproducible)
     fft_plan: Literal["measure", "estimate"] = _STOKES["fft_plan"]
     #: precision of the FFTs of the CG operator: "double" or "single" (single-precision
-    #: transforms inside the double-precision CG, ~1.5x cheaper iterations; fold_run refuses
+    #: transforms inside the double-precision CG, 1.3-1.4x cheaper iterations; fold_run refuses
     #: a tolerance below (2 log2 N + 4) 2^-24 for N voxels, docs/physics.md)
     fft_precision: Literal["double", "single"] = _STOKES["fft_precision"]
     #: initial guess of each CG solve: "previous" (the last step's solution) or
