@@ -271,19 +271,29 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(ip) :: i, j, k, l, l2, m(3), dim, nnyq
-      real(dp) :: th(3), lat(3), ait(3, 3), kk, cosprod
+      real(dp) :: th, lat(3), ait(3, 3), kk, cosprod
+      ! sin and cos of the half angle of every wavenumber index of each axis: the same
+      ! values as evaluated per mode, one evaluation per index instead of per mode
+      real(dp), allocatable :: sh(:, :), ch(:, :)
       logical :: removed
 
       call grid_set_lattice(s%grid, A, stat, errmsg)
       if (stat /= FOLD_OK) return
       dim = s%dim
       ait = transpose(s%grid%Ainv)
+      allocate (sh(0:maxval(s%grid%n) - 1, 3), ch(0:maxval(s%grid%n) - 1, 3))
+      do l = 1, 3
+         do i = 0, s%grid%n(l) - 1
+            th = 2.0_dp*pi*real(i, dp)/real(s%grid%n(l), dp)
+            sh(i, l) = sin(0.5_dp*th)
+            ch(i, l) = cos(0.5_dp*th)
+         end do
+      end do
       do k = 1, s%fft%nsl(3)
          do j = 1, s%fft%nsl(2)
             do i = 1, s%fft%nxh
                ! global wavenumber index of the local mode (spectral layout of the backend)
                m(s%fft%saxis) = [i - 1, j - 1, k - 1] + s%fft%soff
-               th = 2.0_dp*pi*real(m, dp)/real(s%grid%n, dp)
                nnyq = count(2*m(1:dim) == s%grid%n(1:dim))
                lat = 0.0_dp
                if (s%set%derivative == FOLD_DERIV_SPECTRAL) then
@@ -295,10 +305,10 @@ contains
                else
                   cosprod = 1.0_dp
                   do l = 1, dim
-                     cosprod = cosprod*cos(0.5_dp*th(l))
-                     lat(l) = 2.0_dp*s%grid%n(l)*sin(0.5_dp*th(l))
+                     cosprod = cosprod*ch(m(l), l)
+                     lat(l) = 2.0_dp*s%grid%n(l)*sh(m(l), l)
                      do l2 = 1, dim
-                        if (l2 /= l) lat(l) = lat(l)*cos(0.5_dp*th(l2))
+                        if (l2 /= l) lat(l) = lat(l)*ch(m(l2), l2)
                      end do
                   end do
                   s%cosprod(i, j, k) = cosprod
