@@ -342,7 +342,7 @@ contains
       real(dp), intent(in) :: G(3, 3)
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(ip) :: nx, c, it, dim
+      integer(ip) :: nx, it, dim
       real(dp) :: ext(2), red(2), bb, rz, rz_new, alpha, beta, pq, emin, emax
 
       stat = FOLD_OK
