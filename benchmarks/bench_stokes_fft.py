@@ -8,6 +8,7 @@ is the speed-up of np = 2 slabs over np = 1 at 128^3?
 Command:  python benchmarks/bench_stokes_fft.py [--build build/editable] [--repeats 5] [--quick]
           python benchmarks/bench_stokes_fft.py --mpi [--grids 64 128] [--rounds 5]
           python benchmarks/bench_stokes_fft.py --project T_C ALPHA BETA [--grids 128]
+          python benchmarks/bench_stokes_fft.py --precision [--grids 72 128] [--rounds 3]
 Cost: ~3 min (--quick: ~1 min; --mpi: 2-5 min per round of 64^3 and 128^3, 4.5 min at load 10). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
 plans, a sphere of radius n/8 on a sheared lattice, simple shear) and prints medians
 over repeats, with the load average before and after: the machine is shared, so read
@@ -16,6 +17,12 @@ ratios (iteration / FFT, measured back to back in one process), not absolute tim
 Two FFT units are reported: ``hot`` (one field transformed back and forth, in cache)
 and ``seq`` (c2r then r2c of each of the 5 strain fields in turn, as the iteration
 does); ``ratio_seq`` is the one to compare with the floor of 10.
+
+``--precision`` answers only: what does a CG iteration cost with single-precision
+transforms of the operator (fft_precision single) against double, serial, per grid:
+rounds of double then single back to back, medians of the CPU seconds per iteration,
+of the iteration in units of one hot double FFT of the same process (CPU time), of the
+hot single FFT against the double one (wall), and the speed-up double/single.
 
 ``--mpi`` answers only the parallel question (docs/physics.md, "Parallel scaling of
 the slab decomposition"): per round and grid, back to back, np = 1 (serial FFTW),
@@ -50,9 +57,9 @@ def _run(exe: Path, args: list[str], ranks: int) -> str:
     return subprocess.run(cmd, capture_output=True, text=True, check=True, env=ENV).stdout
 
 
-def cost(exe: Path, n: int, ranks: int, repeats: int, backend: str = "auto") -> dict:
+def cost(exe: Path, n: int, ranks: int, repeats: int, backend: str = "auto", precision: str = "double") -> dict:
     """Medians over repeats of the BENCH lines (first repeat dropped: page faults, caches)."""
-    out = _run(exe, [str(n), "1000", str(repeats + 1), "cost", "sphere", backend], ranks)
+    out = _run(exe, [str(n), "1000", str(repeats + 1), "cost", "sphere", backend, precision], ranks)
     rows = [dict((k, float(v)) for k, v in re.findall(r"(\w+)=\s*(\S+)", line))
             for line in out.splitlines() if line.startswith("BENCH")][1:]
     return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
@@ -157,6 +164,30 @@ def mpi_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
     projection(n, tc, alpha, beta, [1, 2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096])
 
 
+def precision_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
+    """Serial CG iteration with double and with single-precision transforms; medians over rounds."""
+    rows: dict[int, list[tuple[dict, dict]]] = {}
+    print(f"{'round':>5} {'grid':>6} {'load 1/5/15 min':>17} {'CPU-s/iter dbl':>14} {'sgl':>10} {'FFT-eq dbl':>10} "
+          f"{'sgl':>6} {'speed-up':>8} {'FFT sgl/dbl':>11}")
+    for r in range(rounds):
+        for n in grids:
+            before = load()
+            d = cost(exe, n, 1, repeats, "auto", "double")
+            f = cost(exe, n, 1, repeats, "auto", "single")
+            rows.setdefault(n, []).append((d, f))
+            print(f"{r:>5} {n:>5}^3 {before:>17} {d['t_iter_cpu']:>14.3e} {f['t_iter_cpu']:>10.3e} "
+                  f"{d['t_iter_cpu'] / d['t_fft_cpu']:>10.2f} {f['t_iter_cpu'] / f['t_fft_cpu']:>6.2f} "
+                  f"{d['t_iter_cpu'] / f['t_iter_cpu']:>8.2f} {f['t_fft_sp'] / f['t_fft']:>11.2f}", flush=True)
+    print("\nmedian [min, max] over rounds (CPU time of this process; FFT-eq = iteration / one hot double FFT)")
+    for n, v in rows.items():
+        for key, vals in (("FFT-eq/iter double", [d["t_iter_cpu"] / d["t_fft_cpu"] for d, _ in v]),
+                          ("FFT-eq/iter single", [f["t_iter_cpu"] / f["t_fft_cpu"] for _, f in v]),
+                          ("speed-up double/single", [d["t_iter_cpu"] / f["t_iter_cpu"] for d, f in v]),
+                          ("hot FFT single/double", [f["t_fft_sp"] / f["t_fft"] for _, f in v])):
+            print(f"  {n:>4}^3 {key:<24} {statistics.median(vals):6.2f} [{min(vals):.2f}, {max(vals):.2f}]  "
+                  f"({len(vals)} rounds)")
+
+
 def iterations(exe: Path, n: int, kappa: float, shape: str = "sphere") -> int:
     out = _run(exe, [str(n), str(kappa), "1", "iters", shape], 1)
     m = re.search(r"iterations=\s*(\d+)", out)
@@ -169,8 +200,10 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="64^3 and np = 2 at 64^3 only, shorter sweeps")
     ap.add_argument("--mpi", action="store_true", help="only np = 2 against np = 1 (transposed, natural, batched)")
-    ap.add_argument("--grids", type=int, nargs="+", default=[64, 128], help="grids of --mpi")
-    ap.add_argument("--rounds", type=int, default=5, help="rounds of --mpi")
+    ap.add_argument("--precision", action="store_true",
+                    help="only the serial iteration with single- against double-precision transforms")
+    ap.add_argument("--grids", type=int, nargs="+", default=[64, 128], help="grids of --mpi and --precision")
+    ap.add_argument("--rounds", type=int, default=5, help="rounds of --mpi and --precision")
     ap.add_argument("--project", type=float, nargs=3, metavar=("T_C", "ALPHA", "BETA"),
                     help="only print the projected scaling at max(--grids) for a serial iteration T_C [s], "
                          "all-to-all latency ALPHA [s] and bandwidth BETA [B/s] (no run)")
@@ -187,6 +220,10 @@ def main() -> None:
     exe = Path(tempfile.mkdtemp(prefix="bench_stokes_")) / "bench_stokes_fft"
     shutil.copy2(built, exe)
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
+    if args.precision:
+        precision_rounds(exe, args.grids, args.rounds, args.repeats)
+        print(f"\nload average after: {load()}")
+        return
     if args.mpi:
         mpi_rounds(exe, args.grids, args.rounds, args.repeats)
         print(f"\nload average after: {load()}")

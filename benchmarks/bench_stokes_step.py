@@ -66,6 +66,10 @@ SETTINGS: dict[str, tuple[dict, str]] = {
     "tol1e-3_every2": ({"tolerance": 1e-3, "solve_every": 2}, "tolerance 1e-3, a solve every 2nd step"),
     "tol1e-3_every3": ({"tolerance": 1e-3, "solve_every": 3}, "tolerance 1e-3, a solve every 3rd step"),
     "tol1e-3_every4": ({"tolerance": 1e-3, "solve_every": 4}, "tolerance 1e-3, a solve every 4th step"),
+    "tol1e-3_single": ({"tolerance": 1e-3, "fft_precision": "single"},
+                       "tolerance 1e-3, single-precision transforms of the CG operator"),
+    "tol1e-4_single": ({"tolerance": 1e-4, "fft_precision": "single"},
+                       "tolerance 1e-4, single-precision transforms of the CG operator"),
 }
 
 

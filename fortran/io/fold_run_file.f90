@@ -8,7 +8,7 @@
 !> The Stokes settings (`stokes_grid`, `stokes_backend`, `stokes_tolerance`,
 !> `stokes_max_iterations`, `stokes_kappa`, `stokes_derivative`, `stokes_fft_plan`,
 !> `stokes_mixing`, `stokes_subsamples`, `stokes_fibre_ends`, `stokes_warm_start`,
-!> `time_scheme`; optional `stokes_initial_guess`, `stokes_solve_every`) are read
+!> `time_scheme`; optional `stokes_initial_guess`, `stokes_solve_every`, `stokes_fft_precision`) are read
 !> only when `hydrodynamics` = 1, so Jeffery run files need not carry them; every
 !> setting that changes results is read, none is left at a default of the solver.
 !> Any problem is returned as FOLD_INPUT_ERROR (wrong content) or FOLD_IO_ERROR
@@ -17,7 +17,8 @@ module fold_run_file
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
    use fold_particles, only: particle_set_t, particles_init, particles_check
-   use fold_stokes_solver, only: stokes_settings_t, FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_KAPPA_MIN, FOLD_KAPPA_MAX
+   use fold_stokes_solver, only: stokes_settings_t, FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, &
+                                 FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE
    use fold_h5, only: hid_t, hsize_t, h5_open_file, h5_close_file, h5_exists, h5_shape, &
                       h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
    implicit none
@@ -234,6 +235,13 @@ contains
       if (h5_exists(file, R//"stokes_initial_guess")) then
          call get_int(file, R//"stokes_initial_guess", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
          s%stokes%guess = int(iv, ip)
+      end if
+      ! optional: run files written before the setting existed transformed in double
+      s%stokes%fft_precision = FOLD_FFT_DOUBLE
+      if (h5_exists(file, R//"stokes_fft_precision")) then
+         call get_int(file, R//"stokes_fft_precision", int(FOLD_FFT_DOUBLE, i8), int(FOLD_FFT_SINGLE, i8), iv, &
+                      stat, errmsg); if (stat /= FOLD_OK) return
+         s%stokes%fft_precision = int(iv, ip)
       end if
       s%stokes_solve_every = 1
       if (h5_exists(file, R//"stokes_solve_every")) then

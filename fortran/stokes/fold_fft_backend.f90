@@ -18,20 +18,27 @@
 !> slab and sums over ranks. Serial and parallel runs share every line of numerics.
 module fold_fft_backend
    use, intrinsic :: iso_c_binding
-   use fold_kinds, only: dp, ip, i8
+   use fold_kinds, only: dp, ip, i8, msg_len
    implicit none
    private
 
    include 'fftw3.f03'
 
    !> One FFTW-aligned field usable for in-place transforms: the same memory seen
-   !> as a padded real array and as a half spectrum.
+   !> as a padded real array and as a half spectrum, in double precision (r, c) and,
+   !> on the first half of the same memory, in single precision (rs, cs; the
+   !> transforms r2c_sp/c2r_sp). The single views share the double ones' storage, so
+   !> a field holds either, never both.
    type, public :: fft_field_t
       type(c_ptr) :: mem = c_null_ptr
       !> Real view (nxp, nl(2), nl(3)); only r(1:nx, :, :) is data, the rest padding
       real(dp), pointer, contiguous :: r(:, :, :) => null()
       !> Complex view (nsl(1), nsl(2), nsl(3)) of the backend (spectral layout)
       complex(dp), pointer, contiguous :: c(:, :, :) => null()
+      !> Single-precision real view, same shape as r
+      real(c_float), pointer, contiguous :: rs(:, :, :) => null()
+      !> Single-precision complex view, same shape as c
+      complex(c_float_complex), pointer, contiguous :: cs(:, :, :) => null()
    end type fft_field_t
 
    !> Abstract FFT engine of a fixed grid (global sizes n, local slab nl/off).
@@ -61,6 +68,12 @@ module fold_fft_backend
       procedure(transform_iface), deferred :: r2c
       !> In-place backward transform (complex view -> real view), unnormalised; destroys the input
       procedure(transform_iface), deferred :: c2r
+      !> Make the single-precision plans (fftwf) of the grid; once, before r2c_sp/c2r_sp
+      procedure(plan_single_iface), deferred :: plan_single
+      !> In-place single-precision forward transform (rs -> cs), unnormalised
+      procedure(transform_iface), deferred :: r2c_sp
+      !> In-place single-precision backward transform (cs -> rs), unnormalised; destroys the input
+      procedure(transform_iface), deferred :: c2r_sp
       !> Sum an array over all ranks (in place)
       procedure(reduce_iface), deferred :: sum_all
       !> Maximum of an array over all ranks (in place)
@@ -83,6 +96,13 @@ module fold_fft_backend
          class(fft_backend_t), intent(inout) :: self
          type(fft_field_t), intent(inout) :: f
       end subroutine transform_iface
+      subroutine plan_single_iface(self, effort, stat, errmsg)
+         import :: fft_backend_t, msg_len
+         class(fft_backend_t), intent(inout) :: self
+         integer, intent(in) :: effort
+         integer, intent(out) :: stat
+         character(len=msg_len), intent(out) :: errmsg
+      end subroutine plan_single_iface
       subroutine reduce_iface(self, x)
          import :: fft_backend_t, dp
          class(fft_backend_t), intent(in) :: self
@@ -110,6 +130,8 @@ contains
       f%mem = fftw_alloc_complex(int(max(self%alloc_complex, 1_i8), c_size_t))
       call c_f_pointer(f%mem, f%r, [self%nxp, self%nl(2), self%nl(3)])
       call c_f_pointer(f%mem, f%c, self%nsl)
+      call c_f_pointer(f%mem, f%rs, [self%nxp, self%nl(2), self%nl(3)])
+      call c_f_pointer(f%mem, f%cs, self%nsl)
       f%r = 0.0_dp
    end subroutine backend_alloc_field
 
@@ -145,6 +167,8 @@ contains
       f%mem = c_null_ptr
       f%r => null()
       f%c => null()
+      f%rs => null()
+      f%cs => null()
    end subroutine field_free
 
    !> Spectral layout in the real-space order: c(nxh, nl(2), nl(3)) (serial, 2-D MPI).

@@ -23,10 +23,17 @@ module fold_fft_mpi
    !> FFTW-MPI in-place r2c/c2r plans of one slab-decomposed grid.
    type, extends(fft_backend_t), public :: fft_mpi_t
       type(c_ptr) :: fwd = c_null_ptr, bwd = c_null_ptr
+      !> Single-precision (fftwf_mpi) plans, made by plan_single only
+      type(c_ptr) :: fwd_sp = c_null_ptr, bwd_sp = c_null_ptr
       type(MPI_Comm) :: comm
+      !> The spectrum is left transposed (3-D default)
+      logical :: transposed = .false.
    contains
       procedure :: r2c => slab_r2c
       procedure :: c2r => slab_c2r
+      procedure :: plan_single => slab_plan_single
+      procedure :: r2c_sp => slab_r2c_sp
+      procedure :: c2r_sp => slab_c2r_sp
       procedure :: sum_all => slab_sum
       procedure :: max_all => slab_max
       procedure :: destroy => slab_destroy
@@ -36,10 +43,11 @@ module fold_fft_mpi
 
 contains
 
-   !> Initialise FFTW-MPI: once per process after MPI_Init, before any plan
-   !> (FFTW ignores repeated calls).
+   !> Initialise FFTW-MPI, double and single precision (separate libraries): once per
+   !> process after MPI_Init, before any plan (FFTW ignores repeated calls).
    subroutine fft_mpi_start()
       call fftw_mpi_init()
+      call fftwf_mpi_init()
    end subroutine fft_mpi_start
 
    !> Make the distributed plans once (collective over comm). fftw_mpi_init must
@@ -74,6 +82,7 @@ contains
       tr = dim == 3
       if (present(transposed)) tr = transposed .and. dim == 3
       call slab_destroy(self)
+      self%transposed = tr
       self%comm = comm
       call MPI_Comm_rank(comm, self%rank)
       call MPI_Comm_size(comm, self%nranks)
@@ -129,6 +138,79 @@ contains
       call field_free(scratch)
    end subroutine fft_mpi_create
 
+   !> The fftwf_mpi plans of the grid. The single-precision distribution of a grid is
+   !> the double one (fftwf_mpi_local_size_* gives the same blocks for the same
+   !> counts), so the fields, slabs and spectral map of the double plans serve.
+   !> Collective over comm.
+   subroutine slab_plan_single(self, effort, stat, errmsg)
+      class(fft_mpi_t), intent(inout) :: self
+      integer, intent(in) :: effort
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(c_intptr_t) :: alloc, local_n, local_0, local_n1, local_1
+      integer(c_int) :: flag_fwd, flag_bwd
+      type(fft_field_t) :: scratch
+      logical :: same
+      stat = FOLD_OK
+      errmsg = ""
+      if (c_associated(self%fwd_sp)) return
+      flag_fwd = plan_flag(effort)
+      flag_bwd = plan_flag(effort)
+      if (self%dim == 3 .and. self%transposed) then
+         alloc = fftwf_mpi_local_size_3d_transposed(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
+                                                    int(self%nxh, c_intptr_t), self%comm%MPI_VAL, local_n, local_0, &
+                                                    local_n1, local_1)
+         same = local_n == self%nl(3) .and. local_0 == self%off(3) .and. local_n1 == self%nsl(3) &
+                .and. local_1 == self%soff(3)
+         flag_fwd = ior(flag_fwd, FFTW_MPI_TRANSPOSED_OUT)
+         flag_bwd = ior(flag_bwd, FFTW_MPI_TRANSPOSED_IN)
+      else if (self%dim == 3) then
+         alloc = fftwf_mpi_local_size_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
+                                         int(self%nxh, c_intptr_t), self%comm%MPI_VAL, local_n, local_0)
+         same = local_n == self%nl(3) .and. local_0 == self%off(3)
+      else
+         alloc = fftwf_mpi_local_size_2d(int(self%n(2), c_intptr_t), int(self%nxh, c_intptr_t), &
+                                         self%comm%MPI_VAL, local_n, local_0)
+         same = local_n == self%nl(2) .and. local_0 == self%off(2)
+      end if
+      if (.not. same .or. alloc > self%alloc_complex) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "fft_mpi: the single-precision FFTW-MPI distribution differs from the double one"
+         return
+      end if
+      call self%alloc_field(scratch)
+      if (self%dim == 3) then
+         self%fwd_sp = fftwf_mpi_plan_dft_r2c_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
+                                                 int(self%n(1), c_intptr_t), scratch%rs, scratch%cs, &
+                                                 self%comm%MPI_VAL, flag_fwd)
+         self%bwd_sp = fftwf_mpi_plan_dft_c2r_3d(int(self%n(3), c_intptr_t), int(self%n(2), c_intptr_t), &
+                                                 int(self%n(1), c_intptr_t), scratch%cs, scratch%rs, &
+                                                 self%comm%MPI_VAL, flag_bwd)
+      else
+         self%fwd_sp = fftwf_mpi_plan_dft_r2c_2d(int(self%n(2), c_intptr_t), int(self%n(1), c_intptr_t), &
+                                                 scratch%rs, scratch%cs, self%comm%MPI_VAL, flag_fwd)
+         self%bwd_sp = fftwf_mpi_plan_dft_c2r_2d(int(self%n(2), c_intptr_t), int(self%n(1), c_intptr_t), &
+                                                 scratch%cs, scratch%rs, self%comm%MPI_VAL, flag_bwd)
+      end if
+      call field_free(scratch)
+      if (.not. (c_associated(self%fwd_sp) .and. c_associated(self%bwd_sp))) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "fft_mpi: FFTW-MPI could not make the single-precision plans"
+      end if
+   end subroutine slab_plan_single
+
+   subroutine slab_r2c_sp(self, f)
+      class(fft_mpi_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call fftwf_mpi_execute_dft_r2c(self%fwd_sp, f%rs, f%cs)
+   end subroutine slab_r2c_sp
+
+   subroutine slab_c2r_sp(self, f)
+      class(fft_mpi_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call fftwf_mpi_execute_dft_c2r(self%bwd_sp, f%cs, f%rs)
+   end subroutine slab_c2r_sp
+
    subroutine slab_r2c(self, f)
       class(fft_mpi_t), intent(inout) :: self
       type(fft_field_t), intent(inout) :: f
@@ -157,8 +239,12 @@ contains
       class(fft_mpi_t), intent(inout) :: self
       if (c_associated(self%fwd)) call fftw_destroy_plan(self%fwd)
       if (c_associated(self%bwd)) call fftw_destroy_plan(self%bwd)
+      if (c_associated(self%fwd_sp)) call fftwf_destroy_plan(self%fwd_sp)
+      if (c_associated(self%bwd_sp)) call fftwf_destroy_plan(self%bwd_sp)
       self%fwd = c_null_ptr
       self%bwd = c_null_ptr
+      self%fwd_sp = c_null_ptr
+      self%bwd_sp = c_null_ptr
    end subroutine slab_destroy
 
 end module fold_fft_mpi

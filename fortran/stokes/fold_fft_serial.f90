@@ -13,9 +13,14 @@ module fold_fft_serial
    !> Serial in-place r2c/c2r plans of one grid.
    type, extends(fft_backend_t), public :: fft_serial_t
       type(c_ptr) :: fwd = c_null_ptr, bwd = c_null_ptr
+      !> Single-precision (fftwf) plans, made by plan_single only
+      type(c_ptr) :: fwd_sp = c_null_ptr, bwd_sp = c_null_ptr
    contains
       procedure :: r2c => serial_r2c
       procedure :: c2r => serial_c2r
+      procedure :: plan_single => serial_plan_single
+      procedure :: r2c_sp => serial_r2c_sp
+      procedure :: c2r_sp => serial_c2r_sp
       procedure :: sum_all => serial_reduce
       procedure :: max_all => serial_reduce
       procedure :: destroy => serial_destroy
@@ -74,6 +79,44 @@ contains
       call field_free(scratch)
    end subroutine fft_serial_create
 
+   !> The fftwf plans of the grid (same layout as the double ones, on the first half
+   !> of a field's memory: fft_field_t%rs/cs).
+   subroutine serial_plan_single(self, effort, stat, errmsg)
+      class(fft_serial_t), intent(inout) :: self
+      integer, intent(in) :: effort
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      type(fft_field_t) :: scratch
+      stat = FOLD_OK
+      errmsg = ""
+      if (c_associated(self%fwd_sp)) return
+      call self%alloc_field(scratch)
+      if (self%dim == 3) then
+         self%fwd_sp = fftwf_plan_dft_r2c_3d(self%n(3), self%n(2), self%n(1), scratch%rs, scratch%cs, plan_flag(effort))
+         self%bwd_sp = fftwf_plan_dft_c2r_3d(self%n(3), self%n(2), self%n(1), scratch%cs, scratch%rs, plan_flag(effort))
+      else
+         self%fwd_sp = fftwf_plan_dft_r2c_2d(self%n(2), self%n(1), scratch%rs, scratch%cs, plan_flag(effort))
+         self%bwd_sp = fftwf_plan_dft_c2r_2d(self%n(2), self%n(1), scratch%cs, scratch%rs, plan_flag(effort))
+      end if
+      call field_free(scratch)
+      if (.not. (c_associated(self%fwd_sp) .and. c_associated(self%bwd_sp))) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "fft_serial: FFTW could not make the single-precision plans"
+      end if
+   end subroutine serial_plan_single
+
+   subroutine serial_r2c_sp(self, f)
+      class(fft_serial_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call fftwf_execute_dft_r2c(self%fwd_sp, f%rs, f%cs)
+   end subroutine serial_r2c_sp
+
+   subroutine serial_c2r_sp(self, f)
+      class(fft_serial_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call fftwf_execute_dft_c2r(self%bwd_sp, f%cs, f%rs)
+   end subroutine serial_c2r_sp
+
    subroutine serial_r2c(self, f)
       class(fft_serial_t), intent(inout) :: self
       type(fft_field_t), intent(inout) :: f
@@ -96,8 +139,12 @@ contains
       class(fft_serial_t), intent(inout) :: self
       if (c_associated(self%fwd)) call fftw_destroy_plan(self%fwd)
       if (c_associated(self%bwd)) call fftw_destroy_plan(self%bwd)
+      if (c_associated(self%fwd_sp)) call fftwf_destroy_plan(self%fwd_sp)
+      if (c_associated(self%bwd_sp)) call fftwf_destroy_plan(self%bwd_sp)
       self%fwd = c_null_ptr
       self%bwd = c_null_ptr
+      self%fwd_sp = c_null_ptr
+      self%bwd_sp = c_null_ptr
    end subroutine serial_destroy
 
 end module fold_fft_serial

@@ -48,21 +48,50 @@
 !> stay O(1) in both phases. Residual: sqrt(<r, M^-1 r> / <b, M^-1 b>)
 !> (relative preconditioned, i.e. energy-like, residual).
 !> No allocation happens inside the iteration; the FFT plans are made once.
+!>
+!> Single-precision transforms (settings fft_precision = FOLD_FFT_SINGLE). The 2 ncg
+!> transforms of each iteration (and of the warm start's r = b - A x) run on fftwf
+!> plans over the first half of the work fields' memory (fft_field_t%rs/cs): the
+!> direction pass rounds the strain to single as it writes it, the viscosity pass
+!> multiplies by 2 eta/N held in single and sums <p, A p> in double, the update pass
+!> widens the stress to double. x, r, p, the preconditioner, every dot product and
+!> the residual stay double, and so do the right-hand side, the velocity and strain
+!> outputs and stokes_fft_true_residual. CG therefore runs with a perturbed operator
+!> A + dA, |dA p| <= eps |A p| in the sense of the stress field, with
+!>     eps = (2 log2 N + 4) u_s,   u_s = 2^-24,  N voxels:
+!> each of the two transforms adds at most log2 N roundings per value (one per
+!> butterfly stage of a radix-2 FFT; Higham 2002, Accuracy and Stability of Numerical
+!> Algorithms, sec. 24.1), plus four roundings to single (strain, 2 eta/N, product,
+!> stress). With a perturbed product the recursive residual keeps falling, while the
+!> true one, b - A x_k, differs from it by the accumulated sum of alpha_i dA p_i
+!> (Greenbaum 1997, SIAM J. Matrix Anal. Appl. 18:535; van der Vorst & Ye 2000,
+!> SIAM J. Sci. Comput. 22:835), i.e. it stalls at a relative level ~eps. A tolerance
+!> >= eps is thus reached by the true residual within a factor 2 (checked by
+!> fortran/stokes/tests/test_stokes_single.f90); below it the reported residual would
+!> overstate the accuracy, so stokes_fft_init refuses tol < eps (single_tol_min; 2.4e-6
+!> at 72^3, 2.7e-6 at 128^3) with a message naming fft_precision. Measured stall of the
+!> true residual (sphere of radius 0.2 cell, 32^3, tol 1e-11): 1.5e-7 to 1.9e-7 for
+!> kappa = 10, 1e3 and 1e6, against eps = 2.0e-6, no kappa dependence seen. The
+!> working tolerances 1e-3..1e-5 are 2..4 orders above the perturbation; the default
+!> 1e-6 and the reference 1e-10 of the benchmarks stay double.
 module fold_stokes_fft
    use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
+   use, intrinsic :: iso_c_binding, only: c_float, c_float_complex
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
    use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, FOLD_PLAN_ESTIMATE
    use fold_grid, only: grid_t, grid_init, grid_set_lattice, grid_total
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, &
                                  FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, FOLD_MIX_HARMONIC, &
-                                 FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE
+                                 FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, &
+                                 FOLD_FFT_SINGLE
    implicit none
    private
 
    ! the settings and codes of the seam, re-exported for callers of this backend
    public :: stokes_settings_t, stokes_settings_check, FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, &
-             FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE
+             FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, &
+             FOLD_FFT_SINGLE
 
    !> Solver state: plans, grid, work fields and the Fourier-space solution.
    type, extends(stokes_solver_t), public :: stokes_fft_t
@@ -73,6 +102,11 @@ module fold_stokes_fft
       type(fft_field_t), allocatable :: work(:)
       !> Viscosity at voxel centres [Pa s]
       type(fft_field_t) :: eta
+      !> FOLD_FFT_SINGLE: 2 eta / N in single precision (nxp, nl(2), nl(3)) for the viscosity
+      !> pass of the single-precision operator [Pa s]; else size 0
+      real(c_float), allocatable :: eta_sp(:, :, :)
+      !> The CG operator transforms in single precision (settings fft_precision)
+      logical :: single = .false.
       !> Velocity u~ at voxel centres after stokes_fft_velocity (dim fields) [m/s]
       type(fft_field_t), allocatable :: vel(:)
       !> Staggered Fourier coefficients i phase u^ (unnormalised FFT) of u~ and the CG vectors
@@ -80,7 +114,7 @@ module fold_stokes_fft
       complex(dp), allocatable :: x(:, :, :, :), r(:, :, :, :), p(:, :, :, :), q(:, :, :, :)
       !> Solution of the solve before the last one (FOLD_GUESS_EXTRAPOLATE only; else size 0)
       complex(dp), allocatable :: x_prev(:, :, :, :)
-      !> Real derivative vector q of each mode (dim, nxh, nsl(2), nsl(3)) [1/m]
+      !> Real derivative vector q of each mode (dim, nxh, nsl(2), nsl(3)), zero on removed modes [1/m]
       real(dp), allocatable :: kv(:, :, :, :)
       !> 1/|q|^2, zero on removed modes (mean, Nyquist/hourglass) [m^2]
       real(dp), allocatable :: ik2(:, :, :)
@@ -107,7 +141,10 @@ module fold_stokes_fft
    end type stokes_fft_t
 
    public :: stokes_fft_init, stokes_fft_new, stokes_fft_set_lattice, stokes_fft_solve, stokes_fft_velocity, &
-             stokes_fft_strain, stokes_fft_destroy
+             stokes_fft_strain, stokes_fft_destroy, stokes_fft_true_residual, stokes_fft_apply, single_tol_min
+
+   !> Unit round-off of single precision, 2^-24 [-]
+   real(dp), parameter, public :: FOLD_SINGLE_ROUNDOFF = 0.5_dp*real(epsilon(1.0_c_float), dp)
 
    real(dp), parameter :: pi = acos(-1.0_dp)
    complex(dp), parameter :: iu = (0.0_dp, 1.0_dp)
@@ -132,6 +169,19 @@ contains
          errmsg = "stokes_fft_init: no FFT backend given"
          return
       end if
+      stat = FOLD_INPUT_ERROR
+      if (set%fft_precision /= FOLD_FFT_DOUBLE .and. set%fft_precision /= FOLD_FFT_SINGLE) then
+         write (errmsg, '(a,i0)') "stokes settings: fft_precision must be 0 (double) or 1 (single), got ", &
+            set%fft_precision
+         return
+      end if
+      if (set%fft_precision == FOLD_FFT_SINGLE .and. set%tol < single_tol_min(product(int(fft%n, i8)))) then
+         write (errmsg, '(a,es9.2,a,i0,a,es9.2,a)') "stokes settings: fft_precision single needs tolerance >= ", &
+            single_tol_min(product(int(fft%n, i8))), " on a grid of ", product(int(fft%n, i8)), &
+            " voxels (single-precision round-off of the CG operator), got ", set%tol, "; use fft_precision double"
+         return
+      end if
+      stat = FOLD_OK
       call stokes_fft_destroy(s)
       call move_alloc(fft, s%fft)
       s%set = set
@@ -159,6 +209,15 @@ contains
          call s%fft%alloc_field(s%vel(c))
       end do
       call s%fft%alloc_field(s%eta)
+      s%single = set%fft_precision == FOLD_FFT_SINGLE
+      if (s%single) then
+         call s%fft%plan_single(set%plan_effort, stat, errmsg)
+         if (stat /= FOLD_OK) return
+         allocate (s%eta_sp(s%fft%nxp, s%fft%nl(2), s%fft%nl(3)))
+      else
+         allocate (s%eta_sp(0, 0, 0))
+      end if
+      s%eta_sp = 0.0_c_float
       ! Fourier-space arrays take the backend's spectral layout (fold_fft_backend)
       nxh = s%fft%nxh
       n2 = s%fft%nsl(2)
@@ -212,19 +271,29 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(ip) :: i, j, k, l, l2, m(3), dim, nnyq
-      real(dp) :: th(3), lat(3), ait(3, 3), kk, cosprod
+      real(dp) :: th, lat(3), ait(3, 3), kk, cosprod
+      ! sin and cos of the half angle of every wavenumber index of each axis: the same
+      ! values as evaluated per mode, one evaluation per index instead of per mode
+      real(dp), allocatable :: sh(:, :), ch(:, :)
       logical :: removed
 
       call grid_set_lattice(s%grid, A, stat, errmsg)
       if (stat /= FOLD_OK) return
       dim = s%dim
       ait = transpose(s%grid%Ainv)
+      allocate (sh(0:maxval(s%grid%n) - 1, 3), ch(0:maxval(s%grid%n) - 1, 3))
+      do l = 1, 3
+         do i = 0, s%grid%n(l) - 1
+            th = 2.0_dp*pi*real(i, dp)/real(s%grid%n(l), dp)
+            sh(i, l) = sin(0.5_dp*th)
+            ch(i, l) = cos(0.5_dp*th)
+         end do
+      end do
       do k = 1, s%fft%nsl(3)
          do j = 1, s%fft%nsl(2)
             do i = 1, s%fft%nxh
                ! global wavenumber index of the local mode (spectral layout of the backend)
                m(s%fft%saxis) = [i - 1, j - 1, k - 1] + s%fft%soff
-               th = 2.0_dp*pi*real(m, dp)/real(s%grid%n, dp)
                nnyq = count(2*m(1:dim) == s%grid%n(1:dim))
                lat = 0.0_dp
                if (s%set%derivative == FOLD_DERIV_SPECTRAL) then
@@ -236,10 +305,10 @@ contains
                else
                   cosprod = 1.0_dp
                   do l = 1, dim
-                     cosprod = cosprod*cos(0.5_dp*th(l))
-                     lat(l) = 2.0_dp*s%grid%n(l)*sin(0.5_dp*th(l))
+                     cosprod = cosprod*ch(m(l), l)
+                     lat(l) = 2.0_dp*s%grid%n(l)*sh(m(l), l)
                      do l2 = 1, dim
-                        if (l2 /= l) lat(l) = lat(l)*cos(0.5_dp*th(l2))
+                        if (l2 /= l) lat(l) = lat(l)*ch(m(l2), l2)
                      end do
                   end do
                   s%cosprod(i, j, k) = cosprod
@@ -249,7 +318,10 @@ contains
                s%kv(:, i, j, k) = matmul(ait(1:dim, 1:dim), lat(1:dim))
                kk = sum(s%kv(:, i, j, k)**2)
                if (removed .or. kk <= 0.0_dp) then
+                  ! kv = 0 too: every operator pass then leaves a removed mode at zero
+                  ! without a branch in its loop (cg_apply_update)
                   s%ik2(i, j, k) = 0.0_dp
+                  s%kv(:, i, j, k) = 0.0_dp
                else
                   s%ik2(i, j, k) = 1.0_dp/kk
                end if
@@ -270,9 +342,8 @@ contains
       real(dp), intent(in) :: G(3, 3)
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(ip) :: nx, i, j, k, c, it, dim
+      integer(ip) :: nx, it, dim
       real(dp) :: ext(2), red(2), bb, rz, rz_new, alpha, beta, pq, emin, emax
-      complex(dp) :: f(3)
 
       stat = FOLD_OK
       errmsg = ""
@@ -313,23 +384,10 @@ contains
       call s%fft%max_all(ext)
       s%eta0 = sqrt(-ext(1)*ext(2))
 
+      if (s%single) s%eta_sp = real((2.0_dp/real(grid_total(s%grid), dp))*s%eta%r, c_float)
+
       ! right-hand side b = -P B^H (2 eta E), from one FFT of 2 eta
-      s%work(1)%r = 2.0_dp*s%eta%r
-      call s%fft%r2c(s%work(1))
-      do k = 1, s%fft%nsl(3)
-         do j = 1, s%fft%nsl(2)
-            do i = 1, s%fft%nxh
-               if (s%ik2(i, j, k) == 0.0_dp) then
-                  s%r(i, j, k, :) = 0.0_dp
-                  cycle
-               end if
-               ! staggered: i phase (-conj(d)_j E_ij (2eta)^) = -kv_j E_ij (2eta)^
-               f(1:dim) = -matmul(s%E(1:dim, 1:dim), s%kv(:, i, j, k))*s%work(1)%c(i, j, k)
-               f(1:dim) = f(1:dim) - s%kv(:, i, j, k)*sum(s%kv(:, i, j, k)*f(1:dim))*s%ik2(i, j, k)
-               s%r(i, j, k, :) = f(1:dim)
-            end do
-         end do
-      end do
+      call rhs(s, s%r)
       bb = precond_dot(s, s%r)
       red = [bb, 0.0_dp]
       call s%fft%sum_all(red)
@@ -353,10 +411,15 @@ contains
          end if
          ! guess re-projected on this lattice's divergence-free modes
          call project(s, s%x)
-         call apply(s, s%x, s%q)
-         s%r = s%r - s%q
+         ! r = b - A x by the passes of an iteration: p = x (direction update with z = 0
+         ! and beta = 1), then r -= 1 A p, which also gives <r, M^-1 r>
+         s%p = s%x
+         call cg_direction_strain(s, 0.0_dp, 1.0_dp, 0.0_dp)
+         call cg_stress(s, pq)
+         red = [cg_apply_update(s, 1.0_dp), 0.0_dp]
       else
          s%x = 0.0_dp
+         red = [precond_dot(s, s%r), 0.0_dp]
       end if
       ! Preconditioned CG (Hestenes-Stiefel form) with z = M^-1 r and q = A p never
       ! stored. Each iteration makes two passes over the spectrum and one over real
@@ -367,7 +430,6 @@ contains
       ! space by the viscosity pass (cg_viscous_energy), so that alpha is known before
       ! the operator pass, which then updates r -= alpha A p and sums <r, M^-1 r>
       ! without storing A p (cg_apply_update).
-      red = [precond_dot(s, s%r), 0.0_dp]
       call s%fft%sum_all(red)
       rz = red(1)
       ! the first direction update reads p (times beta = 0): it must be finite
@@ -379,17 +441,8 @@ contains
       beta = 0.0_dp
       do while (s%residual > s%set%tol .and. it < s%set%max_iter)
          it = it + 1
-         call cg_direction_strain(s, alpha, beta)
-         do c = 1, s%ncg
-            call s%fft%c2r(s%work(s%cg_comp(c)))
-         end do
-         ! times 2 eta (the 1/N of the unnormalised c2r folds in); <p, A p> on the way
-         red = [cg_viscous_energy(s, 2.0_dp/real(grid_total(s%grid), dp)), 0.0_dp]
-         do c = 1, s%ncg
-            call s%fft%r2c(s%work(s%cg_comp(c)))
-         end do
-         call s%fft%sum_all(red)
-         pq = red(1)
+         call cg_direction_strain(s, alpha, beta, 1.0_dp/s%eta0)
+         call cg_stress(s, pq)
          if (.not. (pq > 0.0_dp)) then
             stat = FOLD_NUMERICAL
             write (errmsg, '(a,i0,a,es10.3)') "stokes_fft_solve: CG breakdown at iteration ", it, ", <p, A p> = ", pq
@@ -465,6 +518,8 @@ contains
          deallocate (s%vel)
       end if
       call field_free(s%eta)
+      if (allocated(s%eta_sp)) deallocate (s%eta_sp)
+      s%single = .false.
       if (allocated(s%fft)) then
          call s%fft%destroy()
          deallocate (s%fft)
@@ -511,7 +566,67 @@ contains
       call s%fft%max_all(x)
    end subroutine fft_max_all
 
+   !> Relative preconditioned residual sqrt(<b - A x, M^-1 (b - A x)> / <b, M^-1 b>) of
+   !> the last solution, with the double-precision operator whatever fft_precision is
+   !> (the recursive residual of a single-precision solve can sink below what its
+   !> iterate attains). Overwrites the CG vectors r and q; call after a solve.
+   function stokes_fft_true_residual(s) result(res)
+      class(stokes_fft_t), intent(inout) :: s
+      real(dp) :: res
+      real(dp) :: red(2)
+      call rhs(s, s%r)
+      call apply(s, s%x, s%q)
+      red(1) = precond_dot(s, s%r)
+      s%r = s%r - s%q
+      red(2) = precond_dot(s, s%r)
+      call s%fft%sum_all(red)
+      res = 0.0_dp
+      if (red(1) > 0.0_dp) res = sqrt(max(red(2), 0.0_dp)/red(1))
+   end function stokes_fft_true_residual
+
+   !> au = A u in double precision (u a divergence-free Fourier field of the layout of
+   !> s%x, zero on removed modes; the unnormalised scale of stokes_fft_solve).
+   subroutine stokes_fft_apply(s, u, au)
+      class(stokes_fft_t), intent(inout) :: s
+      complex(dp), intent(in) :: u(:, :, :, :)
+      complex(dp), intent(out) :: au(:, :, :, :)
+      call apply(s, u, au)
+   end subroutine stokes_fft_apply
+
+   !> Smallest tolerance accepted with single-precision transforms on a grid of nvox
+   !> voxels: (2 log2 nvox + 4) u_s (module header: the attainable residual).
+   pure function single_tol_min(nvox) result(t)
+      integer(i8), intent(in) :: nvox
+      real(dp) :: t
+      t = FOLD_SINGLE_ROUNDOFF*(2.0_dp*log(real(max(nvox, 2_i8), dp))/log(2.0_dp) + 4.0_dp)
+   end function single_tol_min
+
    ! ------------------------------------------------------------------ internals
+
+   !> Right-hand side b = -P B^H (2 eta E) from one FFT of 2 eta (s%eta, s%E set).
+   subroutine rhs(s, b)
+      type(stokes_fft_t), intent(inout) :: s
+      complex(dp), intent(out) :: b(:, :, :, :)
+      integer(ip) :: i, j, k, dim
+      complex(dp) :: f(3)
+      dim = s%dim
+      s%work(1)%r = 2.0_dp*s%eta%r
+      call s%fft%r2c(s%work(1))
+      do k = 1, s%fft%nsl(3)
+         do j = 1, s%fft%nsl(2)
+            do i = 1, s%fft%nxh
+               if (s%ik2(i, j, k) == 0.0_dp) then
+                  b(i, j, k, :) = 0.0_dp
+                  cycle
+               end if
+               ! staggered: i phase (-conj(d)_j E_ij (2eta)^) = -kv_j E_ij (2eta)^
+               f(1:dim) = -matmul(s%E(1:dim, 1:dim), s%kv(:, i, j, k))*s%work(1)%c(i, j, k)
+               f(1:dim) = f(1:dim) - s%kv(:, i, j, k)*sum(s%kv(:, i, j, k)*f(1:dim))*s%ik2(i, j, k)
+               b(i, j, k, :) = f(1:dim)
+            end do
+         end do
+      end do
+   end subroutine rhs
 
    !> Strain of the Fourier field u into work(:)%r, normalised.
    subroutine strain(s, u)
@@ -662,30 +777,57 @@ contains
    end subroutine extrapolate_guess
 
    ! ------------------------------------------------------------------ CG kernels
+   ! Every per-mode factor is real: rx(a, z) = a z written on the two parts, 2
+   ! multiplications, where Fortran's a*z converts a to complex and makes 4 (gfortran
+   ! keeps the 0 * imaginary products for the sign of zero), which made the two
+   ! spectral passes compute-bound.
+
+   !> a z for a real a and a complex z, on the real and imaginary parts.
+   elemental function rx(a, z) result(w)
+      real(dp), intent(in) :: a
+      complex(dp), intent(in) :: z
+      complex(dp) :: w
+      w = cmplx(a*real(z, dp), a*aimag(z), kind=dp)
+   end function rx
+
    ! Explicit-shape dummies: the compiler sees contiguous, non-aliased arrays and
    ! vectorises; the 3-D spectral arrays (nxh, nsl(2), nsl(3)) are passed as (nxh, njk).
 
-   !> x += a_prev p_old; p = M^-1 r + beta p_old; strain of p into work(1:nc)%c.
-   subroutine cg_direction_strain(s, a_prev, beta)
+   !> x += a_prev p_old; p = zs eta0 M^-1 r + beta p_old (zs = 1/eta0: the CG direction);
+   !> strain of p into the spectral views of work(cg_comp) (single ones if s%single).
+   subroutine cg_direction_strain(s, a_prev, beta, zs)
       type(stokes_fft_t), intent(inout), target :: s
-      real(dp), intent(in) :: a_prev, beta
+      real(dp), intent(in) :: a_prev, beta, zs
       integer(ip) :: nxh, njk
       nxh = s%fft%nxh
       njk = s%fft%nsl(2)*s%fft%nsl(3)
-      if (s%dim == 3) then
-         call direction_strain3(nxh*njk, s%r, s%p, s%x, s%kv, s%ik2, 1.0_dp/s%eta0, a_prev, beta, &
+      if (s%single .and. s%dim == 3) then
+         call direction_strain3_sp(nxh*njk, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3), s%p(:, :, :, 1), &
+                                   s%p(:, :, :, 2), s%p(:, :, :, 3), s%x(:, :, :, 1), s%x(:, :, :, 2), &
+                                   s%x(:, :, :, 3), s%kv, s%ik2, zs, a_prev, beta, &
+                                   s%work(1)%cs, s%work(2)%cs, s%work(4)%cs, s%work(5)%cs, s%work(6)%cs)
+      else if (s%single) then
+         call direction_strain2_sp(nxh*njk, s%r(:, :, :, 1), s%r(:, :, :, 2), s%p(:, :, :, 1), s%p(:, :, :, 2), &
+                                   s%x(:, :, :, 1), s%x(:, :, :, 2), s%kv, s%ik2, zs, a_prev, beta, &
+                                   s%work(1)%cs, s%work(3)%cs)
+      else if (s%dim == 3) then
+         call direction_strain3(nxh*njk, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3), s%p(:, :, :, 1), &
+                                s%p(:, :, :, 2), s%p(:, :, :, 3), s%x(:, :, :, 1), s%x(:, :, :, 2), &
+                                s%x(:, :, :, 3), s%kv, s%ik2, zs, a_prev, beta, &
                                 s%work(1)%c, s%work(2)%c, s%work(4)%c, s%work(5)%c, s%work(6)%c)
       else
-         call direction_strain2(nxh*njk, s%r, s%p, s%x, s%kv, s%ik2, 1.0_dp/s%eta0, a_prev, beta, &
+         call direction_strain2(nxh*njk, s%r(:, :, :, 1), s%r(:, :, :, 2), s%p(:, :, :, 1), s%p(:, :, :, 2), &
+                                s%x(:, :, :, 1), s%x(:, :, :, 2), s%kv, s%ik2, zs, a_prev, beta, &
                                 s%work(1)%c, s%work(3)%c)
       end if
    end subroutine cg_direction_strain
 
    !> Traceless strain (11, 22, 12, 13, 23; eps_33 = -eps_11 - eps_22 is not formed).
-   subroutine direction_strain3(n, r, p, x, kv, ik2, inv_eta0, a_prev, beta, w1, w2, w4, w5, w6)
+   subroutine direction_strain3(n, r1, r2, r3, pp1, pp2, pp3, x1, x2, x3, kv, ik2, inv_eta0, a_prev, beta, &
+                                w1, w2, w4, w5, w6)
       integer(ip), intent(in) :: n
-      complex(dp), intent(in) :: r(n, 3)
-      complex(dp), intent(inout) :: p(n, 3), x(n, 3)
+      complex(dp), intent(in) :: r1(n), r2(n), r3(n)
+      complex(dp), intent(inout) :: pp1(n), pp2(n), pp3(n), x1(n), x2(n), x3(n)
       real(dp), intent(in) :: kv(3, n), ik2(n), inv_eta0, a_prev, beta
       complex(dp), intent(out) :: w1(n), w2(n), w4(n), w5(n), w6(n)
       integer(ip) :: m
@@ -693,31 +835,31 @@ contains
       real(dp) :: z, d1, d2, d3
       do m = 1, n
          z = ik2(m)*inv_eta0
-         x(m, 1) = x(m, 1) + a_prev*p(m, 1)
-         x(m, 2) = x(m, 2) + a_prev*p(m, 2)
-         x(m, 3) = x(m, 3) + a_prev*p(m, 3)
-         p1 = z*r(m, 1) + beta*p(m, 1)
-         p2 = z*r(m, 2) + beta*p(m, 2)
-         p3 = z*r(m, 3) + beta*p(m, 3)
-         p(m, 1) = p1
-         p(m, 2) = p2
-         p(m, 3) = p3
+         x1(m) = x1(m) + rx(a_prev, pp1(m))
+         x2(m) = x2(m) + rx(a_prev, pp2(m))
+         x3(m) = x3(m) + rx(a_prev, pp3(m))
+         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
+         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
+         p3 = rx(z, r3(m)) + rx(beta, pp3(m))
+         pp1(m) = p1
+         pp2(m) = p2
+         pp3(m) = p3
          d1 = kv(1, m)
          d2 = kv(2, m)
          d3 = kv(3, m)
-         w1(m) = d1*p1
-         w2(m) = d2*p2
-         w4(m) = 0.5_dp*(d1*p2 + d2*p1)
-         w5(m) = 0.5_dp*(d1*p3 + d3*p1)
-         w6(m) = 0.5_dp*(d2*p3 + d3*p2)
+         w1(m) = rx(d1, p1)
+         w2(m) = rx(d2, p2)
+         w4(m) = rx(0.5_dp, (rx(d1, p2) + rx(d2, p1)))
+         w5(m) = rx(0.5_dp, (rx(d1, p3) + rx(d3, p1)))
+         w6(m) = rx(0.5_dp, (rx(d2, p3) + rx(d3, p2)))
       end do
    end subroutine direction_strain3
 
    !> Traceless strain (11, 12; eps_22 = -eps_11 is not formed).
-   subroutine direction_strain2(n, r, p, x, kv, ik2, inv_eta0, a_prev, beta, w1, w3)
+   subroutine direction_strain2(n, r1, r2, pp1, pp2, x1, x2, kv, ik2, inv_eta0, a_prev, beta, w1, w3)
       integer(ip), intent(in) :: n
-      complex(dp), intent(in) :: r(n, 2)
-      complex(dp), intent(inout) :: p(n, 2), x(n, 2)
+      complex(dp), intent(in) :: r1(n), r2(n)
+      complex(dp), intent(inout) :: pp1(n), pp2(n), x1(n), x2(n)
       real(dp), intent(in) :: kv(2, n), ik2(n), inv_eta0, a_prev, beta
       complex(dp), intent(out) :: w1(n), w3(n)
       integer(ip) :: m
@@ -725,18 +867,49 @@ contains
       real(dp) :: z, d1, d2
       do m = 1, n
          z = ik2(m)*inv_eta0
-         x(m, 1) = x(m, 1) + a_prev*p(m, 1)
-         x(m, 2) = x(m, 2) + a_prev*p(m, 2)
-         p1 = z*r(m, 1) + beta*p(m, 1)
-         p2 = z*r(m, 2) + beta*p(m, 2)
-         p(m, 1) = p1
-         p(m, 2) = p2
+         x1(m) = x1(m) + rx(a_prev, pp1(m))
+         x2(m) = x2(m) + rx(a_prev, pp2(m))
+         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
+         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
+         pp1(m) = p1
+         pp2(m) = p2
          d1 = kv(1, m)
          d2 = kv(2, m)
-         w1(m) = d1*p1
-         w3(m) = 0.5_dp*(d1*p2 + d2*p1)
+         w1(m) = rx(d1, p1)
+         w3(m) = rx(0.5_dp, (rx(d1, p2) + rx(d2, p1)))
       end do
    end subroutine direction_strain2
+
+   !> Strain of p (spectral, work(cg_comp)) -> stress 2 eta eps(p) (spectral), unnormalised
+   !> like the strain: ncg c2r, the viscosity pass, ncg r2c; pq = <p, A p> summed over ranks.
+   subroutine cg_stress(s, pq)
+      type(stokes_fft_t), intent(inout) :: s
+      real(dp), intent(out) :: pq
+      integer(ip) :: c
+      real(dp) :: red(2)
+      if (s%single) then
+         do c = 1, s%ncg
+            call s%fft%c2r_sp(s%work(s%cg_comp(c)))
+         end do
+      else
+         do c = 1, s%ncg
+            call s%fft%c2r(s%work(s%cg_comp(c)))
+         end do
+      end if
+      ! times 2 eta (the 1/N of the unnormalised c2r folds in); <p, A p> on the way
+      red = [cg_viscous_energy(s, 2.0_dp/real(grid_total(s%grid), dp)), 0.0_dp]
+      if (s%single) then
+         do c = 1, s%ncg
+            call s%fft%r2c_sp(s%work(s%cg_comp(c)))
+         end do
+      else
+         do c = 1, s%ncg
+            call s%fft%r2c(s%work(s%cg_comp(c)))
+         end do
+      end if
+      call s%fft%sum_all(red)
+      pq = red(1)
+   end subroutine cg_stress
 
    !> work(cg_comp)%r <- c eta work(cg_comp)%r on the nx data columns (the strain
    !> of p, unnormalised c2r, becomes the stress); returns the local
@@ -748,7 +921,13 @@ contains
       real(dp) :: pq
       integer(ip) :: nrows
       nrows = s%grid%nl(2)*s%grid%nl(3)
-      if (s%dim == 3) then
+      if (s%single .and. s%dim == 3) then
+         ! eta_sp holds c eta already (c = 2/N, stokes_fft_solve)
+         pq = viscous_energy3_sp(s%grid%n(1), s%fft%nxp, nrows, s%eta_sp, s%work(1)%rs, s%work(2)%rs, &
+                                 s%work(4)%rs, s%work(5)%rs, s%work(6)%rs)
+      else if (s%single) then
+         pq = viscous_energy2_sp(s%grid%n(1), s%fft%nxp, nrows, s%eta_sp, s%work(1)%rs, s%work(3)%rs)
+      else if (s%dim == 3) then
          pq = viscous_energy3(s%grid%n(1), s%fft%nxp, nrows, c, s%eta%r, s%work(1)%r, s%work(2)%r, &
                               s%work(4)%r, s%work(5)%r, s%work(6)%r)
       else
@@ -813,42 +992,48 @@ contains
       integer(ip) :: nxh, njk
       nxh = s%fft%nxh
       njk = s%fft%nsl(2)*s%fft%nsl(3)
-      if (s%dim == 3) then
+      if (s%single .and. s%dim == 3) then
+         rz = apply_update3_sp(nxh, njk, s%work(1)%cs, s%work(2)%cs, s%work(4)%cs, s%work(5)%cs, s%work(6)%cs, &
+                               s%kv, s%ik2, s%wx, alpha, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3))
+      else if (s%single) then
+         rz = apply_update2_sp(nxh, njk, s%work(1)%cs, s%work(3)%cs, s%kv, s%ik2, s%wx, alpha, s%r(:, :, :, 1), &
+                               s%r(:, :, :, 2))
+      else if (s%dim == 3) then
          rz = apply_update3(nxh, njk, s%work(1)%c, s%work(2)%c, s%work(4)%c, s%work(5)%c, s%work(6)%c, &
-                            s%kv, s%ik2, s%wx, alpha, s%r)
+                            s%kv, s%ik2, s%wx, alpha, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3))
       else
-         rz = apply_update2(nxh, njk, s%work(1)%c, s%work(3)%c, s%kv, s%ik2, s%wx, alpha, s%r)
+         rz = apply_update2(nxh, njk, s%work(1)%c, s%work(3)%c, s%kv, s%ik2, s%wx, alpha, s%r(:, :, :, 1), &
+                           s%r(:, :, :, 2))
       end if
       rz = rz/s%eta0
    end function cg_apply_update
 
    !> Traceless stress: sigma_33 = -sigma_11 - sigma_22.
-   function apply_update3(nxh, njk, w1, w2, w4, w5, w6, kv, ik2, wx, alpha, r) result(v)
+   function apply_update3(nxh, njk, w1, w2, w4, w5, w6, kv, ik2, wx, alpha, q1, q2, q3) result(v)
       integer(ip), intent(in) :: nxh, njk
       complex(dp), intent(in) :: w1(nxh, njk), w2(nxh, njk), w4(nxh, njk), w5(nxh, njk), w6(nxh, njk)
       real(dp), intent(in) :: kv(3, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
-      complex(dp), intent(inout) :: r(nxh, njk, 3)
+      complex(dp), intent(inout) :: q1(nxh, njk), q2(nxh, njk), q3(nxh, njk)
       real(dp) :: v
       integer(ip) :: i, jk
       complex(dp) :: f1, f2, f3, t, r1, r2, r3
-      real(dp) :: k1, k2, k3, keep
+      real(dp) :: k1, k2, k3
       v = 0.0_dp
       do jk = 1, njk
          do i = 1, nxh
-            keep = merge(alpha, 0.0_dp, ik2(i, jk) > 0.0_dp)
             k1 = kv(1, i, jk)
             k2 = kv(2, i, jk)
             k3 = kv(3, i, jk)
-            f1 = k1*w1(i, jk) + k2*w4(i, jk) + k3*w5(i, jk)
-            f2 = k1*w4(i, jk) + k2*w2(i, jk) + k3*w6(i, jk)
-            f3 = k1*w5(i, jk) + k2*w6(i, jk) - k3*(w1(i, jk) + w2(i, jk))
-            t = (k1*f1 + k2*f2 + k3*f3)*ik2(i, jk)
-            r1 = r(i, jk, 1) - keep*(f1 - k1*t)
-            r2 = r(i, jk, 2) - keep*(f2 - k2*t)
-            r3 = r(i, jk, 3) - keep*(f3 - k3*t)
-            r(i, jk, 1) = r1
-            r(i, jk, 2) = r2
-            r(i, jk, 3) = r3
+            f1 = rx(k1, w1(i, jk)) + rx(k2, w4(i, jk)) + rx(k3, w5(i, jk))
+            f2 = rx(k1, w4(i, jk)) + rx(k2, w2(i, jk)) + rx(k3, w6(i, jk))
+            f3 = rx(k1, w5(i, jk)) + rx(k2, w6(i, jk)) - rx(k3, (w1(i, jk) + w2(i, jk)))
+            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2) + rx(k3, f3))
+            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
+            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
+            r3 = q3(i, jk) - rx(alpha, (f3 - rx(k3, t)))
+            q1(i, jk) = r1
+            q2(i, jk) = r2
+            q3(i, jk) = r3
             v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2 &
                                       + real(r3)**2 + aimag(r3)**2)
          end do
@@ -856,31 +1041,216 @@ contains
    end function apply_update3
 
    !> Traceless stress: sigma_22 = -sigma_11.
-   function apply_update2(nxh, njk, w1, w3, kv, ik2, wx, alpha, r) result(v)
+   function apply_update2(nxh, njk, w1, w3, kv, ik2, wx, alpha, q1, q2) result(v)
       integer(ip), intent(in) :: nxh, njk
       complex(dp), intent(in) :: w1(nxh, njk), w3(nxh, njk)
       real(dp), intent(in) :: kv(2, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
-      complex(dp), intent(inout) :: r(nxh, njk, 2)
+      complex(dp), intent(inout) :: q1(nxh, njk), q2(nxh, njk)
       real(dp) :: v
       integer(ip) :: i, jk
       complex(dp) :: f1, f2, t, r1, r2
-      real(dp) :: k1, k2, keep
+      real(dp) :: k1, k2
       v = 0.0_dp
       do jk = 1, njk
          do i = 1, nxh
-            keep = merge(alpha, 0.0_dp, ik2(i, jk) > 0.0_dp)
             k1 = kv(1, i, jk)
             k2 = kv(2, i, jk)
-            f1 = k1*w1(i, jk) + k2*w3(i, jk)
-            f2 = k1*w3(i, jk) - k2*w1(i, jk)
-            t = (k1*f1 + k2*f2)*ik2(i, jk)
-            r1 = r(i, jk, 1) - keep*(f1 - k1*t)
-            r2 = r(i, jk, 2) - keep*(f2 - k2*t)
-            r(i, jk, 1) = r1
-            r(i, jk, 2) = r2
+            f1 = rx(k1, w1(i, jk)) + rx(k2, w3(i, jk))
+            f2 = rx(k1, w3(i, jk)) - rx(k2, w1(i, jk))
+            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2))
+            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
+            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
+            q1(i, jk) = r1
+            q2(i, jk) = r2
             v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2)
          end do
       end do
    end function apply_update2
+
+   ! --------------------------------------------- single-precision operator kernels
+   ! The same passes as above with the strain/stress fields in single precision: the
+   ! CG vectors (r, p, x), the directions' scalars and every sum stay double; a value
+   ! is rounded to single once when it enters a transform and widened when it leaves.
+
+   !> direction_strain3 with a single-precision strain.
+   subroutine direction_strain3_sp(n, r1, r2, r3, pp1, pp2, pp3, x1, x2, x3, kv, ik2, inv_eta0, a_prev, beta, &
+                                   w1, w2, w4, w5, w6)
+      integer(ip), intent(in) :: n
+      complex(dp), intent(in) :: r1(n), r2(n), r3(n)
+      complex(dp), intent(inout) :: pp1(n), pp2(n), pp3(n), x1(n), x2(n), x3(n)
+      real(dp), intent(in) :: kv(3, n), ik2(n), inv_eta0, a_prev, beta
+      complex(c_float_complex), intent(out) :: w1(n), w2(n), w4(n), w5(n), w6(n)
+      integer(ip) :: m
+      complex(dp) :: p1, p2, p3
+      real(dp) :: z, d1, d2, d3
+      do m = 1, n
+         z = ik2(m)*inv_eta0
+         x1(m) = x1(m) + rx(a_prev, pp1(m))
+         x2(m) = x2(m) + rx(a_prev, pp2(m))
+         x3(m) = x3(m) + rx(a_prev, pp3(m))
+         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
+         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
+         p3 = rx(z, r3(m)) + rx(beta, pp3(m))
+         pp1(m) = p1
+         pp2(m) = p2
+         pp3(m) = p3
+         d1 = kv(1, m)
+         d2 = kv(2, m)
+         d3 = kv(3, m)
+         w1(m) = cmplx(rx(d1, p1), kind=c_float_complex)
+         w2(m) = cmplx(rx(d2, p2), kind=c_float_complex)
+         w4(m) = cmplx(rx(0.5_dp, (rx(d1, p2) + rx(d2, p1))), kind=c_float_complex)
+         w5(m) = cmplx(rx(0.5_dp, (rx(d1, p3) + rx(d3, p1))), kind=c_float_complex)
+         w6(m) = cmplx(rx(0.5_dp, (rx(d2, p3) + rx(d3, p2))), kind=c_float_complex)
+      end do
+   end subroutine direction_strain3_sp
+
+   !> direction_strain2 with a single-precision strain.
+   subroutine direction_strain2_sp(n, r1, r2, pp1, pp2, x1, x2, kv, ik2, inv_eta0, a_prev, beta, w1, w3)
+      integer(ip), intent(in) :: n
+      complex(dp), intent(in) :: r1(n), r2(n)
+      complex(dp), intent(inout) :: pp1(n), pp2(n), x1(n), x2(n)
+      real(dp), intent(in) :: kv(2, n), ik2(n), inv_eta0, a_prev, beta
+      complex(c_float_complex), intent(out) :: w1(n), w3(n)
+      integer(ip) :: m
+      complex(dp) :: p1, p2
+      real(dp) :: z, d1, d2
+      do m = 1, n
+         z = ik2(m)*inv_eta0
+         x1(m) = x1(m) + rx(a_prev, pp1(m))
+         x2(m) = x2(m) + rx(a_prev, pp2(m))
+         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
+         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
+         pp1(m) = p1
+         pp2(m) = p2
+         d1 = kv(1, m)
+         d2 = kv(2, m)
+         w1(m) = cmplx(rx(d1, p1), kind=c_float_complex)
+         w3(m) = cmplx(rx(0.5_dp, (rx(d1, p2) + rx(d2, p1))), kind=c_float_complex)
+      end do
+   end subroutine direction_strain2_sp
+
+   !> viscous_energy3 on single-precision fields; ceta = c eta (single). Each row's
+   !> sum is formed in single (nx terms: relative error <= nx u_s, which only shifts the
+   !> step length alpha; x and r move by the same alpha p, so the recursion stays
+   !> consistent), the rows are summed in double.
+   function viscous_energy3_sp(nx, nxp, nrows, ceta, w1, w2, w4, w5, w6) result(pq)
+      integer(ip), intent(in) :: nx, nxp, nrows
+      real(c_float), intent(in) :: ceta(nxp, nrows)
+      real(c_float), intent(inout) :: w1(nxp, nrows), w2(nxp, nrows), w4(nxp, nrows), w5(nxp, nrows), &
+                                      w6(nxp, nrows)
+      real(dp) :: pq
+      integer(ip) :: i, r
+      real(c_float) :: ce, e1, e2, e4, e5, e6, row
+      pq = 0.0_dp
+      do r = 1, nrows
+         row = 0.0_c_float
+         do i = 1, nx
+            ce = ceta(i, r)
+            e1 = w1(i, r)
+            e2 = w2(i, r)
+            e4 = w4(i, r)
+            e5 = w5(i, r)
+            e6 = w6(i, r)
+            row = row + ce*(e1*e1 + e2*e2 + (e1 + e2)**2 + 2.0_c_float*(e4*e4 + e5*e5 + e6*e6))
+            w1(i, r) = ce*e1
+            w2(i, r) = ce*e2
+            w4(i, r) = ce*e4
+            w5(i, r) = ce*e5
+            w6(i, r) = ce*e6
+         end do
+         pq = pq + real(row, dp)
+      end do
+   end function viscous_energy3_sp
+
+   !> viscous_energy2 on single-precision fields (ceta = c eta; rows summed in single
+   !> as in viscous_energy3_sp).
+   function viscous_energy2_sp(nx, nxp, nrows, ceta, w1, w3) result(pq)
+      integer(ip), intent(in) :: nx, nxp, nrows
+      real(c_float), intent(in) :: ceta(nxp, nrows)
+      real(c_float), intent(inout) :: w1(nxp, nrows), w3(nxp, nrows)
+      real(dp) :: pq
+      integer(ip) :: i, r
+      real(c_float) :: ce, e1, e3, row
+      pq = 0.0_dp
+      do r = 1, nrows
+         row = 0.0_c_float
+         do i = 1, nx
+            ce = ceta(i, r)
+            e1 = w1(i, r)
+            e3 = w3(i, r)
+            row = row + 2.0_c_float*ce*(e1*e1 + e3*e3)
+            w1(i, r) = ce*e1
+            w3(i, r) = ce*e3
+         end do
+         pq = pq + real(row, dp)
+      end do
+   end function viscous_energy2_sp
+
+   !> apply_update3 reading a single-precision stress.
+   function apply_update3_sp(nxh, njk, w1, w2, w4, w5, w6, kv, ik2, wx, alpha, q1, q2, q3) result(v)
+      integer(ip), intent(in) :: nxh, njk
+      complex(c_float_complex), intent(in) :: w1(nxh, njk), w2(nxh, njk), w4(nxh, njk), w5(nxh, njk), w6(nxh, njk)
+      real(dp), intent(in) :: kv(3, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
+      complex(dp), intent(inout) :: q1(nxh, njk), q2(nxh, njk), q3(nxh, njk)
+      real(dp) :: v
+      integer(ip) :: i, jk
+      complex(dp) :: f1, f2, f3, t, r1, r2, r3, s1, s2, s4, s5, s6
+      real(dp) :: k1, k2, k3
+      v = 0.0_dp
+      do jk = 1, njk
+         do i = 1, nxh
+            k1 = kv(1, i, jk)
+            k2 = kv(2, i, jk)
+            k3 = kv(3, i, jk)
+            s1 = cmplx(w1(i, jk), kind=dp)
+            s2 = cmplx(w2(i, jk), kind=dp)
+            s4 = cmplx(w4(i, jk), kind=dp)
+            s5 = cmplx(w5(i, jk), kind=dp)
+            s6 = cmplx(w6(i, jk), kind=dp)
+            f1 = rx(k1, s1) + rx(k2, s4) + rx(k3, s5)
+            f2 = rx(k1, s4) + rx(k2, s2) + rx(k3, s6)
+            f3 = rx(k1, s5) + rx(k2, s6) - rx(k3, (s1 + s2))
+            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2) + rx(k3, f3))
+            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
+            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
+            r3 = q3(i, jk) - rx(alpha, (f3 - rx(k3, t)))
+            q1(i, jk) = r1
+            q2(i, jk) = r2
+            q3(i, jk) = r3
+            v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2 &
+                                      + real(r3)**2 + aimag(r3)**2)
+         end do
+      end do
+   end function apply_update3_sp
+
+   !> apply_update2 reading a single-precision stress.
+   function apply_update2_sp(nxh, njk, w1, w3, kv, ik2, wx, alpha, q1, q2) result(v)
+      integer(ip), intent(in) :: nxh, njk
+      complex(c_float_complex), intent(in) :: w1(nxh, njk), w3(nxh, njk)
+      real(dp), intent(in) :: kv(2, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
+      complex(dp), intent(inout) :: q1(nxh, njk), q2(nxh, njk)
+      real(dp) :: v
+      integer(ip) :: i, jk
+      complex(dp) :: f1, f2, t, r1, r2, s1, s3
+      real(dp) :: k1, k2
+      v = 0.0_dp
+      do jk = 1, njk
+         do i = 1, nxh
+            k1 = kv(1, i, jk)
+            k2 = kv(2, i, jk)
+            s1 = cmplx(w1(i, jk), kind=dp)
+            s3 = cmplx(w3(i, jk), kind=dp)
+            f1 = rx(k1, s1) + rx(k2, s3)
+            f2 = rx(k1, s3) - rx(k2, s1)
+            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2))
+            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
+            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
+            q1(i, jk) = r1
+            q2(i, jk) = r2
+            v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2)
+         end do
+      end do
+   end function apply_update2_sp
 
 end module fold_stokes_fft

@@ -41,6 +41,10 @@ module fold_stokes_solver
    !> guess worse: measured on a sphere at the cell centre, no shift is the best.)
    integer(ip), parameter, public :: FOLD_GUESS_PREVIOUS = 1, FOLD_GUESS_EXTRAPOLATE = 2
 
+   !> Precision of the FFTs of the FFT backend's CG operator (fold_stokes_fft): double, or
+   !> single-precision transforms inside the double-precision CG (tolerance bounded below)
+   integer(ip), parameter, public :: FOLD_FFT_DOUBLE = 0, FOLD_FFT_SINGLE = 1
+
    !> Fibre ends of the voxelisation: flat cylinder or capsule (fold_voxelise)
    integer(ip), parameter, public :: FOLD_ENDS_FLAT = 0, FOLD_ENDS_CAPPED = 1
 
@@ -82,6 +86,8 @@ module fold_stokes_solver
       !> disturbance flow vanishes there. A property of the cell, which the caller
       !> copies from it; only a backend that can impose walls accepts it.
       logical :: walls = .false.
+      !> Precision of the CG operator's transforms (FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE)
+      integer(ip) :: fft_precision = FOLD_FFT_DOUBLE
    end type stokes_settings_t
 
    !> What every Stokes backend holds and does.

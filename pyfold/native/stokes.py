@@ -16,6 +16,7 @@ Particle vectors are ``(N, dim)`` as everywhere in pyfold.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,7 +37,23 @@ FIBRE_ENDS = {"flat": 0, "capped": 1}
 GUESSES = {"previous": 1, "extrapolate": 2}
 SCHEMES = {"euler": 1, "ab2": 2}
 FFT_PLANS = {"estimate": 0, "measure": 1}
+#: transforms of the CG operator (fold_stokes_solver FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE); fold_run only
+FFT_PRECISIONS = {"double": 0, "single": 1}
 SHAPES = {"fibre": 1, "sphere": 2, "spheroid": 3}
+
+#: Unit round-off of single precision (fold_stokes_fft FOLD_SINGLE_ROUNDOFF).
+SINGLE_ROUNDOFF = 0.5 * float(np.finfo(np.float32).eps)
+
+
+def single_tolerance_min(voxels: int) -> float:
+    """Smallest CG tolerance accepted with ``fft_precision = "single"`` on a grid of
+    ``voxels`` points: ``(2 log2 N + 4) u_s``, the residual attainable when the operator's
+    transforms round to single precision (derivation: the header of
+    fortran/stokes/fold_stokes_fft.f90; its ``single_tol_min`` is the Fortran copy, and
+    tests/micro/test_stokes_code_tables.py checks that fold_run refuses exactly below it).
+    """
+    return SINGLE_ROUNDOFF * (2.0 * math.log2(max(int(voxels), 2)) + 4.0)
+
 
 #: The backend choice that has no code: :func:`backend_for` resolves it from the cell
 #: (the normaliser writes the resolved code to /setup/resolved/stokes_backend).
@@ -78,6 +95,7 @@ DEFAULTS = {
     "warm_start": True,
     "initial_guess": "previous",
     "fft_plan": "measure",
+    "fft_precision": "double",
 }
 
 

@@ -29,6 +29,7 @@ TIME_SCHEME_CODES = stokes_codes.SCHEMES
 DERIVATIVE_CODES = stokes_codes.DERIVATIVES
 FFT_PLAN_CODES = stokes_codes.FFT_PLANS
 INITIAL_GUESS_CODES = stokes_codes.GUESSES
+FFT_PRECISION_CODES = stokes_codes.FFT_PRECISIONS
 #: Spheres: hydrodynamic interactions "matter" for ``auto`` from this total volume
 #: fraction on. Batchelor & Green (1972, J. Fluid Mech. 56:401):
 #: eta/eta_f = 1 + 2.5 phi + 6.2 phi^2; the pair term is 2.48 phi of the single-particle
@@ -201,6 +202,8 @@ class ResolvedScene:
                                   "1: each CG solve starts from the previous solution, 0: from zero"),
             "stokes_initial_guess": (np.int32(INITIAL_GUESS_CODES[st.initial_guess]), "1",
                                      "CG initial guess: 1 previous solution, 2 extrapolated from the last two"),
+            "stokes_fft_precision": (np.int32(FFT_PRECISION_CODES[st.fft_precision]), "1",
+                                     "precision of the CG operator's FFTs: 0 double, 1 single"),
             "stokes_solve_every": (np.int32(st.solve_every), "1",
                                    "a Stokes solve every k-th step, velocities extrapolated linearly in between"),
             "time_scheme": (np.int32(TIME_SCHEME_CODES[num.time_scheme]), "1",
@@ -802,6 +805,14 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                      f"{st.cells_per_diameter} across the thinnest diameter {2.0 * min(radii):g}) exceeds "
                      f"max_grid_points = {st.max_grid_points}; raise it (memory ~ {_grid_megabytes(grid, dim):.0f} MB), "
                      f"lower numerics.stokes.cells_per_diameter or the cell size")
+    if grid is not None and backend == "fft" and st.fft_precision == "single":
+        tol_min = stokes_codes.single_tolerance_min(grid_points)
+        if st.tolerance < tol_min:
+            problems.add("numerics.stokes.tolerance",
+                         f"with fft_precision = 'single' the CG residual cannot fall below the single-precision "
+                         f"round-off of the transforms, (2 log2 N + 4) 2^-24 = {tol_min:.3g} on the "
+                         f"{' x '.join(map(str, grid[:dim]))} grid; allowed: tolerance >= {tol_min:.3g} or "
+                         f"fft_precision = 'double', got {st.tolerance:g}")
     voxel_text = ""
     if grid is not None and grid_points <= st.max_grid_points and good and G is not None and shear_flow:
         # walls: the lattice stays rectangular (no Lees-Edwards offset widens the span)

@@ -216,6 +216,10 @@ class StokesSettings(_Table):
     #: FFTW planning: "measure" (faster transforms, plans timed at start-up; repeated runs
     #: agree to the solver tolerance) or "estimate" (bitwise reproducible)
     fft_plan: Literal["measure", "estimate"] = _STOKES["fft_plan"]
+    #: precision of the FFTs of the CG operator: "double" or "single" (single-precision
+    #: transforms inside the double-precision CG, 1.3-1.4x cheaper iterations; fold_run refuses
+    #: a tolerance below (2 log2 N + 4) 2^-24 for N voxels, docs/physics.md)
+    fft_precision: Literal["double", "single"] = _STOKES["fft_precision"]
     #: initial guess of each CG solve: "previous" (the last step's solution) or
     #: "extrapolate" (2 u_n - u_(n-1) of the last two solutions); measured by
     #: benchmarks/bench_stokes_step.py (2 % fewer iterations on the dense-fibre scene)

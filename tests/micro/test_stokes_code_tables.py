@@ -35,6 +35,7 @@ TABLES = {
     "initial_guess": (stokes.GUESSES, "stokes/fold_stokes_solver.f90", "FOLD_GUESS_", None),
     "time_scheme": (stokes.SCHEMES, "stokes/fold_time_scheme.f90", "FOLD_", {"euler": "EULER", "ab2": "AB2"}),
     "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_backend.f90", "FOLD_PLAN_", None),
+    "fft_precision": (stokes.FFT_PRECISIONS, "stokes/fold_stokes_solver.f90", "FOLD_FFT_", None),
     "hydrodynamics": (HYDRODYNAMICS_CODES, "io/fold_run_file.f90", "FOLD_HYDRO_", None),
     "collisions": (COLLISION_CODES, "contact/fold_contacts.f90", "FOLD_CONTACT_", None),
     "on_contact_cap": (ON_CAP_CODES, "contact/fold_contacts.f90", "FOLD_ON_CAP_", None),
@@ -80,7 +81,8 @@ def test_scene_choices_are_the_keys_of_the_stokes_code_tables():
     fields = StokesSettings.model_fields
     for key, table in (("backend", stokes.BACKENDS), ("derivative", stokes.DERIVATIVES),
                        ("mixing", stokes.MIXINGS), ("fibre_ends", stokes.FIBRE_ENDS),
-                       ("initial_guess", stokes.GUESSES), ("fft_plan", stokes.FFT_PLANS)):
+                       ("initial_guess", stokes.GUESSES), ("fft_plan", stokes.FFT_PLANS),
+                       ("fft_precision", stokes.FFT_PRECISIONS)):
         words = set(fields[key].annotation.__args__)
         if key == "backend":
             assert stokes.AUTO_BACKEND in words and stokes.AUTO_BACKEND not in table
@@ -180,3 +182,35 @@ def test_the_bindings_refuse_a_backend_they_do_not_run():
     assert stokes.StokesSettings(backend="fft").backend == "fft"
     with pytest.raises(ValueError, match="backend.*'fft' or 'auto'"):
         stokes.StokesSettings(backend="hypre")
+
+
+@pytest.mark.parametrize("side", [-1, +1])
+def test_single_precision_tolerance_bound_is_the_same_in_validate_and_fold_run(side, tmp_path):
+    """fft_precision = 'single' is refused below (2 log2 N + 4) 2^-24 by both pyfold
+    validate (pyfold.native.stokes.single_tolerance_min) and fold_run (fold_stokes_fft
+    single_tol_min); just above the bound both accept. 1e-9 relative is far outside the
+    round-off of evaluating the bound (a few ulps) and far inside its change between
+    grids."""
+    base = (REPO / "data/scenes/stokes_small.toml").read_text()
+
+    def scene(tol):
+        return base.replace("tolerance = 1e-6", f'fft_precision = "single"\ntolerance = {tol!r}')
+
+    grid = parse_scene(scene(1e-3)).resolved_datasets()["stokes_grid"][0]
+    tol = stokes.single_tolerance_min(int(np.prod([int(v) for v in grid]))) * (1.0 + side * 1e-9)
+    if side > 0:
+        parse_scene(scene(tol))
+    else:
+        with pytest.raises(ValueError, match=r"numerics.stokes.tolerance.*fft_precision"):
+            parse_scene(scene(tol))
+    require_fold_run()
+    n = 8
+    path = tmp_path / "single.h5"
+    write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.1, length=0.6, xi=xi_of(3.0),
+                   shape=[3], t_end=0.01,
+                   stokes={"stokes_grid": (n, n, n), "stokes_fft_precision": 1,
+                           "stokes_tolerance": stokes.single_tolerance_min(n**3) * (1.0 + side * 1e-9)})
+    proc = run_fold(path)
+    assert proc.returncode == (2 if side < 0 else 0), (proc.returncode, proc.stderr)
+    if side < 0:
+        assert "fft_precision" in proc.stderr, proc.stderr

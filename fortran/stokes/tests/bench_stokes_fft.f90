@@ -1,6 +1,9 @@
 !> Benchmark of the Stokes solver (run through benchmarks/bench_stokes_fft.py).
 !>
-!> Usage: bench_stokes_fft N [kappa] [repeats] [mode] [shape] [backend]
+!> Usage: bench_stokes_fft N [kappa] [repeats] [mode] [shape] [backend] [precision]
+!>   precision "double" (default) or "single": fft_precision of the solver (fold_stokes_fft);
+!>     the FFT units stay the double transforms, and mode "cost" adds t_fft_sp, the hot
+!>     single-precision FFT, and the CPU times t_iter_cpu, t_fft_cpu of this process.
 !>   backend "auto" (default): serial FFTW on one rank (what fold_run and the Python
 !>     extension use), FFTW-MPI slabs on several (spectrum left transposed: one
 !>     all-to-all per transform); "mpi": FFTW-MPI slabs even on one rank;
@@ -12,7 +15,7 @@
 !>     (c2r then r2c over the ncg strain fields in turn). The floor is the number of
 !>     FFTs per iteration (10 in 3-D: 5 traceless strain components back, 5 stress
 !>     components forward). One line per repeat:
-!>       BENCH n= ranks= t_fft= t_fft_seq= t_iter= ratio= ratio_seq= ffts=
+!>       BENCH n= ranks= t_fft= t_fft_seq= t_iter= ratio= ratio_seq= ffts= t_fft_sp= t_iter_cpu= t_fft_cpu=
 !>   mode "fft": the time of one hot real 3-D FFT (r2c + c2r of one field, 50 pairs
 !>     per repeat), wall and CPU seconds of this process; one line per repeat:
 !>       FFT n= t_fft_wall= t_fft_cpu=
@@ -43,6 +46,7 @@ program bench_stokes_fft
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
    use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_stokes_fft
+   use fold_stokes_solver, only: FOLD_FFT_SINGLE
    use fold_grid, only: shear_lattice
    implicit none
    include 'fftw3-mpi.f03'
@@ -56,7 +60,8 @@ program bench_stokes_fft
    integer :: stat, rank, nranks, rep, nrep, i, j, k, c
    integer(ip) :: n
    character(len=msg_len) :: msg
-   character(len=32) :: arg, mode, shape, backend
+   character(len=32) :: arg, mode, shape, backend, precision
+   real(dp) :: t_fft_sp, c_fft, c_it
    real(dp) :: ax(3), along
    type(c_ptr) :: bmem, bfwd, bbwd
    real(dp), pointer :: rb(:)
@@ -91,6 +96,8 @@ program bench_stokes_fft
    if (command_argument_count() >= 5) call get_command_argument(5, shape)
    backend = "auto"
    if (command_argument_count() >= 6) call get_command_argument(6, backend)
+   precision = "double"
+   if (command_argument_count() >= 7) call get_command_argument(7, precision)
    ax = 1.0_dp/sqrt(3.0_dp)
    set%plan_effort = FOLD_PLAN_MEASURE
    ! the all-to-all timing makes no FFT: instant plans
@@ -102,6 +109,11 @@ program bench_stokes_fft
    else
       set%tol = 1.0e-14_dp
       set%max_iter = 20
+   end if
+   if (trim(precision) == "single") then
+      set%fft_precision = FOLD_FFT_SINGLE
+      ! the smallest tolerance the setting accepts (cost: 20 iterations stop far above it)
+      set%tol = max(set%tol, single_tol_min(int(n, i8)**3))
    end if
    if (nranks == 1 .and. trim(backend) /= "mpi") then
       allocate (serial)
@@ -218,12 +230,25 @@ program bench_stokes_fft
          ! hot: one field forth and back, 10 times
          call MPI_Barrier(MPI_COMM_WORLD)
          t0 = MPI_Wtime()
+         call cpu_time(c0)
          do i = 1, 10
             call s%fft%r2c(s%work(1))
             call s%fft%c2r(s%work(1))
          end do
          call MPI_Barrier(MPI_COMM_WORLD)
+         call cpu_time(c1)
          t_fft = (MPI_Wtime() - t0)/20
+         c_fft = (c1 - c0)/20
+         t_fft_sp = 0.0_dp
+         if (s%single) then
+            t0 = MPI_Wtime()
+            do i = 1, 10
+               call s%fft%r2c_sp(s%work(1))
+               call s%fft%c2r_sp(s%work(1))
+            end do
+            call MPI_Barrier(MPI_COMM_WORLD)
+            t_fft_sp = (MPI_Wtime() - t0)/20
+         end if
          ! as in an iteration: c2r then r2c of each CG strain field in turn
          t0 = MPI_Wtime()
          do c = 1, s%ncg
@@ -233,13 +258,17 @@ program bench_stokes_fft
          call MPI_Barrier(MPI_COMM_WORLD)
          t_seq = (MPI_Wtime() - t0)/(2*s%ncg)
          t0 = MPI_Wtime()
+         call cpu_time(c0)
          call stokes_fft_solve(s, chi, G, stat, msg)
          call MPI_Barrier(MPI_COMM_WORLD)
+         call cpu_time(c1)
          ! the solve also makes the viscosity, the rhs (1 FFT) and runs s%iterations iterations
          t_it = (MPI_Wtime() - t0 - t_fft)/max(s%iterations, 1)
-         if (rank == 0) print '(a,i0,a,i0,a,es10.3,a,es10.3,a,es10.3,a,f6.2,a,f6.2,a,i0)', "BENCH n=", n, &
+         c_it = (c1 - c0 - c_fft)/max(s%iterations, 1)
+         if (rank == 0) print '(a,i0,a,i0,a,es10.3,a,es10.3,a,es10.3,a,f6.2,a,f6.2,a,i0,3(a,es10.3))', "BENCH n=", n, &
             " ranks=", nranks, " t_fft=", t_fft, " t_fft_seq=", t_seq, " t_iter=", t_it, " ratio=", t_it/t_fft, &
-            " ratio_seq=", t_it/t_seq, " ffts=", 2*s%ncg
+            " ratio_seq=", t_it/t_seq, " ffts=", 2*s%ncg, " t_fft_sp=", t_fft_sp, " t_iter_cpu=", c_it, &
+            " t_fft_cpu=", c_fft
       end do
    end if
    call stokes_fft_destroy(s)
