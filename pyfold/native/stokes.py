@@ -29,7 +29,7 @@ from pyfold.native import load
 # fold_fft_backend.f90 (FOLD_PLAN_*); the scene schema, the normaliser (what
 # /setup/resolved holds) and these bindings use them, and
 # tests/micro/test_code_tables.py checks them against the Fortran sources.
-BACKENDS = {"fft": 1}
+BACKENDS = {"fft": 1, "hypre": 2}
 DERIVATIVES = {"spectral": 0, "fd": 1}
 MIXINGS = {"arithmetic": 0, "harmonic": 1, "geometric": 2}
 FIBRE_ENDS = {"flat": 0, "capped": 1}
