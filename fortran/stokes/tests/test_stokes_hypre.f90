@@ -1,10 +1,12 @@
 !> The staggered-grid hypre backend (fold_stokes_hypre) against exact and reference
 !> solutions. One group per meson test, named by the first argument:
 !>  couette  layered Couette flow between walls is reproduced exactly (2-D, 3-D),
-!>           kappa = 1 gives u~ = 0, a sheared lattice is refused
+!>           kappa = 1 gives u~ = 0, a sheared lattice is refused, an iteration
+!>           cap is reported as FOLD_NOT_CONVERGED
+!>  sphere   the same in 3-D (sphere)
 !>  order    manufactured smooth solution with smooth viscosity: second order
-!>  disk     a disk (2-D) / sphere (3-D) midway between the walls spins at
-!>           gamma_dot/2 and does not translate, better with resolution
+!>  disk     a disk midway between the walls spins at gamma_dot/2 and does not
+!>           translate (three resolutions)
 !>  fft      periodic cell, one sphere in shear: hypre and fft rigid velocities
 !>           agree, better with resolution
 !>  ranks    the solve on all ranks of MPI_COMM_WORLD equals the serial one
@@ -12,7 +14,7 @@
 program test_stokes_hypre
    use mpi_f08
    use fold_kinds, only: dp, ip, msg_len
-   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_STOKES_HYPRE, FOLD_STOKES_FFT
    use fold_stokes_factory, only: stokes_solver_create
    use fold_cell, only: cell_t, cell_init
@@ -37,6 +39,7 @@ program test_stokes_hypre
       call kappa_one(2, failures)
       call kappa_one(3, failures)
       call sheared_lattice_refused(failures)
+      call not_converged_reported(failures)
    case ("disk")
       call disk_spin(2, failures)
    case ("sphere")
@@ -226,6 +229,44 @@ contains
       call check(err(1) <= 10.0_dp*epsilon(1.0_dp)*L(2), "kappa = 1 with walls gives u~ = 0", failures)
       call s%destroy()
    end subroutine kappa_one
+
+   !> An iteration cap below what the tolerance needs gives FOLD_NOT_CONVERGED with
+   !> the iterations, the residual reached (> tol) and a finite last iterate.
+   subroutine not_converged_reported(failures)
+      integer, intent(inout) :: failures
+      type(stokes_settings_t) :: set
+      class(stokes_solver_t), allocatable :: s
+      integer :: stat
+      character(len=msg_len) :: msg
+      real(dp) :: G(3, 3), x(3), umax(1)
+      real(dp), allocatable :: chi(:, :, :)
+      real(dp), pointer, contiguous :: v(:, :, :)
+      integer(ip) :: i, j
+      set = walled_settings(1.0e3_dp, 1.0e-10_dp)
+      set%max_iter = 2
+      call stokes_solver_create(set, 2_ip, [16_ip, 16_ip, 1_ip], MPI_COMM_WORLD, s, stat, msg)
+      call s%set_lattice(box([1.0_dp, 1.0_dp, 1.0_dp]), stat, msg)
+      allocate (chi(s%grid%n(1), s%grid%nl(2), 1))
+      do j = 1, s%grid%nl(2)
+         do i = 1, 16
+            x = ([i - 1, s%grid%off(2) + j - 1, 0] + 0.5_dp)/16.0_dp - 0.5_dp
+            chi(i, j, 1) = merge(1.0_dp, 0.0_dp, norm2(x(1:2)) < 0.25_dp)
+         end do
+      end do
+      G = 0.0_dp
+      G(1, 2) = 1.0_dp
+      call s%solve(chi, G, stat, msg)
+      call s%compute_velocity()
+      v => s%velocity_field(1_ip)
+      umax = maxval(abs(v))
+      call s%max_all(umax)
+      if (rank == 0) print '(a,i0,a,i0,a,es10.3,a,a)', "not converged: stat ", stat, ", iterations ", s%iterations, &
+         ", residual ", s%residual, ": ", trim(msg)
+      call check(stat == FOLD_NOT_CONVERGED .and. s%iterations == 2 .and. s%residual > set%tol .and. &
+                 umax(1) > 0.0_dp .and. umax(1) < huge(1.0_dp), "an iteration cap is reported as not converged", &
+                 failures)
+      call s%destroy()
+   end subroutine not_converged_reported
 
    !> A Lees-Edwards lattice with a non-zero offset is refused with FOLD_INPUT_ERROR.
    subroutine sheared_lattice_refused(failures)
