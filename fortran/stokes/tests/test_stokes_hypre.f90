@@ -3,12 +3,15 @@
 !>  couette  layered Couette flow between walls is reproduced exactly (2-D, 3-D),
 !>           kappa = 1 gives u~ = 0, a sheared lattice is refused, an iteration
 !>           cap is reported as FOLD_NOT_CONVERGED
-!>  sphere   the same in 3-D (sphere)
-!>  order    manufactured smooth solution with smooth viscosity: second order
 !>  disk     a disk midway between the walls spins at gamma_dot/2 and does not
 !>           translate (three resolutions)
-!>  fft      periodic cell, one sphere in shear: hypre and fft rigid velocities
-!>           agree, better with resolution
+!>  sphere   the same for a sphere in 3-D (two resolutions)
+!>  order    self-convergence with a smooth viscosity, 2-D periodic and walled:
+!>           second order (the solver takes its forcing from chi and G only, so
+!>           the reference is the solution on the finer grids, not a manufactured one)
+!>  order3   the same in 3-D
+!>  fft      periodic cell, two spheres in shear: hypre and fft rigid velocities
+!>           agree, better with resolution (2-D, 3-D)
 !>  ranks    the solve on all ranks of MPI_COMM_WORLD equals the serial one
 !> Runs under mpirun with any number of ranks (each check reduces over ranks).
 program test_stokes_hypre
