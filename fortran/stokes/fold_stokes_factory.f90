@@ -4,6 +4,7 @@
 !>
 !> fft: FFTW-MPI slabs over comm when it has more than one rank, serial FFTW
 !> otherwise (fold_fft_mpi, fold_fft_serial); the plans are made here, once.
+!> hypre: the staggered-grid solver of fold_stokes_hypre, slabs along the last axis.
 !> Collective over comm. Needs MPI, so it is linked with the executables
 !> (stokes_mpi_sources), not with the Python extensions, which make their serial
 !> FFT solver through fold_stokes_step::stokes_context_init.
@@ -17,6 +18,7 @@ module fold_stokes_factory
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_STOKES_FFT, &
       FOLD_STOKES_HYPRE
    use fold_stokes_fft, only: stokes_fft_new
+   use fold_stokes_hypre, only: stokes_hypre_new
    implicit none
    private
 
@@ -42,11 +44,10 @@ contains
       case (FOLD_STOKES_FFT)
          call create_fft(set, dim, n, comm, solver, stat, errmsg)
       case (FOLD_STOKES_HYPRE)
-         stat = FOLD_INPUT_ERROR
-         errmsg = "stokes settings: backend 2 (hypre) is not available in this build"
+         call create_hypre(set, dim, n, comm, solver, stat, errmsg)
       case default
          stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,i0)') "stokes settings: backend must be 1 (fft), got ", set%backend
+         write (errmsg, '(a,i0)') "stokes settings: backend must be 1 (fft) or 2 (hypre), got ", set%backend
       end select
    end subroutine stokes_solver_create
 
@@ -79,5 +80,16 @@ contains
       end if
       call stokes_fft_new(fft, set, solver, stat, errmsg)
    end subroutine create_fft
+
+   !> hypre: staggered grid in slabs along the last axis over comm (fold_stokes_hypre).
+   subroutine create_hypre(set, dim, n, comm, solver, stat, errmsg)
+      type(stokes_settings_t), intent(in) :: set
+      integer(ip), intent(in) :: dim, n(3)
+      type(MPI_Comm), intent(in) :: comm
+      class(stokes_solver_t), allocatable, intent(out) :: solver
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call stokes_hypre_new(set, dim, n, comm, solver, stat, errmsg)
+   end subroutine create_hypre
 
 end module fold_stokes_factory
