@@ -45,7 +45,7 @@ Command
 Cost (2 shared cores)
     jeffery, small: 6 runs of 600 steps, ~5 s wall each (42 disks; snapshot every step),
     under a minute with the analysis. stokes: 6 runs of 600 hypre solves on a 40 × 27
-    grid (large: 80 × 54, 20 runs); not measured here (the backend is not yet built).
+    grid (large: 80 × 54, 20 runs).
 
 Outputs (under out/seed_examples/couette_disks/<hydrodynamics>/)
     runs/*.h5 (+ .toml, .json wall time)   the runs (reused)
@@ -123,10 +123,6 @@ def run_name(case: str, seed: int, hydrodynamics: str, form: Form) -> str:
 # Solver: one fold_run at a time, finished runs reused
 
 
-class BackendMissing(RuntimeError):
-    pass
-
-
 def ensure_run(runs: Path, name: str, scene: dict, analyse_only: bool) -> Path:
     from pyfold.cli import main as cli_main
 
@@ -144,9 +140,6 @@ def ensure_run(runs: Path, name: str, scene: dict, analyse_only: bool) -> Path:
     if status != 0:
         if out.exists():
             out.unlink()
-        if scene["model"]["hydrodynamics"] == "stokes" and status == 2:
-            raise BackendMissing("pyfold run refused the Stokes scene (exit 2); if fold_run says the hypre backend "
-                                 "is not available in this build, run with --hydrodynamics jeffery")
         raise RuntimeError(f"pyfold run {path} failed with status {status}")
     (runs / f"{name}.json").write_text(json.dumps({"wall_s": wall}), encoding="utf-8")
     return out
@@ -401,10 +394,7 @@ def main(argv=None) -> None:
     form = dataclasses.replace(form, **{k: v for k, v in (("seeds", tuple(args.seeds) if args.seeds else None),
                                                           ("t_end", args.t_end)) if v is not None})
     start = time.perf_counter()
-    try:
-        ds = run(args.hydrodynamics, form, args.out / args.hydrodynamics, args.analyse_only, not args.no_figures)
-    except BackendMissing as exc:
-        raise SystemExit(f"couette_disks: {exc}") from exc
+    ds = run(args.hydrodynamics, form, args.out / args.hydrodynamics, args.analyse_only, not args.no_figures)
     print(summary(ds))
     print(f"wall time of the study: {time.perf_counter() - start:.1f} s; outputs in {args.out / args.hydrodynamics}")
 

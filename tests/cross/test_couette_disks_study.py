@@ -65,13 +65,8 @@ def test_contacts_only_strategy_never_overlaps_and_no_strategy_does(study, tmp_p
     assert (tmp_path / "couette_disks.nc").exists() and (tmp_path / "couette_disks.md").exists()
 
 
-def test_stokes_form_runs_once_the_hypre_backend_is_built(study, tmp_path, capsys):
-    try:
-        ds = study.run("stokes", study.Form(seeds=(1,), t_end=0.5, cells_per_diameter=4), tmp_path, figures=False)
-    except study.BackendMissing:
-        if "not available in this build" in capsys.readouterr().err:
-            pytest.skip("fold_stokes_factory: backend 2 (hypre) not available in this build")
-        raise
+def test_stokes_form_runs_with_the_hypre_backend(study, tmp_path):
+    ds = study.run("stokes", study.Form(seeds=(1,), t_end=0.5, cells_per_diameter=4), tmp_path, figures=False)
     assert int(ds["overlaps"].sel(case="strategy").max()) == 0
     # rigid disks only add dissipation: the power the walls put in, tau_w 2U Lx, is at least
     # the particle-free eta gamma_dot^2 Lx Ly, so tau_w >= eta gamma_dot = 1 Pa

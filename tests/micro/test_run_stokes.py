@@ -243,10 +243,9 @@ def test_stokes_backend_that_cannot_solve_the_cell_is_refused_with_exit_2(tmp_pa
         assert proc.returncode == 2 and "/setup/resolved/stokes_backend" in proc.stderr, proc.stderr
 
 
-def test_stokes_in_a_couette_cell_resolves_to_hypre_and_runs_once_the_backend_is_built(tmp_path, capsys):
+def test_stokes_in_a_couette_cell_resolves_to_hypre_and_runs(tmp_path, capsys):
     """backend = "auto" in a cell with walls writes code 2 (hypre); fold_run passes the
-    walls to the solver. Until fold_stokes_factory builds hypre it says so (exit 2),
-    and then this test skips; once built, the run must finish with a wall shear stress."""
+    walls to the solver, and the run must finish with a wall shear stress."""
     import pyfold
     from pyfold.cli import main
     from pyfold.scene import load_scene
@@ -259,8 +258,6 @@ def test_stokes_in_a_couette_cell_resolves_to_hypre_and_runs_once_the_backend_is
     out = tmp_path / "walls.h5"
     code = main(["run", str(scene), "-o", str(out)])
     err = capsys.readouterr().err
-    if code == 2 and "not available in this build" in err:
-        pytest.skip("fold_stokes_factory: backend 2 (hypre) not available in this build")
     assert code == 0, err
     ds = pyfold.open_run(out)
     # the sphere at the centre of a sheared gap: the walls carry the shear stress, which
