@@ -58,7 +58,7 @@ module fold_driver
    use fold_jeffery_step, only: jeffery_stepper_t, jeffery_stepper_init, jeffery_step_velocities
    use fold_h5, only: h5_start, h5_stop
    use fold_run_file, only: run_setup_t, read_run_file, FOLD_HYDRO_STOKES
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_STOKES_HYPRE
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
                                stokes_rigid_velocities, stokes_context_lubrication
@@ -171,7 +171,13 @@ contains
          good_vprev = v_prev
          good_wprev = w_prev
          if (rank == 0) then
-            write (m2, '(i0,2("x",i0))') setup%stokes_grid(1:parts%dim)
+            ! one "x" between counts: a format with more descriptors than counts would end in "x"
+            if (parts%dim == 2) then
+               write (m2, '(i0,"x",i0)') setup%stokes_grid(1:2)
+            else
+               write (m2, '(i0,"x",i0,"x",i0)') setup%stokes_grid(1:3)
+            end if
+            m2 = trim(m2)//trim(merge(" (hypre)", " (fft)  ", setup%stokes%backend == FOLD_STOKES_HYPRE))
             write (output_unit, '(a,a,a,i0,a,es9.2,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(m2), " on ", nranks, &
                " rank(s), kappa ", setup%stokes%kappa, ", tol ", setup%stokes%tol, ", ", &
                trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
