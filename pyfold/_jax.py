@@ -28,6 +28,7 @@ costs a new export, never a different program.
 import hashlib
 import json
 import os
+import threading
 from pathlib import Path
 
 import jax
@@ -137,7 +138,7 @@ def _read_export(path: Path, avals, tree):
 def _write_export(path: Path, exported) -> None:
     payload = bytes(exported.serialize())
     blob = _EXPORT_MAGIC + hashlib.sha256(payload).hexdigest().encode() + b"\n" + payload
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp.write_bytes(blob)
