@@ -43,6 +43,7 @@ Standard error: ``s^2 / (J·J)``, ``s^2 = RSS / (n - 1)`` (Bard 1974, ch. 7), as
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -186,9 +187,9 @@ def _program(closure: str, dim: int):
         def ci_of(v):
             return jnp.where(v <= v_min, 0.0, jnp.exp(v) - CI_SCALE)
 
-        def evaluate(v):
+        def evaluate(v, steps):
             ci = ci_of(v)
-            a2, da2 = jax.jvp(lambda c: integrate(c, xi, a2_0, L, t, n_sub, table), (ci,), (jnp.ones_like(ci),))
+            a2, da2 = jax.jvp(lambda c: integrate(c, xi, a2_0, L, t, steps, table), (ci,), (jnp.ones_like(ci),))
             r = (a2[1:, iu, ju] - target) * weight
             J = da2[1:, iu, ju] * weight * (ci + CI_SCALE)  # dr/dv
             ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J))
@@ -218,17 +219,20 @@ def _program(closure: str, dim: int):
             return jnp.abs(ci_of(v + step) - ci) <= jnp.maximum(OPT_SHARE * stderr, FIT_RTOL * ci + FIT_ATOL)
 
         # One evaluation site in the program (the closure's jvp is the bulk of its code):
-        # the first pass of the loop evaluates the start v0 and sets up the state, every
-        # later pass evaluates the trial v + step.
+        # the first pass of the loop evaluates the start v0 and sets up the state, the
+        # passes after it evaluate the trial v + step, and once the optimiser has stopped
+        # a last pass integrates the optimum again with half the step, for the step error
+        # (module notes; its derivative is not used).
         v0 = jnp.log(ci0 + CI_SCALE)
         n_r = target.shape
         zeros_a2 = jnp.zeros((t.shape[0],) + a2_0.shape, a2_0.dtype)
+        false = jnp.asarray(False)
         state = (v0, zeros_a2, jnp.zeros(n_r), jnp.zeros(n_r), jnp.asarray(jnp.inf), jnp.asarray(0.0),
-                 jnp.asarray(0.0), v0, jnp.asarray(0.0), jnp.asarray(0.0), jnp.asarray(0), jnp.asarray(False),
-                 jnp.asarray(True))
+                 jnp.asarray(0.0), v0, jnp.asarray(0.0), jnp.asarray(0.0), jnp.asarray(0), false,
+                 jnp.asarray(True), zeros_a2, false)
 
         def cond(s):
-            return s[12] | ((s[10] < MAX_ITERATIONS) & ~s[11])
+            return ~s[14]
 
         def start(v, evaluated):
             a2, r, J, loss, g, jj = evaluated
@@ -253,21 +257,20 @@ def _program(closure: str, dim: int):
             return v, a2, r, J, loss, g, jj, v_o, g_o, step, it + 1, small(v, step, loss, jj) & jnp.isfinite(loss)
 
         def body(s):
-            first = s[12]
-            trial = jnp.where(first, s[0], s[0] + s[9])
-            evaluated = evaluate(trial)
-            new = jax.tree_util.tree_map(lambda a, b: jnp.where(first, a, b), start(trial, evaluated),
-                                         advance(s[:12], trial, evaluated))
-            return (*new, jnp.asarray(False))
+            first, a2_half = s[12], s[13]
+            stopped = ~first & ((s[10] >= MAX_ITERATIONS) | s[11])
+            point = jnp.where(first | stopped, s[0], s[0] + s[9])
+            evaluated = evaluate(point, jnp.where(stopped, 2 * n_sub, n_sub))
+            pick = functools.partial(jax.tree_util.tree_map, lambda a, b, c: jnp.where(first, a, jnp.where(stopped, b, c)))
+            new = pick(start(point, evaluated), s[:12], advance(s[:12], point, evaluated))
+            return (*new, false, jnp.where(stopped, evaluated[0], a2_half), stopped)
 
-        v, a2, r, J, loss, g, _, v_o, g_o, _, it, done, _ = jax.lax.while_loop(cond, body, state)
+        v, a2, r, J, loss, g, _, v_o, g_o, _, it, done, _, a2_half, _ = jax.lax.while_loop(cond, body, state)
         ci = ci_of(v)
         scale = ci + CI_SCALE
         # curvature of the loss / 2 in C_I at the optimum, from the last secant in v (g = 0
         # at an interior optimum, so the chain rule's g d2v/dC_I2 term drops out)
         secant = (g - g_o) / jnp.where(v != v_o, v - v_o, jnp.nan) / scale**2
-        # the same run with half the step, for the step error (module notes)
-        a2_half = integrate(ci, xi, a2_0, L, t, 2 * n_sub, table)
         return ci, a2, r, J / scale, loss, it, done, a2_half, secant
 
     _PROGRAMS[key] = fit
