@@ -62,6 +62,11 @@ import jax.numpy as jnp  # noqa: E402  (must follow the x64 switch)
 
 __all__ = ["jax", "jnp", "exported_call"]
 
+#: Export files kept per program name (argument shapes, versions and source states
+#: together); beyond it the least recently used are removed when a new one is written, so
+#: that editing the package or analysing runs of many size classes does not grow the
+#: folder without bound.
+MAX_EXPORTS_PER_NAME = 8
 #: First line of an export file; the format of what follows it (bump on any change).
 _EXPORT_MAGIC = b"pyfold-jax-export 1\n"
 _SOURCE_DIGEST: str | None = None
@@ -145,6 +150,21 @@ def _write_export(path: Path, exported) -> None:
         os.replace(tmp, path)  # atomic: a concurrent reader sees the old file or the new one
     except OSError:  # a read-only or full cache folder: this process keeps its program
         tmp.unlink(missing_ok=True)
+        return
+    _prune(path)
+
+
+def _prune(path: Path) -> None:
+    """Remove the least recently used exports of the same program name beyond
+    :data:`MAX_EXPORTS_PER_NAME` (a read marks a file used: :func:`exported_call`)."""
+    name = path.name.rsplit("-", 1)[0]
+    try:
+        siblings = [p for p in path.parent.glob(f"{name}-*.jaxexport") if p.name.rsplit("-", 1)[0] == name]
+        siblings.sort(key=lambda p: p.stat().st_mtime, reverse=True)
+        for old in siblings[MAX_EXPORTS_PER_NAME:]:
+            old.unlink(missing_ok=True)
+    except OSError:  # a file removed meanwhile by another process
+        pass
 
 
 def _can_serialise() -> bool:
@@ -174,7 +194,12 @@ def exported_call(name: str, build, args: tuple):
     if call is None:
         path = _CACHE / "export" / f"{key}.jaxexport"
         exported = _read_export(path, avals, tree)
-        if exported is None:
+        if exported is not None:
+            try:
+                os.utime(path)  # used: kept by _prune
+            except OSError:
+                pass
+        else:
             specs = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(np.shape(x), np.result_type(x)), args)
             exported = jax.export.export(build())(*specs)
             _write_export(path, exported)

@@ -143,3 +143,26 @@ def test_without_the_cache_the_program_is_traced_every_time(tmp_path, monkeypatc
     assert len(calls) == 2
     assert not any(tmp_path.iterdir())
     np.testing.assert_allclose(np.asarray(out[0]), _expected(1.0)[0], rtol=1e-14, atol=1e-14)
+
+
+def test_least_recently_used_exports_of_a_name_are_removed_beyond_the_limit(cache, monkeypatch):
+    import os
+
+    monkeypatch.setattr(_jax, "MAX_EXPORTS_PER_NAME", 2)
+    build, calls = _counting_build(1.0)
+
+    def args(n):
+        return (np.linspace(0.0, 1.0, n), (np.ones((2, 3)), np.ones((3, n))))
+
+    exported_call("toy", build, args(3))
+    oldest = _only_file(cache)
+    os.utime(oldest, (1_000_000_000, 1_000_000_000))  # long unused
+    exported_call("toy", build, args(4))
+    second = [p for p in cache.iterdir() if p != oldest][0]
+    os.utime(second, (1_000_000_100, 1_000_000_100))
+    _jax._LOADED.clear()
+    exported_call("toy", build, args(3))  # read back: marked used, now the newest
+    assert len(calls) == 2
+    exported_call("toy", build, args(5))  # a third: the least recently used goes
+    names = {p.name for p in cache.iterdir()}
+    assert len(names) == 2 and oldest.name in names and second.name not in names
