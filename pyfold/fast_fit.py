@@ -23,7 +23,13 @@ seconds and a new process re-uses the compiled programs:
   zero-length intervals and zero weights, so that one program per closure and size
   class serves every run; the programs carry no host callbacks, so JAX's persistent
   cache (:mod:`pyfold._jax`) keeps them (a diffrax solve does carry callbacks and is
-  compiled again in every process).
+  compiled again in every process), and each is run through a serialised export
+  (:func:`pyfold._jax.exported_call`), so a new process neither traces nor lowers it;
+* the closure evaluated at one place in the program: the four RK4 stages are a loop,
+  and the start, every Newton trial and the half-step pass of the step error (below)
+  are passes of one loop around a single ``jvp`` of the integration. The code XLA
+  compiles, and a new process loads from the cache, is then one closure and its
+  derivative instead of twelve copies.
 
 The step error of the fitted value. RK4's global error is ``O(h^4)``: at the optimum
 the run is integrated again with half the step, and ``e = 16/15 (a_h - a_{h/2})``
