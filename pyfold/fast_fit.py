@@ -49,7 +49,6 @@ Standard error: ``s^2 / (J·J)``, ``s^2 = RSS / (n - 1)`` (Bard 1974, ch. 7), as
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 
 import numpy as np
@@ -267,8 +266,8 @@ def _program(closure: str, dim: int):
             stopped = ~first & ((s[10] >= MAX_ITERATIONS) | s[11])
             point = jnp.where(first | stopped, s[0], s[0] + s[9])
             evaluated = evaluate(point, jnp.where(stopped, 2 * n_sub, n_sub))
-            pick = functools.partial(jax.tree_util.tree_map, lambda a, b, c: jnp.where(first, a, jnp.where(stopped, b, c)))
-            new = pick(start(point, evaluated), s[:12], advance(s[:12], point, evaluated))
+            new = jax.tree_util.tree_map(lambda a, b, c: jnp.where(first, a, jnp.where(stopped, b, c)),
+                                         start(point, evaluated), s[:12], advance(s[:12], point, evaluated))
             return (*new, false, jnp.where(stopped, evaluated[0], a2_half), stopped)
 
         v, a2, r, J, loss, g, _, v_o, g_o, _, it, done, _, a2_half, _ = jax.lax.while_loop(cond, body, state)
