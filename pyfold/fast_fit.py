@@ -23,7 +23,13 @@ seconds and a new process re-uses the compiled programs:
   zero-length intervals and zero weights, so that one program per closure and size
   class serves every run; the programs carry no host callbacks, so JAX's persistent
   cache (:mod:`pyfold._jax`) keeps them (a diffrax solve does carry callbacks and is
-  compiled again in every process).
+  compiled again in every process), and each is run through a serialised export
+  (:func:`pyfold._jax.exported_call`), so a new process neither traces nor lowers it;
+* the closure evaluated at one place in the program: the four RK4 stages are a loop,
+  and the start, every Newton trial and the half-step pass of the step error (below)
+  are passes of one loop around a single ``jvp`` of the integration. The code XLA
+  compiles, and a new process loads from the cache, is then one closure and its
+  derivative instead of twelve copies.
 
 The step error of the fitted value. RK4's global error is ``O(h^4)``: at the optimum
 the run is integrated again with half the step, and ``e = 16/15 (a_h - a_{h/2})``
@@ -47,7 +53,7 @@ import math
 
 import numpy as np
 
-from pyfold._jax import jax, jnp
+from pyfold._jax import exported_call, jax, jnp
 from pyfold.errors import InputError
 
 __all__ = ["FastFit", "fit_ci_rk4", "padded_size", "MAX_STEP", "MIN_RECORDS"]
@@ -88,6 +94,10 @@ CI_SCALE = 1e-6
 MAX_LOG_STEP = 2.0
 #: Iterations at most (the secant converges superlinearly: about ten).
 MAX_ITERATIONS = 60
+#: Classical RK4: stage j is evaluated at a + h c_j k_(j-1), and the step is
+#: a + h/6 sum_j w_j k_j.
+_RK4_NODES = np.array([0.0, 0.5, 0.5, 1.0])
+_RK4_WEIGHTS = np.array([1.0, 2.0, 2.0, 1.0])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,12 +127,17 @@ _PROGRAMS: dict[tuple[str, int], object] = {}
 
 
 def _program(closure: str, dim: int):
-    """The compiled fit for ``closure`` (a registered name, or ``"exact"``: the table
-    given as data) in ``dim`` dimensions; one per process, its compiled code kept by
-    the persistent cache across processes."""
+    """The jitted fit for ``closure`` (a registered name, or ``"exact"``: the table
+    given as data, ``(times, a4, slopes)`` of :class:`pyfold.closures.TabulatedA4`) in
+    ``dim`` dimensions. Traced only when no export of it is found
+    (:func:`pyfold._jax.exported_call`); its compiled code is kept by the persistent
+    cache across processes."""
     key = (closure, dim)
     if key in _PROGRAMS:
         return _PROGRAMS[key]
+    import equinox as eqx
+
+    from pyfold.closures import TabulatedA4
     from pyfold.models import FolgarTucker
 
     iu, ju = np.triu_indices(dim)
@@ -134,17 +149,33 @@ def _program(closure: str, dim: int):
         model = FolgarTucker(ci=ci, xi=xi, closure=closure if table is None else table, dim=dim)
         return model.rate(t, a, L)
 
+    def tabulated(arrays):
+        # the run's a4 as a TabulatedA4 whose arrays are the program's inputs
+        if not arrays:
+            return None
+        template = TabulatedA4(np.arange(2.0), np.zeros((2,) + (dim,) * 4))
+        return eqx.tree_at(lambda m: (m.times, m.a4_series, m.slopes), template, tuple(arrays))
+
     def integrate(ci, xi, a2_0, L, t, n_sub, table):
         def interval(a, k):
             h = jnp.where(n_sub[k] > 0, (t[k + 1] - t[k]) / jnp.maximum(n_sub[k], 1), 0.0)
 
             def step(i, a):
                 s = t[k] + i * h
-                k1 = rate(ci, xi, a, L, s, table)
-                k2 = rate(ci, xi, a + h / 2 * k1, L, s + h / 2, table)
-                k3 = rate(ci, xi, a + h / 2 * k2, L, s + h / 2, table)
-                k4 = rate(ci, xi, a + h * k3, L, s + h, table)
-                return a + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+                # The four stages as a loop over _RK4_NODES / _RK4_WEIGHTS: the closure
+                # appears once in the program, not four times (a quarter of the code to
+                # compile and to load from the cache). The arithmetic is that of
+                # k2 = rate(a + h/2 k1), ..., a + h/6 (k1 + 2 k2 + 2 k3 + k4), term by term.
+                def stage(j, carry):
+                    k_prev, acc = carry
+                    c = jnp.asarray(_RK4_NODES)[j]
+                    k_j = rate(ci, xi, a + (h * c) * k_prev, L, s + h * c, table)
+                    return k_j, acc + jnp.asarray(_RK4_WEIGHTS)[j] * k_j
+
+                zero = jnp.zeros_like(a)
+                _, acc = jax.lax.fori_loop(0, 4, stage, (zero, zero))
+                return a + h / 6 * acc
 
             a = jax.lax.fori_loop(0, n_sub[k], step, a)
             return a, a
@@ -153,16 +184,17 @@ def _program(closure: str, dim: int):
         return jnp.concatenate([a2_0[None], ys])
 
     @jax.jit
-    def fit(ci0, xi, a2_0, L, t, n_sub, target, weight, table):
+    def fit(ci0, xi, a2_0, L, t, n_sub, target, weight, table_arrays):
+        table = tabulated(table_arrays)
         # The variable is v = ln(C_I + CI_SCALE) (module notes); v_min is C_I = 0.
         v_min = jnp.log(CI_SCALE)
 
         def ci_of(v):
             return jnp.where(v <= v_min, 0.0, jnp.exp(v) - CI_SCALE)
 
-        def evaluate(v):
+        def evaluate(v, steps):
             ci = ci_of(v)
-            a2, da2 = jax.jvp(lambda c: integrate(c, xi, a2_0, L, t, n_sub, table), (ci,), (jnp.ones_like(ci),))
+            a2, da2 = jax.jvp(lambda c: integrate(c, xi, a2_0, L, t, steps, table), (ci,), (jnp.ones_like(ci),))
             r = (a2[1:, iu, ju] - target) * weight
             J = da2[1:, iu, ju] * weight * (ci + CI_SCALE)  # dr/dv
             ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J))
@@ -191,19 +223,30 @@ def _program(closure: str, dim: int):
             stderr = jnp.sqrt(loss / jnp.maximum(n_res - 1, 1) / jnp.where(jj > 0.0, jj, jnp.inf)) * (ci + CI_SCALE)
             return jnp.abs(ci_of(v + step) - ci) <= jnp.maximum(OPT_SHARE * stderr, FIT_RTOL * ci + FIT_ATOL)
 
+        # One evaluation site in the program (the closure's jvp is the bulk of its code):
+        # the first pass of the loop evaluates the start v0 and sets up the state, the
+        # passes after it evaluate the trial v + step, and once the optimiser has stopped
+        # a last pass integrates the optimum again with half the step, for the step error
+        # (module notes; its derivative is not used).
         v0 = jnp.log(ci0 + CI_SCALE)
-        a2, r, J, loss, g, jj = evaluate(v0)
-        step = newton(v0, g, jj, v0, g)
-        state = (v0, a2, r, J, loss, g, jj, v0, g, step, jnp.asarray(0),
-                 small(v0, step, loss, jj) & jnp.isfinite(loss))
+        n_r = target.shape
+        zeros_a2 = jnp.zeros((t.shape[0],) + a2_0.shape, a2_0.dtype)
+        false = jnp.asarray(False)
+        state = (v0, zeros_a2, jnp.zeros(n_r), jnp.zeros(n_r), jnp.asarray(jnp.inf), jnp.asarray(0.0),
+                 jnp.asarray(0.0), v0, jnp.asarray(0.0), jnp.asarray(0.0), jnp.asarray(0), false,
+                 jnp.asarray(True), zeros_a2, false)
 
         def cond(s):
-            return (s[10] < MAX_ITERATIONS) & ~s[11]
+            return ~s[14]
 
-        def body(s):
+        def start(v, evaluated):
+            a2, r, J, loss, g, jj = evaluated
+            step = newton(v, g, jj, v, g)
+            return v, a2, r, J, loss, g, jj, v, g, step, jnp.asarray(0), small(v, step, loss, jj) & jnp.isfinite(loss)
+
+        def advance(s, trial, evaluated):
             v, a2, r, J, loss, g, jj, _, _, step, it, _ = s
-            trial = v + step
-            a2_t, r_t, J_t, loss_t, g_t, jj_t = evaluate(trial)
+            a2_t, r_t, J_t, loss_t, g_t, jj_t = evaluated
             accept = loss_t < loss
             # the other point of the secant: the one left behind, or the rejected trial
             v_o, g_o = jnp.where(accept, v, trial), jnp.where(accept, g, g_t)
@@ -218,39 +261,45 @@ def _program(closure: str, dim: int):
             step = jnp.where(accept, proposal, shorter)
             return v, a2, r, J, loss, g, jj, v_o, g_o, step, it + 1, small(v, step, loss, jj) & jnp.isfinite(loss)
 
-        v, a2, r, J, loss, g, _, v_o, g_o, _, it, done = jax.lax.while_loop(cond, body, state)
+        def body(s):
+            first, a2_half = s[12], s[13]
+            stopped = ~first & ((s[10] >= MAX_ITERATIONS) | s[11])
+            point = jnp.where(first | stopped, s[0], s[0] + s[9])
+            evaluated = evaluate(point, jnp.where(stopped, 2 * n_sub, n_sub))
+            new = jax.tree_util.tree_map(lambda a, b, c: jnp.where(first, a, jnp.where(stopped, b, c)),
+                                         start(point, evaluated), s[:12], advance(s[:12], point, evaluated))
+            return (*new, false, jnp.where(stopped, evaluated[0], a2_half), stopped)
+
+        v, a2, r, J, loss, g, _, v_o, g_o, _, it, done, _, a2_half, _ = jax.lax.while_loop(cond, body, state)
         ci = ci_of(v)
         scale = ci + CI_SCALE
         # curvature of the loss / 2 in C_I at the optimum, from the last secant in v (g = 0
         # at an interior optimum, so the chain rule's g d2v/dC_I2 term drops out)
         secant = (g - g_o) / jnp.where(v != v_o, v - v_o, jnp.nan) / scale**2
-        # the same run with half the step, for the step error (module notes)
-        a2_half = integrate(ci, xi, a2_0, L, t, 2 * n_sub, table)
         return ci, a2, r, J / scale, loss, it, done, a2_half, secant
 
     _PROGRAMS[key] = fit
     return fit
 
 
-def _table(t: np.ndarray, a4: np.ndarray, size: int):
-    """The run's a4 as a :class:`pyfold.closures.TabulatedA4` of ``size`` rows: the real
-    records, then rows past the end (times continuing at the last spacing, the last a4,
-    zero slopes) that the integration never reaches. Its interpolation on
-    ``[t[0], t[-1]]`` is that of the unpadded table (the slopes are the real table's)."""
-    import equinox as eqx
+def _table(t: np.ndarray, a4: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The run's a4 as the arrays ``(times, a4, slopes)`` of a
+    :class:`pyfold.closures.TabulatedA4` of ``size`` rows: the real records, then rows
+    past the end (times continuing at the last spacing, the last a4, zero slopes) that
+    the integration never reaches. Its interpolation on ``[t[0], t[-1]]`` is that of the
+    unpadded table (the slopes are the real table's). In numpy: no small programs to
+    compile for a table built op by op in JAX."""
+    from pyfold.closures.tabulated import _three_point_slopes
 
-    from pyfold.closures import TabulatedA4
-
-    real = TabulatedA4(t, a4)
+    slopes = _three_point_slopes(t, a4)
     extra = size - len(t)
     if extra == 0:
-        return real
+        return t, a4, slopes
     dt = t[-1] - t[-2]
     t_pad = np.concatenate([t, t[-1] + dt * np.arange(1, extra + 1)])
     a4_pad = np.concatenate([a4, np.repeat(a4[-1:], extra, axis=0)])
-    table = TabulatedA4(t_pad, a4_pad)
-    slopes = np.concatenate([np.asarray(real.slopes), np.zeros((extra,) + a4.shape[1:])])
-    return eqx.tree_at(lambda m: m.slopes, table, jnp.asarray(slopes))
+    slopes_pad = np.concatenate([slopes, np.zeros((extra,) + a4.shape[1:])])
+    return t_pad, a4_pad, slopes_pad
 
 
 def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: float, *,
@@ -278,8 +327,6 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
     max_step : float
         Largest RK4 step [1/γ̇] before refinement.
     """
-    from pyfold.kinematics import shear_rate
-
     t = np.asarray(t, dtype=np.float64)
     a2 = np.asarray(a2, dtype=np.float64)
     n, d = len(t), a2.shape[-1]
@@ -291,20 +338,23 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         raise InputError(f"ci_start: must be finite and >= 0, got {ci_start!r}")
     L = np.asarray(L, dtype=np.float64)[:d, :d]
     size = padded_size(n)
-    table = None
+    table = ()
     if closure == "exact":
         if a4 is None:
             raise InputError("a4: closure 'exact' fits with the run's own a4, none given")
         a4 = np.asarray(a4, dtype=np.float64)
         if a4.shape != (n,) + (d,) * 4:
             raise InputError(f"a4: expected shape ({n}, {d}, {d}, {d}, {d}), got {a4.shape}")
+        if not np.all(np.isfinite(a4)):
+            raise InputError("a4: contains NaN or infinity")
         table = _table(t, a4, size)
     else:
         from pyfold.closures import get_closure
 
         get_closure(closure, d)  # the name, checked with the allowed ones
 
-    rate = float(shear_rate(jnp.asarray(L))) or 1.0
+    D = 0.5 * (L + L.T)
+    rate = math.sqrt(2.0 * float(np.sum(D * D))) or 1.0  # pyfold.kinematics.shear_rate, in numpy
     iu, ju = np.triu_indices(d)
     t_pad = np.concatenate([t, np.full(size - n, t[-1])])
     target = np.zeros((size - 1, iu.size))
@@ -312,8 +362,7 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
     weight = np.zeros((size - 1, 1))
     weight[: n - 1] = 1.0
     a2_0 = 0.5 * (a2[0] + a2[0].T)
-    program = _program(closure, d)
-    f64 = jnp.float64
+    name = f"fast_fit_{closure}_{d}d"
     ci, step_error, refinements = float(ci_start), math.nan, 0
     while True:
         h = max_step / 2**refinements
@@ -321,8 +370,9 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         # (1 - 1e-12): an interval that is a whole number of steps up to the round-off of
         # the division (0.5 / 0.5 = 1 + 2e-16) takes that number, not one more
         n_sub[: n - 1] = np.maximum(1, np.ceil(np.diff(t) * rate / h * (1.0 - 1e-12))).astype(np.int32)
-        out = program(jnp.asarray(ci, f64), jnp.asarray(xi, f64), jnp.asarray(a2_0), jnp.asarray(L),
-                      jnp.asarray(t_pad), jnp.asarray(n_sub), jnp.asarray(target), jnp.asarray(weight), table)
+        # numpy arguments: jnp.asarray would compile a small program per shape
+        args = (np.float64(ci), np.float64(xi), a2_0, L, t_pad, n_sub, target, weight, table)
+        out = exported_call(name, lambda: _program(closure, d), args)
         ci_j, a2_fit, r, J, loss, iterations, done, a2_half, secant = out
         ci = float(ci_j)
         r, J = np.asarray(r).ravel(), np.asarray(J).ravel()

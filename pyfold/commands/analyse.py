@@ -7,8 +7,9 @@ cause): the closure names; the run file (a pyfold run with ``/setup`` and
 and that ``--out`` can be created and written.
 
 The fits are :func:`pyfold.pipeline.fit_ci_per_closure` (fixed-step RK4 on padded
-record counts, :mod:`pyfold.fast_fit`): their compiled programs are kept in the per-user
-JAX cache (:mod:`pyfold._jax`), so only the first analysis on a machine compiles them.
+record counts, :mod:`pyfold.fast_fit`, one closure per core at a time): their programs
+are kept, exported and compiled, in the per-user JAX cache (:mod:`pyfold._jax`), so only
+the first analysis on a machine traces and compiles them.
 """
 from __future__ import annotations
 
