@@ -27,7 +27,7 @@ from typing import Sequence
 import numpy as np
 import xarray as xr
 
-from pyfold._jax import jax, jnp
+from pyfold._jax import exported_call, jax, jnp
 from pyfold.closures import available, get_closure
 from pyfold.errors import InputError
 from pyfold.kinematics import rate_of_strain
@@ -58,7 +58,9 @@ def closure_a4(name: str, a2: np.ndarray) -> np.ndarray:
     if values.ndim != 3 or values.shape[1] != values.shape[2] or values.shape[1] not in (2, 3):
         raise InputError(f"a2: expected shape (nt, d, d) with d in {{2, 3}}, got {values.shape}")
     fn = get_closure(name, values.shape[-1])
-    return np.asarray(jax.jit(jax.vmap(fn))(jnp.asarray(values)))
+    # through a serialised export in the per-user cache: a new process skips the trace
+    return np.asarray(exported_call(f"closure_a4_{name}_{values.shape[-1]}d", lambda: jax.jit(jax.vmap(fn)),
+                                    (values,)))
 
 
 def _shear_rate(D: np.ndarray) -> float:

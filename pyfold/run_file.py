@@ -15,13 +15,16 @@ import subprocess
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
 
 from pyfold import __version__
 from pyfold.errors import InputError
-from pyfold.scene import ResolvedScene
+
+if TYPE_CHECKING:  # only an annotation here: readers of run files need not load the scene schema
+    from pyfold.scene import ResolvedScene
 
 __all__ = [
     "FORMAT",
