@@ -166,6 +166,64 @@ def test_np2_equals_np1_to_solver_tolerance(tmp_path):
     assert one.attrs["mpi_ranks"] == 1 and two.attrs["mpi_ranks"] == 2
 
 
+def _walled_scene_file(path, tol, max_iterations=1000):
+    """Two spheres and a spheroid between no-slip walls at y = 0, 1 (Couette cell,
+    hypre backend): a tiny walled Stokes scene."""
+    x = np.array([[0.3, 0.3, 0.3], [0.72, 0.55, 0.62], [0.35, 0.75, 0.8]])
+    p = np.array([[1.0, 0.0, 0.0], [0.6, 0.64, 0.48], [1.0, 0.0, 0.0]])
+    write_run_file(path, x=x, p=p, radius=[0.1, 0.075, 0.1], length=[0.2, 0.3, 0.2], xi=[0.0, xi_of(2.0), 0.0],
+                   shape=[2, 3, 2], walls=1, dt=0.02, t_end=0.06, collisions=2, alpha=0.01, output_every=1,
+                   snapshot_every=1,
+                   stokes={"stokes_grid": (16, 16, 16), "stokes_backend": np.int64(2), "stokes_tolerance": tol,
+                           "stokes_max_iterations": np.int64(max_iterations)})
+
+
+def test_walled_np2_equals_np1_to_solver_tolerance(tmp_path):
+    """The hypre backend keeps the FFT path's rule: --np 2 agrees with --np 1. The two
+    runs do not share a preconditioner (BoomerAMG coarsens each rank's rows), so they
+    agree to the solver tolerance, not to round-off: with tol = 1e-9 on velocities
+    of order gamma_dot L = 1 over 3 steps of dt = 0.02, positions agree to ~1e-10 and
+    the stress to ~1e-8 (kappa = 1e3 amplifies the residual into the solid's stress;
+    bounds below with a factor 10-100 of room)."""
+    require_fold_run()
+    xr = pytest.importorskip("xarray")
+    runs = []
+    for ranks in (1, 2):
+        path = tmp_path / f"walls_np{ranks}.h5"
+        _walled_scene_file(path, tol=1e-9)
+        proc = run_fold(path, np_ranks=ranks)
+        assert proc.returncode == 0, proc.stderr
+        assert "(hypre)" in proc.stdout, proc.stdout
+        runs.append(xr.open_dataset(path, engine="h5netcdf"))
+    one, two = runs
+    assert np.all(one.stokes_residual.values <= 1e-9) and np.all(two.stokes_residual.values <= 1e-9)
+    np.testing.assert_allclose(two.x.values, one.x.values, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(two.stress.values, one.stress.values, rtol=0, atol=1e-6)
+    # the wall shear stress exceeds the fluid's eta gamma_dot: rigid inclusions only add dissipation
+    assert np.all(one.stress.values[:, 0, 1] > 1.0)
+    assert one.attrs["mpi_ranks"] == 1 and two.attrs["mpi_ranks"] == 2
+
+
+def test_walled_non_convergence_exits_1_with_residual_and_keeps_last_good_state(tmp_path):
+    """The same stop rule as the FFT path: an iteration cap reached is exit 1, the step,
+    the residual and kappa in the message and the status, the initial state kept."""
+    require_fold_run()
+    path = tmp_path / "walls_cap.h5"
+    _walled_scene_file(path, tol=1e-9, max_iterations=2)
+    with h5py.File(path) as f:
+        x0 = f["/initial/x"][()]
+    proc = run_fold(path)
+    assert proc.returncode == 1, proc.stderr
+    assert "step 1" in proc.stderr and "not converged" in proc.stderr and "residual" in proc.stderr
+    with h5py.File(path) as f:
+        status = f.attrs["status"]
+        status = status.decode() if isinstance(status, bytes) else str(status)
+        assert status.startswith("failed: step 1") and "kappa" in status
+        assert int(f.attrs["steps_done"]) == 0
+        np.testing.assert_array_equal(f["x"][-1], x0)
+        assert f["stokes_iterations"][-1] == 2 and f["stokes_residual"][-1] > 1e-9
+
+
 def test_dilute_spheroid_follows_jeffery_with_its_discrete_shape_factor(tmp_path):
     """A single prolate spheroid (beta = 3) at the centre of a unit cell (n L^3 = 0.05):
     hydrodynamic interactions (here with its own periodic images) vanish as n L^3 -> 0,
