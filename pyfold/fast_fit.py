@@ -225,7 +225,7 @@ class FastFit:
     a2: np.ndarray  # (records, d, d): Folgar-Tucker at the fitted C_I, on the record times
     step: float  # RK4 step used [1/γ̇] (largest over the record intervals)
     step_error: float  # |ΔC_I| estimated from the step (module notes)
-    iterations: int
+    iterations: int  # Newton steps, summed over the passes at successively halved RK4 steps
     #: the fitted trajectory stays in the orientation tensors (module notes); when not,
     #: ``success`` is False, ``ci`` and ``stderr`` are NaN and the fields below say where
     admissible: bool = True
@@ -325,7 +325,9 @@ def _program(closure: str, dim: int):
             a2, da2 = jax.jvp(lambda c: integrate(c, xi, a2_0, L, t, steps, table), (ci,), (jnp.ones_like(ci),))
             r = (a2[1:, iu, ju] - target) * weight
             J = da2[1:, iu, ju] * weight * (ci + CI_SCALE)  # dr/dv
-            finite = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J))
+            # (a far blown-up state has finite entries whose products overflow)
+            finite = (jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J)) & jnp.isfinite(jnp.sum(J * r))
+                      & jnp.isfinite(jnp.sum(J * J)) & jnp.isfinite(jnp.sum(r * r)))
             r, J = jnp.where(finite, r, 0.0), jnp.where(finite, J, 0.0)
             # an inadmissible trajectory has an infinite loss (never accepted), but its
             # gradient is kept: from an inadmissible start, Newton's step towards the
@@ -378,7 +380,10 @@ def _program(closure: str, dim: int):
         def advance(s, trial, evaluated):
             v, a2, r, J, loss, g, jj, _, _, step, it, _ = s
             a2_t, r_t, J_t, loss_t, g_t, jj_t = evaluated
-            accept = loss_t < loss
+            # from an inadmissible point (infinite loss) an inadmissible trial is taken
+            # too: the search goes on along Newton's steps towards the least squares
+            # instead of shrinking back onto a point that no step size rescues
+            accept = (loss_t < loss) | (jnp.isinf(loss) & jnp.isinf(loss_t))
             # the other point of the secant: the one left behind, or the rejected trial
             v_o, g_o = jnp.where(accept, v, trial), jnp.where(accept, g, g_t)
             v, a2, r, J, loss, g, jj = jax.tree_util.tree_map(lambda new, old: jnp.where(accept, new, old),
@@ -494,7 +499,7 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
     weight[: n - 1] = 1.0
     a2_0 = 0.5 * (a2[0] + a2[0].T)
     name = f"fast_fit_{closure}_{d}d"
-    ci, step_error, refinements = float(ci_start), math.nan, 0
+    ci, step_error, refinements, total_iterations = float(ci_start), math.nan, 0, 0
     while True:
         h = max_step / 2**refinements
         n_sub = np.zeros(size - 1, dtype=np.int32)
@@ -505,6 +510,7 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         args = (np.float64(ci), np.float64(xi), a2_0, L, t_pad, n_sub, target, weight, table)
         out = exported_call(name, lambda: _program(closure, d), args)
         ci_j, a2_fit, r, J, loss, iterations, done, a2_half, secant = out
+        total_iterations += int(iterations)
         ci = float(ci_j)
         r, J = np.asarray(r).ravel(), np.asarray(J).ravel()
         rss = float(loss)
@@ -539,18 +545,18 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
                    f"at every C_I tried (C_I = {ci:.3g} last) and down to that step: no C_I reported")
         return FastFit(closure=closure, ci=math.nan, stderr=math.nan, residual_rms=math.nan, n_points=n_points,
                        success=False, at_bound=False, message=message, a2=np.asarray(a2_fit)[:n], step=h_used,
-                       step_error=math.nan, iterations=int(iterations), admissible=False,
+                       step_error=math.nan, iterations=total_iterations, admissible=False,
                        inadmissible_time=float(t[bad_record]), inadmissible_step=step, inadmissible_cause=cause)
     if not finite:
         message = "Folgar-Tucker blew up for every C_I tried (non-finite a2)"
     elif not converged:
-        message = f"the fit stopped after {int(iterations)} iterations without converging"
+        message = f"the fit stopped after {total_iterations} iterations without converging"
     else:
-        message = f"converged in {int(iterations)} steps"
+        message = f"converged in {total_iterations} steps"
         if at_bound:
             message += " (C_I held on its bound 0: the loss increases into C_I > 0)"
     if finite and step_error > allowed:
         message += f"; RK4 step error of C_I {step_error:.2g} above {allowed:.2g} at the smallest step {h_used:.3g}"
     return FastFit(closure=closure, ci=ci, stderr=stderr, residual_rms=math.sqrt(rss / n_points) if finite else math.nan,
                    n_points=n_points, success=converged and finite, at_bound=at_bound, message=message,
-                   a2=np.asarray(a2_fit)[:n], step=h_used, step_error=step_error, iterations=int(iterations))
+                   a2=np.asarray(a2_fit)[:n], step=h_used, step_error=step_error, iterations=total_iterations)
