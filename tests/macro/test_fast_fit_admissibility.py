@@ -147,3 +147,26 @@ def test_summary_table_prints_failed_instead_of_a_ci():
     lines = summary_table(fits, errors).splitlines()
     assert "failed" in lines[1] and "t = 45 s" in lines[1] and "nan" not in lines[1]
     assert "3.000e-04" in lines[2] and "failed" not in lines[2]
+
+
+def test_diffrax_fit_whose_trajectory_leaves_the_orientation_tensors_reports_no_value():
+    """pyfold.fit.fit_parameters: the linear closure with C_I held at or below 2e-3
+    leaves the positive semi-definite cone in shear at xi = 1 (smallest eigenvalue
+    about -0.026 at C_I = 1e-3, tests/macro/test_solution_checks.py); fitted to an
+    admissible history (quadratic closure), the optimum lies in that range, and the
+    fit must say so instead of reporting it."""
+    from pyfold.fit import fit_parameters, synthetic_dataset
+    from pyfold.models import FolgarTucker
+    from pyfold.tensors import isotropic_a2
+
+    t = np.linspace(0.0, 200.0, 101)
+    data = synthetic_dataset(FolgarTucker(ci=1e-3, xi=1.0, closure="quadratic"), isotropic_a2(3), SHEAR, t)
+    res = fit_parameters(data, FolgarTucker(ci=1e-3, xi=1.0, closure="linear"), ("ci",), SHEAR,
+                         bounds={"ci": (0.0, 2e-3)})
+    assert not res.success
+    assert np.isnan(res.values["ci"]) and np.isnan(res.stderr["ci"])
+    assert res.message.startswith("closure linear: a2 leaves the orientation tensors at t = ")
+    assert "positive semi-definite" in res.message
+    # the time named is a sample time
+    named = float(res.message.split("at t = ")[1].split(" s")[0])
+    assert np.min(np.abs(t - named)) <= 1e-6 * named
