@@ -466,8 +466,9 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
     for k, name in enumerate(names):
         if "admissible" in fits and not int(fits["admissible"].sel(closure=name)):
             # ci is NaN (no bar): say why at its place
-            right.text(k, 0.0, "failed:\na2 left the\nadmissible set", ha="center", va="bottom", fontsize=7,
-                       rotation=90, color="C3")
+            right.text(k, 0.0, "failed\n(a2 left the\nadmissible set)", ha="center", va="bottom", fontsize=7,
+                       color="C3")
+    right.set_xlim(-0.6, len(names) - 0.4)  # a NaN bar takes no room otherwise
     right.set_xticks(range(len(names)), names, rotation=30)
     right.set_ylabel("fitted C_I")
     right.grid(alpha=0.3, axis="y")
