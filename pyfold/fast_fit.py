@@ -7,7 +7,9 @@ and unit weights:
 
 Folgar–Tucker started from the run's first record (symmetrised) and closed by a
 registered closure or by the run's own ``a4`` (``"exact"``: the records interpolated
-in time by the piecewise cubic Hermite of :class:`pyfold.closures.TabulatedA4`). What
+in time by the piecewise cubic Hermite of :class:`pyfold.closures.TabulatedA4`,
+corrected to contract to the integrated a2: :func:`contracted_table`, see
+Admissibility below). What
 differs is how it is solved, so that a run of hundreds of records is fitted in
 seconds and a new process re-uses the compiled programs:
 
@@ -50,15 +52,17 @@ optimiser never settles on one. The fitted trajectory is checked again in numpy
 (:func:`admissibility`), which names the first record, RK4 step and cause; a fit that
 leaves the set is retried at half the step (a discretisation artefact goes away, a
 departure of the model does not) and, if it still leaves it, reported as failed with
-``C_I`` NaN. The tolerance is a round-off bound, :data:`ADMISSIBLE_TOL_PER_STEP` per
-RK4 step times the steps taken: Folgar–Tucker keeps ``tr a2 = 1`` exactly when the
+``C_I`` NaN. The tolerance (:func:`admissible_tol`) is a round-off bound,
+:data:`ADMISSIBLE_TOL_PER_STEP` per RK4 step times the steps taken, plus the drift a
+closure's departure from ``a4_ijkk = a2_ij`` can cause (:data:`CONTRACTION_DEFECT`):
+Folgar–Tucker keeps ``tr a2 = 1`` exactly when the
 closure satisfies ``a4_ijkk = a2_ij`` (``tr`` of the rate is ``2 xi D:(a2 - a4_iikl)
 - 2 d C_I γ̇ (tr a2 - 1)``), and RK4, a linear combination of rates, preserves that
 linear invariant up to round-off. The eigenvalues of the exact flow stay in
 ``[0, 1]``; those of the computed states move by at most the 2-norm of the accumulated
-round-off (Weyl), bounded by the same per-step sum.
+round-off and closure defect (Weyl), bounded by the same sum.
 
-The run's own a4 ("exact") is fed through :class:`ContractedTable`: the recorded a4,
+The run's own a4 ("exact") is fed through :func:`contracted_table`: the recorded a4,
 corrected by the smallest fully symmetric tensor that restores ``a4_ijkk = a2_ij`` for
 the a2 being integrated. The recorded a4 alone contracts to the *run's* a2, not the
 integrated one, and the trace then obeys ``d tr/dt = 2 xi D:(a2 - a2_run)``: the
@@ -79,7 +83,8 @@ import numpy as np
 from pyfold._jax import exported_call, jax, jnp
 from pyfold.errors import InputError
 
-__all__ = ["FastFit", "fit_ci_rk4", "padded_size", "MAX_STEP", "MIN_RECORDS"]
+__all__ = ["FastFit", "fit_ci_rk4", "padded_size", "admissibility", "contracted_table", "MAX_STEP", "MIN_RECORDS",
+           "admissible_tol", "ADMISSIBLE_TOL_PER_STEP", "CONTRACTION_DEFECT"]
 
 #: Largest RK4 step [1/γ̇]: pyfold.report.PREDICTION_MAX_STEP, whose a2 error over a
 #: strain of 400 is 6e-5 (C_I = 0) and 8e-6 (C_I = 1e-3) against the adaptive solve.
@@ -121,14 +126,23 @@ MAX_ITERATIONS = 60
 #: a + h/6 sum_j w_j k_j.
 #: Round-off allowed per RK4 step in the admissibility check (module notes): the update
 #: ``a + h/6 sum_j w_j k_j`` rounds each entry by a few ε; the rate's entries are sums
-#: of O(d^3) products of entries <= 1 and rates <= γ̇ (relative error ~d^3 ε, times
-#: h γ̇ <= MAX_STEP); the closures meet ``a4_ijkk = a2_ij`` to ~1e-14 per component (the
-#: quadrature of pyfold.closures.exact / FEC; the polynomial closures to a few ε),
-#: i.e. ~50 ε, entering the trace through 2 xi D:(.) with a factor <= 2 d. Their sum,
-#: ~500 ε per step with d = 3, is rounded up to 1024 ε: 1.5e-9 over the 6400 steps of
-#: a strain of 400 at the smallest step (MAX_STEP / 2**MAX_REFINEMENTS). A blown-up
-#: trajectory departs by O(1).
+#: of O(d^3) products of entries <= 1 and rates <= γ̇ (relative error ~d^3 ε = 27 ε,
+#: times h γ̇ <= MAX_STEP); summed over the d diagonal entries and the four stages,
+#: ~300 ε, rounded up to 1024 ε: 1.5e-9 over the 6400 steps of a strain of 400 at the
+#: smallest step (MAX_STEP / 2**MAX_REFINEMENTS).
 ADMISSIBLE_TOL_PER_STEP = 1024 * float(np.finfo(np.float64).eps)
+#: Largest departure from ``a4_ijkk = a2_ij`` of a closure [1] on the states a fit
+#: visits. It moves the trace at the rate 2 |xi| ||D|| CONTRACTION_DEFECT <= 2 |xi| γ̇
+#: CONTRACTION_DEFECT, step size aside, so over a strain γ̇ T the tolerance grows by
+#: 2 |xi| γ̇ T CONTRACTION_DEFECT (8e-7 over a strain of 400). The polynomial closures
+#: (quadratic, hybrid, IBOF, ORW3) meet the identity algebraically, to ~100 ε; the run's
+#: own a4 does by construction (ContractedTable); FEC (pyfold.closures.exact) meets it
+#: to the residual of its inverse problem a2 -> C, which grows where two eigenvalues of
+#: a2 approach 0 (ill-conditioned there): 2e-13 on random states, 5e-11 with eigenvalues
+#: (3e-5, 5e-4), 9e-10 with (7e-6, 1e-5) (measured on 300 states each). 1e-9 covers
+#: states down to eigenvalues ~1e-5; a trajectory more aligned than that is reported
+#: (cause "trace") rather than passed. A blown-up trajectory departs by O(1e-3 .. 1).
+CONTRACTION_DEFECT = 1e-9
 _RK4_NODES = np.array([0.0, 0.5, 0.5, 1.0])
 _RK4_WEIGHTS = np.array([1.0, 2.0, 2.0, 1.0])
 
@@ -174,6 +188,20 @@ def _contracted_table_class():
 
 #: :func:`_contracted_table_class` (None until first used).
 ContractedTable = None
+
+
+def admissible_tol(steps, xi, strain):
+    """Tolerance of the admissibility check after ``steps`` RK4 steps over ``strain`` =
+    γ̇ (t_end - t_0): round-off and the closure's contraction defect
+    (:data:`ADMISSIBLE_TOL_PER_STEP`, :data:`CONTRACTION_DEFECT`)."""
+    return ADMISSIBLE_TOL_PER_STEP * steps + 2.0 * abs(xi) * CONTRACTION_DEFECT * strain
+
+
+def contracted_table(times, a4_series):
+    """The run's ``a4(t)`` as the closure the fits integrate with: a
+    :class:`ContractedTable` (cubic Hermite in time, corrected so that
+    ``a4_ijkk = a2_ij`` for the a2 it is given)."""
+    return _contracted_table_class()(times, a4_series)
 
 
 def admissibility(a2: np.ndarray, tol: float) -> tuple[int, str]:
@@ -311,7 +339,7 @@ def _program(closure: str, dim: int):
             # the test of admissibility() (module notes), on every record (the padded
             # ones repeat the last); the eigenvalues of a non-finite state are not
             # looked at (its finiteness test fails anyway)
-            tol = ADMISSIBLE_TOL_PER_STEP * jnp.sum(steps)
+            tol = admissible_tol(jnp.sum(steps), xi, jnp.sqrt(2.0 * jnp.sum(Dsym * Dsym)) * (t[-1] - t[0]))
             finite = jnp.all(jnp.isfinite(a2))
             a = jnp.where(finite, a2, jnp.eye(dim) / dim)
             at = jnp.swapaxes(a, -1, -2)
@@ -319,6 +347,8 @@ def _program(closure: str, dim: int):
             ev = jnp.linalg.eigvalsh(0.5 * (a + at))
             return (finite & jnp.all(jnp.abs(a - at) <= tol) & jnp.all(trace_err <= trace_err[0] + tol)
                     & jnp.all(ev[:, 0] >= -tol) & jnp.all(ev[:, -1] <= 1.0 + tol))
+
+        Dsym = 0.5 * (L + L.T)
 
         def evaluate(v, steps):
             ci = ci_of(v)
@@ -525,7 +555,7 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         if at_bound and float(J @ e.ravel()) >= 0.0:
             step_error = 0.0  # the step error pushes C_I further into the bound: the fit stays on it
         allowed = max(STEP_ERROR_SHARE * stderr if math.isfinite(stderr) else 0.0, FIT_RTOL * ci + FIT_ATOL)
-        tol = ADMISSIBLE_TOL_PER_STEP * float(np.sum(n_sub))
+        tol = admissible_tol(float(np.sum(n_sub)), xi, math.sqrt(2.0 * float(np.sum(D * D))) * float(t[-1] - t[0]))
         bad_record, cause = admissibility(np.asarray(a2_fit)[:n], tol)
         if refinements == MAX_REFINEMENTS:
             break

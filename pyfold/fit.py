@@ -443,7 +443,7 @@ def fit_parameters(
         to ``data.attrs["velocity_gradient"]`` (written by :func:`synthetic_dataset`).
     closure : str, callable or "exact", optional
         Replaces the model's closure; ``"exact"`` feeds the dataset's own ``a4``
-        through :class:`pyfold.fast_fit.ContractedTable` (a
+        through :func:`pyfold.fast_fit.contracted_table` (a
         :class:`pyfold.closures.TabulatedA4`, cubic Hermite in time, corrected so that
         it contracts to the integrated a2).
     bounds : mapping, optional
@@ -504,9 +504,9 @@ def fit_parameters(
     if closure == "exact":
         # corrected to contract to the integrated a2, so that tr a2 stays 1
         # (pyfold.fast_fit, module notes)
-        from pyfold.fast_fit import _contracted_table_class
+        from pyfold.fast_fit import contracted_table
 
-        closure = _contracted_table_class()(t, a4v)
+        closure = contracted_table(t, a4v)
     if closure is not None:
         model = dataclasses.replace(model, closure=closure)
     Lv = _velocity_gradient(L, data, d)
