@@ -81,6 +81,15 @@ def test_contracted_table_contracts_to_the_a2_it_is_given():
         own = np.einsum("ijkk->ij", np.asarray(plain(None, time)))
         np.testing.assert_allclose(np.asarray(table(jnp.asarray(own), time)), np.asarray(plain(None, time)),
                                    rtol=0, atol=16 * EPS)
+    # in 2-D (planar orientation): the same formula with d = 2
+    rng2 = np.random.default_rng(4)
+    p2 = rng2.normal(size=(3, 50, 2))
+    p2 /= np.linalg.norm(p2, axis=-1, keepdims=True)
+    table2 = fast_fit.contracted_table(t, np.asarray(a4_from_vectors(jnp.asarray(p2))))
+    a2_2 = np.array([[0.7, 0.1], [0.1, 0.3]])
+    x2 = np.asarray(table2(jnp.asarray(a2_2), 0.5))
+    np.testing.assert_allclose(np.einsum("ijkk->ij", x2), a2_2, rtol=0, atol=16 * EPS)
+    np.testing.assert_allclose(x2, _sym4(x2), rtol=0, atol=16 * EPS)
 
 
 def test_exact_fit_of_another_model_keeps_the_trace():
