@@ -7,7 +7,9 @@ and unit weights:
 
 Folgar–Tucker started from the run's first record (symmetrised) and closed by a
 registered closure or by the run's own ``a4`` (``"exact"``: the records interpolated
-in time by the piecewise cubic Hermite of :class:`pyfold.closures.TabulatedA4`). What
+in time by the piecewise cubic Hermite of :class:`pyfold.closures.TabulatedA4`,
+corrected to contract to the integrated a2: :func:`contracted_table`, see
+Admissibility below). What
 differs is how it is solved, so that a run of hundreds of records is fitted in
 seconds and a new process re-uses the compiled programs:
 
@@ -43,6 +45,31 @@ most :data:`MAX_REFINEMENTS` times. ``|ΔC_I|`` is reported with the fit
 (``ci_step_error``). A tenth of the standard error adds half a percent to the total
 error in quadrature: the fixed step does not change what the fit says.
 
+Admissibility. Every trajectory the loss sees is checked, in the program: finite,
+symmetric, ``|tr a2 - 1|`` not beyond its start's by more than ``tol``, and the
+eigenvalues in ``[-tol, 1 + tol]``; a trajectory that fails has an infinite loss, so the
+optimiser never settles on one. The fitted trajectory is checked again in numpy
+(:func:`admissibility`), which names the first record, RK4 step and cause; a fit that
+leaves the set is retried at half the step (a discretisation artefact goes away, a
+departure of the model does not) and, if it still leaves it, reported as failed with
+``C_I`` NaN. The tolerance (:func:`admissible_tol`) is a round-off bound,
+:data:`ADMISSIBLE_TOL_PER_STEP` per RK4 step times the steps taken, plus the drift a
+closure's departure from ``a4_ijkk = a2_ij`` can cause (:data:`CONTRACTION_DEFECT`):
+Folgar–Tucker keeps ``tr a2 = 1`` exactly when the
+closure satisfies ``a4_ijkk = a2_ij`` (``tr`` of the rate is ``2 xi D:(a2 - a4_iikl)
+- 2 d C_I γ̇ (tr a2 - 1)``), and RK4, a linear combination of rates, preserves that
+linear invariant up to round-off. The eigenvalues of the exact flow stay in
+``[0, 1]``; those of the computed states move by at most the 2-norm of the accumulated
+round-off and closure defect (Weyl), bounded by the same sum.
+
+The run's own a4 ("exact") is fed through :func:`contracted_table`: the recorded a4,
+corrected by the smallest fully symmetric tensor that restores ``a4_ijkk = a2_ij`` for
+the a2 being integrated. The recorded a4 alone contracts to the *run's* a2, not the
+integrated one, and the trace then obeys ``d tr/dt = 2 xi D:(a2 - a2_run)``: the
+difference is amplified at a rate ``2 xi D:a2`` and the trace runs away over a long run
+(``tr a2 = 6`` at ``γ̇ t = 400`` on ``data/scenes/default.toml``). On the run's own
+trajectory the correction is zero.
+
 Standard error: ``s^2 / (J·J)``, ``s^2 = RSS / (n - 1)`` (Bard 1974, ch. 7), as in
 :mod:`pyfold.fit`: independent residuals of equal variance assumed.
 """
@@ -56,7 +83,8 @@ import numpy as np
 from pyfold._jax import exported_call, jax, jnp
 from pyfold.errors import InputError
 
-__all__ = ["FastFit", "fit_ci_rk4", "padded_size", "MAX_STEP", "MIN_RECORDS"]
+__all__ = ["FastFit", "fit_ci_rk4", "padded_size", "admissibility", "contracted_table", "MAX_STEP", "MIN_RECORDS",
+           "admissible_tol", "ADMISSIBLE_TOL_PER_STEP", "CONTRACTION_DEFECT"]
 
 #: Largest RK4 step [1/γ̇]: pyfold.report.PREDICTION_MAX_STEP, whose a2 error over a
 #: strain of 400 is 6e-5 (C_I = 0) and 8e-6 (C_I = 1e-3) against the adaptive solve.
@@ -96,8 +124,118 @@ MAX_LOG_STEP = 2.0
 MAX_ITERATIONS = 60
 #: Classical RK4: stage j is evaluated at a + h c_j k_(j-1), and the step is
 #: a + h/6 sum_j w_j k_j.
+#: Round-off allowed per RK4 step in the admissibility check (module notes): the update
+#: ``a + h/6 sum_j w_j k_j`` rounds each entry by a few ε; the rate's entries are sums
+#: of O(d^3) products of entries <= 1 and rates <= γ̇ (relative error ~d^3 ε = 27 ε,
+#: times h γ̇ <= MAX_STEP); summed over the d diagonal entries and the four stages,
+#: ~300 ε, rounded up to 1024 ε: 1.5e-9 over the 6400 steps of a strain of 400 at the
+#: smallest step (MAX_STEP / 2**MAX_REFINEMENTS).
+ADMISSIBLE_TOL_PER_STEP = 1024 * float(np.finfo(np.float64).eps)
+#: Largest departure from ``a4_ijkk = a2_ij`` of a closure [1] on the states a fit
+#: visits. It moves the trace at the rate 2 |xi| ||D|| CONTRACTION_DEFECT <= 2 |xi| γ̇
+#: CONTRACTION_DEFECT, step size aside, so over a strain γ̇ T the tolerance grows by
+#: 2 |xi| γ̇ T CONTRACTION_DEFECT (8e-7 over a strain of 400). The polynomial closures
+#: (quadratic, hybrid, IBOF, ORW3) meet the identity algebraically, to ~100 ε; the run's
+#: own a4 does by construction (ContractedTable); FEC (pyfold.closures.exact) meets it
+#: to the residual of its inverse problem a2 -> C, which grows where two eigenvalues of
+#: a2 approach 0 (ill-conditioned there): 2e-13 on random states, 5e-11 with eigenvalues
+#: (3e-5, 5e-4), 9e-10 with (7e-6, 1e-5) (measured on 300 states each). 1e-9 covers
+#: states down to eigenvalues ~1e-5; a trajectory more aligned than that is reported
+#: (cause "trace") rather than passed. A blown-up trajectory departs by O(1e-3 .. 1).
+CONTRACTION_DEFECT = 1e-9
 _RK4_NODES = np.array([0.0, 0.5, 0.5, 1.0])
 _RK4_WEIGHTS = np.array([1.0, 2.0, 2.0, 1.0])
+
+
+def _contracted_table_class():
+    """:class:`ContractedTable`, built on first use (so that importing this module
+    does not import the closures)."""
+    global ContractedTable
+    if ContractedTable is not None:
+        return ContractedTable
+    from pyfold.closures import TabulatedA4
+
+    class _ContractedTable(TabulatedA4):
+        """The recorded ``a4(t)`` of :class:`pyfold.closures.TabulatedA4`, corrected for
+        the a2 it is given so that ``a4_ijkk = a2_ij`` (module notes).
+
+        The correction ``X`` is the fully symmetric tensor of least Frobenius norm with
+        ``X_ijkk = delta_ij``, ``delta = a2 - a4_ijkk``: the contraction's adjoint on
+        symmetric tensors is ``B -> S(B ⊗ I)`` (S the full symmetrisation), whose
+        contraction is ``((d + 4) B + tr B I) / 6``; so ``X = S(B ⊗ I)`` with
+        ``tr B = 3 tr delta / (d + 2)`` and ``B = (6 delta - tr B I) / (d + 4)``. It
+        vanishes on the run's own trajectory (``delta = 0``) and is linear in
+        ``delta``: an error of the fit in a2 changes a4 to first order only where the
+        identity every a4 obeys requires it.
+        """
+
+        def __call__(self, a2, t):
+            a4 = TabulatedA4.__call__(self, a2, t)
+            d = a4.shape[-1]
+            eye = jnp.eye(d, dtype=a4.dtype)
+            delta = a2 - jnp.einsum("ijkk->ij", a4)
+            trb = 3.0 * jnp.trace(delta) / (d + 2)
+            B = (6.0 * delta - trb * eye) / (d + 4)
+            x = jnp.einsum("ij,kl->ijkl", B, eye)
+            sym = (x + x.transpose(0, 2, 1, 3) + x.transpose(0, 3, 2, 1)
+                   + x.transpose(2, 3, 0, 1) + x.transpose(2, 1, 0, 3) + x.transpose(3, 1, 2, 0)) / 6.0
+            return a4 + sym
+
+    _ContractedTable.__name__ = _ContractedTable.__qualname__ = "ContractedTable"
+    ContractedTable = _ContractedTable
+    return ContractedTable
+
+
+#: :func:`_contracted_table_class` (None until first used).
+ContractedTable = None
+
+
+def admissible_tol(steps, xi, strain):
+    """Tolerance of the admissibility check after ``steps`` RK4 steps over ``strain`` =
+    γ̇ (t_end - t_0): round-off and the closure's contraction defect
+    (:data:`ADMISSIBLE_TOL_PER_STEP`, :data:`CONTRACTION_DEFECT`)."""
+    return ADMISSIBLE_TOL_PER_STEP * steps + 2.0 * abs(xi) * CONTRACTION_DEFECT * strain
+
+
+def contracted_table(times, a4_series):
+    """The run's ``a4(t)`` as the closure the fits integrate with: a
+    :class:`ContractedTable` (cubic Hermite in time, corrected so that
+    ``a4_ijkk = a2_ij`` for the a2 it is given)."""
+    return _contracted_table_class()(times, a4_series)
+
+
+def admissibility(a2: np.ndarray, tol: float) -> tuple[int, str]:
+    """First record of ``a2`` (nt, d, d) outside the orientation tensors, and why.
+
+    Outside: not finite; not symmetric (``|a_ij - a_ji| > tol``); ``|tr a2 - 1|`` more
+    than ``tol`` beyond its value at record 0; an eigenvalue below ``-tol`` or above
+    ``1 + tol``. Returns ``(-1, "")`` when every record is admissible."""
+    a2 = np.asarray(a2, dtype=np.float64)
+    d = a2.shape[-1]
+    finite = np.isfinite(a2).reshape(len(a2), -1).all(axis=1)
+    safe = np.where(finite[:, None, None], a2, np.eye(d) / d)
+    asym = np.abs(safe - np.swapaxes(safe, -1, -2)).max(axis=(-2, -1))
+    trace_err = np.abs(np.trace(safe, axis1=-2, axis2=-1) - 1.0)
+    ev = np.linalg.eigvalsh(0.5 * (safe + np.swapaxes(safe, -1, -2)))
+    bad_sym = asym > tol
+    bad_trace = trace_err > trace_err[0] + tol
+    bad_low, bad_high = ev[:, 0] < -tol, ev[:, -1] > 1.0 + tol
+    bad = ~finite | bad_sym | bad_trace | bad_low | bad_high
+    if not bad.any():
+        return -1, ""
+    k = int(np.argmax(bad))
+    if not finite[k]:
+        return k, "non-finite a2"
+    causes = []
+    if bad_trace[k]:
+        causes.append(f"trace: tr a2 = {np.trace(safe[k]):.10g} (|tr a2 - 1| > {trace_err[0] + tol:.1e})")
+    if bad_low[k]:
+        causes.append(f"negative eigenvalue {ev[k, 0]:.3e} (< -{tol:.1e})")
+    if bad_high[k]:
+        causes.append(f"eigenvalue {ev[k, -1]:.6g} above 1 + {tol:.1e}")
+    if bad_sym[k]:
+        causes.append(f"asymmetry {asym[k]:.1e} > {tol:.1e}")
+    return k, ", ".join(causes)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,7 +253,13 @@ class FastFit:
     a2: np.ndarray  # (records, d, d): Folgar-Tucker at the fitted C_I, on the record times
     step: float  # RK4 step used [1/γ̇] (largest over the record intervals)
     step_error: float  # |ΔC_I| estimated from the step (module notes)
-    iterations: int
+    iterations: int  # Newton steps, summed over the passes at successively halved RK4 steps
+    #: the fitted trajectory stays in the orientation tensors (module notes); when not,
+    #: ``success`` is False, ``ci`` and ``stderr`` are NaN and the fields below say where
+    admissible: bool = True
+    inadmissible_time: float = math.nan  # first record time [s] outside the set
+    inadmissible_step: int = -1  # RK4 steps taken up to that record
+    inadmissible_cause: str = ""
 
 
 def padded_size(n: int) -> int:
@@ -137,7 +281,6 @@ def _program(closure: str, dim: int):
         return _PROGRAMS[key]
     import equinox as eqx
 
-    from pyfold.closures import TabulatedA4
     from pyfold.models import FolgarTucker
 
     iu, ju = np.triu_indices(dim)
@@ -153,7 +296,7 @@ def _program(closure: str, dim: int):
         # the run's a4 as a TabulatedA4 whose arrays are the program's inputs
         if not arrays:
             return None
-        template = TabulatedA4(np.arange(2.0), np.zeros((2,) + (dim,) * 4))
+        template = _contracted_table_class()(np.arange(2.0), np.zeros((2,) + (dim,) * 4))
         return eqx.tree_at(lambda m: (m.times, m.a4_series, m.slopes), template, tuple(arrays))
 
     def integrate(ci, xi, a2_0, L, t, n_sub, table):
@@ -192,14 +335,34 @@ def _program(closure: str, dim: int):
         def ci_of(v):
             return jnp.where(v <= v_min, 0.0, jnp.exp(v) - CI_SCALE)
 
+        def admissible(a2, steps):
+            # the test of admissibility() (module notes), on every record (the padded
+            # ones repeat the last); the eigenvalues of a non-finite state are not
+            # looked at (its finiteness test fails anyway)
+            tol = admissible_tol(jnp.sum(steps), xi, jnp.sqrt(2.0 * jnp.sum(Dsym * Dsym)) * (t[-1] - t[0]))
+            finite = jnp.all(jnp.isfinite(a2))
+            a = jnp.where(finite, a2, jnp.eye(dim) / dim)
+            at = jnp.swapaxes(a, -1, -2)
+            trace_err = jnp.abs(jnp.trace(a, axis1=-2, axis2=-1) - 1.0)
+            ev = jnp.linalg.eigvalsh(0.5 * (a + at))
+            return (finite & jnp.all(jnp.abs(a - at) <= tol) & jnp.all(trace_err <= trace_err[0] + tol)
+                    & jnp.all(ev[:, 0] >= -tol) & jnp.all(ev[:, -1] <= 1.0 + tol))
+
+        Dsym = 0.5 * (L + L.T)
+
         def evaluate(v, steps):
             ci = ci_of(v)
             a2, da2 = jax.jvp(lambda c: integrate(c, xi, a2_0, L, t, steps, table), (ci,), (jnp.ones_like(ci),))
             r = (a2[1:, iu, ju] - target) * weight
             J = da2[1:, iu, ju] * weight * (ci + CI_SCALE)  # dr/dv
-            ok = jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J))
-            r, J = jnp.where(ok, r, 0.0), jnp.where(ok, J, 0.0)
-            loss = jnp.where(ok, jnp.sum(r * r), jnp.inf)
+            # (a far blown-up state has finite entries whose products overflow)
+            finite = (jnp.all(jnp.isfinite(r)) & jnp.all(jnp.isfinite(J)) & jnp.isfinite(jnp.sum(J * r))
+                      & jnp.isfinite(jnp.sum(J * J)) & jnp.isfinite(jnp.sum(r * r)))
+            r, J = jnp.where(finite, r, 0.0), jnp.where(finite, J, 0.0)
+            # an inadmissible trajectory has an infinite loss (never accepted), but its
+            # gradient is kept: from an inadmissible start, Newton's step towards the
+            # least squares is the best guess of where admissible ones are
+            loss = jnp.where(finite & admissible(a2, steps), jnp.sum(r * r), jnp.inf)
             return a2, r, J, loss, jnp.sum(J * r), jnp.sum(J * J)
 
         def newton(v, g, jj, v_o, g_o):
@@ -247,7 +410,10 @@ def _program(closure: str, dim: int):
         def advance(s, trial, evaluated):
             v, a2, r, J, loss, g, jj, _, _, step, it, _ = s
             a2_t, r_t, J_t, loss_t, g_t, jj_t = evaluated
-            accept = loss_t < loss
+            # from an inadmissible point (infinite loss) an inadmissible trial is taken
+            # too: the search goes on along Newton's steps towards the least squares
+            # instead of shrinking back onto a point that no step size rescues
+            accept = (loss_t < loss) | (jnp.isinf(loss) & jnp.isinf(loss_t))
             # the other point of the secant: the one left behind, or the rejected trial
             v_o, g_o = jnp.where(accept, v, trial), jnp.where(accept, g, g_t)
             v, a2, r, J, loss, g, jj = jax.tree_util.tree_map(lambda new, old: jnp.where(accept, new, old),
@@ -363,7 +529,7 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
     weight[: n - 1] = 1.0
     a2_0 = 0.5 * (a2[0] + a2[0].T)
     name = f"fast_fit_{closure}_{d}d"
-    ci, step_error, refinements = float(ci_start), math.nan, 0
+    ci, step_error, refinements, total_iterations = float(ci_start), math.nan, 0, 0
     while True:
         h = max_step / 2**refinements
         n_sub = np.zeros(size - 1, dtype=np.int32)
@@ -374,6 +540,7 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         args = (np.float64(ci), np.float64(xi), a2_0, L, t_pad, n_sub, target, weight, table)
         out = exported_call(name, lambda: _program(closure, d), args)
         ci_j, a2_fit, r, J, loss, iterations, done, a2_half, secant = out
+        total_iterations += int(iterations)
         ci = float(ci_j)
         r, J = np.asarray(r).ravel(), np.asarray(J).ravel()
         rss = float(loss)
@@ -388,21 +555,38 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         if at_bound and float(J @ e.ravel()) >= 0.0:
             step_error = 0.0  # the step error pushes C_I further into the bound: the fit stays on it
         allowed = max(STEP_ERROR_SHARE * stderr if math.isfinite(stderr) else 0.0, FIT_RTOL * ci + FIT_ATOL)
-        if not (step_error > allowed) or refinements == MAX_REFINEMENTS or not math.isfinite(rss):
+        tol = admissible_tol(float(np.sum(n_sub)), xi, math.sqrt(2.0 * float(np.sum(D * D))) * float(t[-1] - t[0]))
+        bad_record, cause = admissibility(np.asarray(a2_fit)[:n], tol)
+        if refinements == MAX_REFINEMENTS:
+            break
+        # a trajectory outside the set: half the step (module notes); else the step error
+        if bad_record < 0 and (not (step_error > allowed) or not math.isfinite(rss)):
             break
         refinements += 1
     h_used = float(np.max(np.diff(t) * rate / np.maximum(n_sub[: n - 1], 1)))
     converged, finite = bool(done), math.isfinite(rss)
+    if bad_record >= 0:
+        # the loss of every inadmissible trajectory is infinite, so this is the
+        # start's, every trial having left the set too (or the check of the program
+        # and the one here disagree by round-off at the tolerance)
+        step = int(np.sum(n_sub[:bad_record]))
+        message = (f"closure {closure}: a2 leaves the orientation tensors at t = {t[bad_record]:.6g} s "
+                   f"(record {bad_record}, RK4 step {step} of {h_used:.3g}/γ̇): {cause}; "
+                   f"at every C_I tried (C_I = {ci:.3g} last) and down to that step: no C_I reported")
+        return FastFit(closure=closure, ci=math.nan, stderr=math.nan, residual_rms=math.nan, n_points=n_points,
+                       success=False, at_bound=False, message=message, a2=np.asarray(a2_fit)[:n], step=h_used,
+                       step_error=math.nan, iterations=total_iterations, admissible=False,
+                       inadmissible_time=float(t[bad_record]), inadmissible_step=step, inadmissible_cause=cause)
     if not finite:
         message = "Folgar-Tucker blew up for every C_I tried (non-finite a2)"
     elif not converged:
-        message = f"the fit stopped after {int(iterations)} iterations without converging"
+        message = f"the fit stopped after {total_iterations} iterations without converging"
     else:
-        message = f"converged in {int(iterations)} steps"
+        message = f"converged in {total_iterations} steps"
         if at_bound:
             message += " (C_I held on its bound 0: the loss increases into C_I > 0)"
     if finite and step_error > allowed:
         message += f"; RK4 step error of C_I {step_error:.2g} above {allowed:.2g} at the smallest step {h_used:.3g}"
     return FastFit(closure=closure, ci=ci, stderr=stderr, residual_rms=math.sqrt(rss / n_points) if finite else math.nan,
                    n_points=n_points, success=converged and finite, at_bound=at_bound, message=message,
-                   a2=np.asarray(a2_fit)[:n], step=h_used, step_error=step_error, iterations=int(iterations))
+                   a2=np.asarray(a2_fit)[:n], step=h_used, step_error=step_error, iterations=total_iterations)

@@ -122,7 +122,9 @@ class FitResult:
         Number of residuals ``n`` (independent components times sample times,
         the initial time excluded).
     success : bool
-        Optimiser converged and the ODE solve succeeded at the optimum.
+        Optimiser converged, the ODE solve succeeded at the optimum and its a2 stays
+        in the orientation tensors (else ``values`` and ``stderr`` are NaN and
+        ``message`` says where a2 left them and why).
     message : str
         Human-readable outcome.
     closure : str
@@ -306,9 +308,9 @@ def _forward_mode_solve(model, a2_0, L, t, rtol: float, atol: float, max_steps: 
     Jacobian wants p JVPs rather than n VJPs: measured on FT/IBOF, 41 samples,
     9 s to compile and 8 ms per Jacobian, against ~60 s and ~1.7 s in reverse mode.
     """
-    ys, status, _ = _integrate(model, a2_0, L, t, rtol, atol, diffrax.Tsit5(), max_steps,
-                               adjoint=diffrax.ForwardMode())
-    return ys, status
+    ys, status, stats = _integrate(model, a2_0, L, t, rtol, atol, diffrax.Tsit5(), max_steps,
+                                   adjoint=diffrax.ForwardMode())
+    return ys, status, stats["num_accepted_steps"]
 
 
 class _Problem(eqx.Module):
@@ -335,14 +337,14 @@ class _Problem(eqx.Module):
         names = self.names
         return eqx.tree_at(lambda m: [getattr(m, n) for n in names], self.model, [values[k] for k in range(len(names))])
 
-    def solve(self, values: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """``(a2(t), status)`` for the parameter values, forward-mode differentiable."""
+    def solve(self, values: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+        """``(a2(t), status, accepted steps)`` for the parameter values, forward-mode differentiable."""
         return _forward_mode_solve(
             self.model_at(values), self.a2_0, self.L, self.t, self.rtol, self.atol, self.max_ode_steps
         )
 
     def residuals(self, values: jax.Array) -> jax.Array:
-        return self.residuals_from(*self.solve(values))
+        return self.residuals_from(*self.solve(values)[:2])
 
     def residuals_from(self, a2: jax.Array, status: jax.Array) -> jax.Array:
         d = self.a2_0.shape[-1]
@@ -370,12 +372,12 @@ def _least_squares(problem: _Problem, u0: jax.Array, rtol: float, atol: float, m
     values = problem.external(sol.value)
 
     def with_status(v):
-        a2, status = problem.solve(v)
+        a2, status, accepted = problem.solve(v)
         r = problem.residuals_from(a2, status)
-        return r, (r, status)
+        return r, (r, status, a2, accepted)
 
-    J, (r, status) = jax.jacfwd(with_status, has_aux=True)(values)
-    return values, sol.result, sol.stats["num_steps"], r, J, status
+    J, (r, status, a2, accepted) = jax.jacfwd(with_status, has_aux=True)(values)
+    return values, sol.result, sol.stats["num_steps"], r, J, status, a2, accepted
 
 
 def _scalar_parameters(model) -> list[str]:
@@ -441,7 +443,9 @@ def fit_parameters(
         to ``data.attrs["velocity_gradient"]`` (written by :func:`synthetic_dataset`).
     closure : str, callable or "exact", optional
         Replaces the model's closure; ``"exact"`` feeds the dataset's own ``a4``
-        through :class:`pyfold.closures.TabulatedA4` (linear interpolation in time).
+        through :func:`pyfold.fast_fit.contracted_table` (a
+        :class:`pyfold.closures.TabulatedA4`, cubic Hermite in time, corrected so that
+        it contracts to the integrated a2).
     bounds : mapping, optional
         ``name -> (lo, hi)``, ``None`` meaning unbounded; merged over
         :data:`DEFAULT_BOUNDS` (``C_I >= 0``, ``0 <= kappa <= 1``, ...).
@@ -498,7 +502,11 @@ def fit_parameters(
     t, a2v, a4v = validate_dataset(data, dim=dim, need_a4=closure == "exact")
     d = a2v.shape[-1]
     if closure == "exact":
-        closure = TabulatedA4(t, a4v)
+        # corrected to contract to the integrated a2, so that tr a2 stays 1
+        # (pyfold.fast_fit, module notes)
+        from pyfold.fast_fit import contracted_table
+
+        closure = contracted_table(t, a4v)
     if closure is not None:
         model = dataclasses.replace(model, closure=closure)
     Lv = _velocity_gradient(L, data, d)
@@ -552,7 +560,7 @@ def fit_parameters(
         max_ode_steps=int(max_ode_steps),
     )
     u0 = jnp.asarray([_to_internal(x, lo, hi) for x, lo, hi in zip(start, lower, upper)])
-    values, result, n_steps, r, J, status = _least_squares(
+    values, result, n_steps, r, J, status, a2_fit, accepted = _least_squares(
         problem, u0, float(fit_rtol), float(fit_atol), int(max_steps)
     )
     r, J, values = np.asarray(r), np.asarray(J), np.array(values)
@@ -604,6 +612,21 @@ def fit_parameters(
     success = ode_ok and (lm_ok or (bool(active.any()) and free_ok))
     at_bound = {name: bool(active[k]) for k, name in enumerate(params)}
     fitted = eqx.tree_at(lambda m: [getattr(m, n_) for n_ in params], model, [float(v) for v in values])
+    # The trajectory at the optimum must stay in the orientation tensors (the check of
+    # pyfold.models.solve_orientation, tolerances from rtol, atol and the accepted
+    # steps): else no values are reported (NaN), success is False and the message
+    # names the closure, the first sample time and the cause.
+    if ode_ok:
+        from pyfold.models.solve import _admissibility, _tolerances
+
+        tol_trace, tol_eig = _tolerances(np.asarray(accepted)[None], rtol, atol, d)
+        a2_np = np.asarray(a2_fit)[None]
+        admissible, _, why = _admissibility(t, a2_np, np.ones(a2_np.shape[:2], dtype=bool), tol_trace, tol_eig)
+        if not admissible[0]:
+            message = f"closure {_closure_label(fitted.closure)}: {why[0]}; no values reported ({message})"
+            success = False
+            values = np.full(p, np.nan)
+            stderr = np.full(p, np.nan)
     return FitResult(
         values={name: float(v) for name, v in zip(params, values)},
         stderr={name: float(s) for name, s in zip(params, stderr)},

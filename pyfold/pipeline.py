@@ -270,7 +270,10 @@ def fit_ci_per_closure(ds: xr.Dataset, L: np.ndarray, closures: Sequence[str], x
     squares of :func:`pyfold.fit.fit_parameters`, solved by fixed-step RK4 on padded
     shapes, so that the compiled programs are re-used across runs and processes).
     Returns a Dataset over ``closure`` with ``ci``, ``ci_stderr``, ``residual_rms``,
-    ``success``, ``ci_step_error``, ``rk4_step`` and the fitted ``a2_fit(closure, time, i, j)``.
+    ``success``, ``admissible``, ``inadmissible_time``, ``ci_step_error``, ``rk4_step``
+    and the fitted ``a2_fit(closure, time, i, j)``. A fit whose trajectory leaves the
+    orientation tensors has ``success = 0``, ``admissible = 0`` and ``ci`` NaN; its
+    message in the ``fit_messages`` attribute names the record, step and cause.
     """
     from pyfold.fast_fit import fit_ci_rk4
 
@@ -300,7 +303,13 @@ def fit_ci_per_closure(ds: xr.Dataset, L: np.ndarray, closures: Sequence[str], x
             "residual_rms": ("closure", [f.residual_rms for f in fits],
                              {"units": "1", "long_name": "RMS of a2 residuals at the optimum"}),
             "success": ("closure", np.array([f.success for f in fits], dtype=np.int8),
-                        {"long_name": "fit converged (1) or not (0)"}),
+                        {"long_name": "fit converged on an admissible trajectory (1) or not (0)"}),
+            "admissible": ("closure", np.array([f.admissible for f in fits], dtype=np.int8),
+                           {"long_name": "fitted a2 stays in the orientation tensors (1) or leaves them (0; "
+                                         "ci is then NaN, see fit_messages)"}),
+            "inadmissible_time": ("closure", [f.inadmissible_time for f in fits],
+                                  {"units": "s", "long_name": "first record time at which the fitted a2 leaves "
+                                                              "the orientation tensors (NaN: never)"}),
             "ci_step_error": ("closure", [f.step_error for f in fits],
                               {"units": "1", "long_name": "estimated shift of C_I by the RK4 step (Richardson)"}),
             "rk4_step": ("closure", [f.step for f in fits],
@@ -394,6 +403,13 @@ def summary_table(fits: xr.Dataset, errors: xr.Dataset) -> str:
         rms = float(fits["residual_rms"].sel(closure=name))
         err = (f"{float(errors['mean_error_contracted'].sel(closure=name)):11.2e}"
                if name in errors["closure"].values else f"{'(data)':>11}")
+        admissible = int(fits["admissible"].sel(closure=name)) if "admissible" in fits else 1
+        if not admissible:
+            # no C_I: the fitted trajectory left the orientation tensors (fit_messages says where)
+            t_bad = float(fits["inadmissible_time"].sel(closure=name))
+            lines.append(f"{name:<10} {'failed':>11} {'':>10} {'':>9} {err}  (a2 left the admissible set "
+                         f"at t = {t_bad:.4g} s)")
+            continue
         flag = "" if int(fits["success"].sel(closure=name)) else "  (fit did not converge)"
         lines.append(f"{name:<10} {ci:11.3e} {se:10.1e} {rms:9.1e} {err}{flag}")
     lines.append("a4:D error: time mean of ||(closure(a2) - a4):D|| / ||a4:D|| against the simulation's own a4")
@@ -417,8 +433,16 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
     for ax, (i, j) in zip(axes, [(0, 0), (1, 1), (0, 1)]):
         ax.plot(strain, a2[:, i, j], "k.", ms=3, label="direct simulation")
         for name in fits["closure"].values:
-            ax.plot(strain, fits["a2_fit"].sel(closure=name).values[:, i, j], lw=1.2,
-                    label=f"FT {name}, C_I={float(fits['ci'].sel(closure=name)):.2g}")
+            curve = fits["a2_fit"].sel(closure=name).values[:, i, j]
+            if "admissible" in fits and not int(fits["admissible"].sel(closure=name)):
+                # drawn only up to the first record outside the admissible set, dotted,
+                # and labelled as failed: it is not a fit
+                t_bad = float(fits["inadmissible_time"].sel(closure=name))
+                shown = np.asarray(ds["time"].values) <= t_bad
+                ax.plot(strain[shown], curve[shown], ":", lw=1.0,
+                        label=f"FT {name}: failed, a2 inadmissible at γ̇t={t_bad * rate:.3g}")
+                continue
+            ax.plot(strain, curve, lw=1.2, label=f"FT {name}, C_I={float(fits['ci'].sel(closure=name)):.2g}")
         ax.set_xlabel("shear strain γ̇t")
         ax.set_ylabel(f"a{i + 1}{j + 1}")
         ax.grid(alpha=0.3)
@@ -439,6 +463,12 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
         left.legend(fontsize=7, frameon=False)
     names = list(fits["closure"].values)
     right.bar(range(len(names)), fits["ci"].values, yerr=fits["ci_stderr"].values, capsize=3, color="C0")
+    for k, name in enumerate(names):
+        if "admissible" in fits and not int(fits["admissible"].sel(closure=name)):
+            # ci is NaN (no bar): say why at its place
+            right.text(k, 0.0, "failed\n(a2 left the\nadmissible set)", ha="center", va="bottom", fontsize=7,
+                       color="C3")
+    right.set_xlim(-0.6, len(names) - 0.4)  # a NaN bar takes no room otherwise
     right.set_xticks(range(len(names)), names, rotation=30)
     right.set_ylabel("fitted C_I")
     right.grid(alpha=0.3, axis="y")
