@@ -117,7 +117,10 @@ def closure_errors(
     full, contracted, components = [], [], []
     for name in names:
         diff = closure_a4(name, a2) - a4
-        full.append(np.linalg.norm(diff.reshape(len(a4), -1), axis=1) / norm_full)
+        # an a4 of zero norm is no orientation tensor (its trace a4_iijj is 1): the relative
+        # error is undefined there, NaN rather than a division warning
+        full.append(np.divide(np.linalg.norm(diff.reshape(len(a4), -1), axis=1), norm_full,
+                              out=np.full(len(a4), np.nan), where=norm_full > 0.0))
         diff_D = np.einsum("tijkl,kl->tij", diff, D)
         contracted.append(np.linalg.norm(diff_D.reshape(len(a4), -1), axis=1) / np.maximum(norm_D, 1e-300))
         components.append(diff_D[:, ci, cj] / scale)
