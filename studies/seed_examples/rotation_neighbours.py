@@ -64,7 +64,7 @@ Command
     --reanalyse FILE.nc (tables and figure from a saved file, no solves).
 Cost on 2 cores (one solve at a time, serial FFTW; CPU time; load ~4)
     one solve: 0.02-0.3 s (sphere cells 6^3-30^3), 0.3 s (fibre, 30^3) / 0.6 s (44^3).
-    small (5 seeds, vpd 4 and 6, 16 nodes per half orbit): ~520 solves, a few CPU minutes.
+    small (8 seeds, vpd 4 and 6, 16 nodes per half orbit): ~640 solves, ~3 CPU minutes.
     large (10 seeds, vpd 4, 6, 8, 24 nodes): fibre cells up to 60^3, ~2000 solves, ~1 CPU hour.
 Outputs (under --out, default out/seed_examples/rotation_neighbours/)
     rotation_neighbours.nc   per-solve spins and per-orbit periods, seed means and errors
@@ -102,7 +102,11 @@ BETA = 5.0  # fibre aspect ratio L/d
 #: (docs/jeffery_orbits.md uses 1.5 L = 7.5 d, odd at 6 voxels per d)
 FIBRE_CELL_D = 8.0
 SPHERE_CELL = 5.0  # cell edge of the random sphere suspensions, in d
-GAP = 1.0 / 6.0  # minimum surface gap of the placement, in d
+GAP = 1.0 / 6.0  # minimum surface gap between spheres, in d
+#: minimum gap between a neighbour sphere and the disc swept by the fibre, in d: 2 voxels at 4 voxels
+#: per d. With d/6 (sub-voxel at 4 vox/d) the fibre and a sphere near its tip share voxels and the
+#: period moved by factors between 4 and 6 vox/d (up to 3600 s against 121 s in one configuration)
+FIBRE_CLEARANCE = 0.5
 #: docs/jeffery_orbits.md, beta = 5, cell 1.5 L, kappa 1e3: measured beta_e at 4 / 6 / 8 vpd and extrapolated
 BETA_E_DOCS = {4: 4.398, 6: 4.235, 8: 4.170, "inf": (4.06, 0.11)}
 PUSH_MARGIN = 1e-4  # overshoot of a placement push, in d
@@ -119,7 +123,7 @@ class Form:
     fibre_phis: tuple[float, ...] = (0.1, 0.2)
 
 
-SMALL = Form(vpd=(4, 6), seeds=5, nphi=16)
+SMALL = Form(vpd=(4, 6), seeds=8, nphi=16)
 LARGE = Form(vpd=(4, 6, 8), seeds=10, nphi=24)
 
 
@@ -174,9 +178,11 @@ def swept_disc_push(x, centre, cell, clearance):
     return push, bool(np.any(bad))
 
 
-def place_spheres(rng, n: int, cell: float, gap: float = GAP, fibre_centre=None, max_sweeps: int = 20000):
+def place_spheres(rng, n: int, cell: float, gap: float = GAP, fibre_centre=None, clearance: float = 0.0,
+                  max_sweeps: int = 20000):
     """``n`` centres of unit spheres in the cubic cell, every pair >= 1 + gap apart (minimum
-    image) and, with ``fibre_centre``, every sphere >= 1/2 + gap from the fibre's swept disc.
+    image) and, with ``fibre_centre``, every sphere surface >= ``clearance`` from the fibre's
+    swept disc.
     Random start, then overlapping pairs are pushed apart (each by half its deficit, 1 %
     and PUSH_MARGIN overshoot, without which the deficits only decay geometrically) until no
     constraint is violated; RuntimeError if that fails."""
@@ -186,7 +192,7 @@ def place_spheres(rng, n: int, cell: float, gap: float = GAP, fibre_centre=None,
     for _ in range(max_sweeps):
         moved = False
         if fibre_centre is not None:
-            push, bad = swept_disc_push(x, np.asarray(fibre_centre, float), cell, 0.5 + gap)
+            push, bad = swept_disc_push(x, np.asarray(fibre_centre, float), cell, 0.5 + clearance)
             if bad:
                 x += 1.01 * push + PUSH_MARGIN * np.sign(push)
                 moved = True
@@ -317,7 +323,7 @@ def run(form: Form, log=print):
     for a, (phi, N) in enumerate(zip(fphis, fcounts)):
         for b_, seed in enumerate(seeds):
             x = place_spheres(np.random.default_rng([int(seed), int(round(phi * 1000)), 2]), int(N), fcell,
-                              fibre_centre=[fcell / 2] * 3)
+                              fibre_centre=[fcell / 2] * 3, clearance=FIBRE_CLEARANCE)
             fb_x[a, b_, :N] = x
             for i, v in enumerate(vpds):
                 fb_omega[a, b_, i] = fibre_orbit(x, int(v), form.nphi, s)[0]
@@ -353,7 +359,7 @@ def run(form: Form, log=print):
         format="pyfold.study.rotation_neighbours", format_version="1.0", creator=f"pyfold {_git_hash()}",
         created=datetime.datetime.now(datetime.timezone.utc).isoformat(), command=" ".join(sys.argv),
         shear_rate=SHEAR_RATE, diameter=DIAMETER, eta_f=ETA_F, kappa=KAPPA, tol=TOL, beta=BETA,
-        fibre_cell_d=fcell, sphere_cell_d=SPHERE_CELL, gap_d=GAP, nphi=form.nphi,
+        fibre_cell_d=fcell, sphere_cell_d=SPHERE_CELL, gap_d=GAP, fibre_clearance_d=FIBRE_CLEARANCE, nphi=form.nphi,
         backend="fft", cpu_time_total=cpu))
 
 
@@ -394,7 +400,8 @@ def analyse(raw):
     nphi_s, nseed = sr.shape[0], sr.shape[1]
     stats = {}
     for name, arr in (("mean", seed_mean), ("sd", seed_sd), ("test", test), ("perp", seed_perp),
-                      ("mean_shift_vs_finest", seed_mean - seed_mean[:, :, -1:])):
+                      ("mean_shift_vs_finest", seed_mean - seed_mean[:, :, -1:]),
+                      ("sd_shift_vs_finest", seed_sd - seed_sd[:, :, -1:])):
         m = np.empty((nphi_s, nv))
         e = np.empty((nphi_s, nv))
         for a in range(nphi_s):
@@ -408,27 +415,39 @@ def analyse(raw):
     T1 = np.array([period(raw.fibre_single_omega.values[i, :, 2], w) for i in range(nv)])
     T1h = np.array([period(raw.fibre_single_omega.values[i, ::2, 2], w_half) for i in range(nv)])
     om = raw.fibre_omega.values[..., 2]  # fphi, seed, vpd, node
-    stalls = int(np.sum(om >= 0))
-    T = 2 * np.sum(w / np.abs(om), axis=-1)
-    Th = 2 * np.sum(w_half / np.abs(om[..., ::2]), axis=-1)
-    rel = T / T1[None, None, :] - 1
-    Tm, Te, Rm, Re = (np.empty(T.shape[::2]) for _ in range(4))
-    for a in range(T.shape[0]):
+    # omega_z >= 0 at a node: with frozen neighbours the orbit has a fixed point (T infinite,
+    # orbit frequency 0). The period's distribution over environments is heavy-tailed (T grows
+    # without bound as omega_z -> 0 at some node), the frequency f = 1/T lies in [0, f_max]:
+    # means and standard errors are taken of f, the period quoted is 1/<f>.
+    stalled = np.any(om >= 0, axis=-1)
+    with np.errstate(divide="ignore"):
+        f = np.where(stalled, 0.0, 1.0 / (2 * np.sum(w / np.abs(om), axis=-1)))
+        fh = np.where(np.any(om[..., ::2] >= 0, axis=-1), 0.0, 1.0 / (2 * np.sum(w_half / np.abs(om[..., ::2]), axis=-1)))
+        T = np.where(stalled, np.inf, 1.0 / np.where(stalled, 1.0, f))
+    f1 = 1.0 / T1
+    rel = f / f1[None, None, :] - 1
+    Fm, Fe, Rm, Re = (np.empty(f.shape[::2]) for _ in range(4))
+    for a in range(f.shape[0]):
         for i in range(nv):
-            Tm[a, i], Te[a, i] = _em(T[a, :, i])
+            Fm[a, i], Fe[a, i] = _em(f[a, :, i])
             Rm[a, i], Re[a, i] = _em(rel[a, :, i])
     perp_f = np.hypot(raw.fibre_omega.values[..., 0], raw.fibre_omega.values[..., 1])
     ds["fibre_single_period"] = (("vpd",), T1, {"units": "s", "long_name": "Jeffery period of the fibre alone"})
     ds["fibre_single_period_half_nodes"] = (("vpd",), T1h, {"units": "s", "long_name": "same, every other node"})
     ds["fibre_single_beta_e"] = (("vpd",), beta_from_period(T1), {"units": "1", "long_name": "beta_e from T"})
+    ds["fibre_stalled"] = (("fibre_phi", "seed", "vpd"), stalled.astype(np.int8),
+                           {"units": "1", "long_name": "1: omega_z >= 0 at a node (fixed point, T infinite)"})
     ds["fibre_period"] = (("fibre_phi", "seed", "vpd"), T, {"units": "s", "long_name": "period among frozen neighbours"})
-    ds["fibre_period_half_nodes"] = (("fibre_phi", "seed", "vpd"), Th, {"units": "s", "long_name": "every other node"})
-    ds["fibre_period_change"] = (("fibre_phi", "seed", "vpd"), rel, {"units": "1", "long_name": "T / T_alone - 1"})
-    ds["fibre_period_mean"] = (("fibre_phi", "vpd"), Tm, {"units": "s", "long_name": "seed mean of T"})
-    ds["fibre_period_se"] = (("fibre_phi", "vpd"), Te, {"units": "s", "long_name": "standard error over seeds"})
-    ds["fibre_period_change_mean"] = (("fibre_phi", "vpd"), Rm, {"units": "1", "long_name": "seed mean of T/T_alone - 1"})
-    ds["fibre_period_change_se"] = (("fibre_phi", "vpd"), Re, {"units": "1", "long_name": "standard error over seeds"})
-    ds.attrs["fibre_stalled_nodes"] = stalls
+    ds["fibre_frequency"] = (("fibre_phi", "seed", "vpd"), f, {"units": "1/s", "long_name": "orbit frequency 1/T"})
+    ds["fibre_frequency_half_nodes"] = (("fibre_phi", "seed", "vpd"), fh, {"units": "1/s", "long_name": "every other node"})
+    ds["fibre_frequency_change"] = (("fibre_phi", "seed", "vpd"), rel, {"units": "1", "long_name": "f / f_alone - 1"})
+    ds["fibre_frequency_mean"] = (("fibre_phi", "vpd"), Fm, {"units": "1/s", "long_name": "seed mean of f"})
+    ds["fibre_frequency_se"] = (("fibre_phi", "vpd"), Fe, {"units": "1/s", "long_name": "standard error over seeds"})
+    ds["fibre_frequency_change_mean"] = (("fibre_phi", "vpd"), Rm, {"units": "1", "long_name": "seed mean of f/f_alone - 1"})
+    ds["fibre_frequency_change_se"] = (("fibre_phi", "vpd"), Re, {"units": "1", "long_name": "standard error over seeds"})
+    ds["fibre_period_of_mean_frequency"] = (("fibre_phi", "vpd"), 1.0 / Fm, {"units": "s", "long_name": "1 / <f>"})
+    ds["fibre_period_of_mean_frequency_se"] = (("fibre_phi", "vpd"), Fe / Fm**2,
+                                               {"units": "s", "long_name": "its standard error, se(f) / <f>^2"})
 
     # table
     at = raw.attrs
@@ -456,12 +475,14 @@ def analyse(raw):
     L += ["", f"Random spheres in a cell of {float(at['sphere_cell_d']):g} d (gap >= {float(at['gap_d']):.3f} d): "
           "mean over seeds +- standard error of the per-seed values", "",
           "| phi | N | vpd | mean s (all spheres) | sd of s over the spheres | test sphere s | "
-          "mean |omega_xy| / (gamma_dot/2) | mean s - mean s at finest vpd |", "|---|---|---|---|---|---|---|---|"]
+          "mean |omega_xy| / (gamma_dot/2) | mean s minus its finest-vpd value | sd minus its finest-vpd value |",
+          "|---|---|---|---|---|---|---|---|---|"]
     for a, phi in enumerate(raw.phi.values):
         for i, v in enumerate(vpds):
-            f = lambda k: f"{stats[k][0][a, i]:.4f} +- {stats[k][1][a, i]:.4f}"  # noqa: E731
-            L.append(f"| {phi:g} | {int(raw.n_spheres.values[a])} | {v} | {f('mean')} | {f('sd')} | {f('test')} | "
-                     f"{f('perp')} | {f('mean_shift_vs_finest') if i < nv - 1 else '-'} |")
+            fmt = lambda k: f"{stats[k][0][a, i]:.4f} +- {stats[k][1][a, i]:.4f}"  # noqa: E731
+            L.append(f"| {phi:g} | {int(raw.n_spheres.values[a])} | {v} | {fmt('mean')} | {fmt('sd')} | {fmt('test')} | "
+                     f"{fmt('perp')} | {fmt('mean_shift_vs_finest') if i < nv - 1 else '-'} | "
+                     f"{fmt('sd_shift_vs_finest') if i < nv - 1 else '-'} |")
     be = beta_from_period(T1)
     rules = {k: float(equivalent_aspect_ratio(BETA, k)) for k in ("cox", "harris_pittman", "zhang")}
     L += ["", f"Fibre (flat-ended cylinder, beta = {BETA:g}) alone, cell {float(at['fibre_cell_d']) / BETA:g} L = "
@@ -474,19 +495,22 @@ def analyse(raw):
           f"docs/jeffery_orbits.md extrapolated {BETA_E_DOCS['inf'][0]} +- {BETA_E_DOCS['inf'][1]}.",
           f"Discretisation error of T alone (vpd {vpds[prev]} -> {vpds[fin]}): {abs(T1[fin] - T1[prev]):.3f} s "
           f"({100 * abs(T1[fin] / T1[prev] - 1):.1f} %).", "",
-          "Fibre among frozen neighbour spheres: T mean +- s.e. over seeds; change = T / T_alone - 1 at the same vpd "
-          "(paired); disc. = |change(finest) - change(previous vpd)|", "",
-          "| phi | N | vpd | T [s] | change | disc. | max quadrature bound [s] | max |omega_xy| / (gamma_dot/2) | significant |",
-          "|---|---|---|---|---|---|---|---|---|"]
+          f"Fibre among frozen neighbour spheres (surface >= {float(at['fibre_clearance_d']):g} d from the disc the fibre "
+          "sweeps): orbit frequency f = 1/T (0 if omega_z >= 0 at a node: stalled); change = f / f_alone - 1 at the "
+          "same vpd (paired), mean +- s.e. over seeds; 1/<f> the period of the mean frequency; disc. = |change(finest) - "
+          "change(previous vpd)|; quad. = max |f - f(every other node)| / f_alone", "",
+          "| phi | N | vpd | stalled seeds | median T [s] | 1/<f> [s] | change of f | disc. | quad. | "
+          "max |omega_xy| / (gamma_dot/2) | significant |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for a, phi in enumerate(raw.fibre_phi.values):
         disc = abs(Rm[a, fin] - Rm[a, prev]) if nv > 1 else np.nan
         for i, v in enumerate(vpds):
             sig = abs(Rm[a, i]) > 2 * Re[a, i] + (disc if np.isfinite(disc) else 0)
-            L.append(f"| {phi:g} | {int(raw.n_neighbours.values[a])} | {v} | {Tm[a, i]:.2f} +- {Te[a, i]:.2f} | "
-                     f"{100 * Rm[a, i]:+.1f} +- {100 * Re[a, i]:.1f} % | {100 * disc:.1f} % | "
-                     f"{np.max(np.abs(T[a, :, i] - Th[a, :, i])):.3f} | {np.max(perp_f[a, :, i]) / 0.5:.3f} | "
-                     f"{'yes' if sig else 'no'} |")
-    L += ["", f"Nodes where the fibre's omega_z >= 0 (would stall): {stalls}.",
+            quad = np.max(np.abs(f[a, :, i] - fh[a, :, i])) / f1[i]
+            L.append(f"| {phi:g} | {int(raw.n_neighbours.values[a])} | {v} | {int(stalled[a, :, i].sum())} / {nseed} | "
+                     f"{np.median(T[a, :, i]):.2f} | {1 / Fm[a, i]:.2f} +- {Fe[a, i] / Fm[a, i] ** 2:.2f} | "
+                     f"{100 * Rm[a, i]:+.1f} +- {100 * Re[a, i]:.1f} % | {100 * disc:.1f} % | {100 * quad:.1f} % | "
+                     f"{np.max(perp_f[a, :, i]) / (0.5 * SHEAR_RATE):.3f} | {'yes' if sig else 'no'} |")
+    L += ["", f"Nodes where the fibre's omega_z >= 0 (fixed point of the frozen orbit): {int(np.sum(om >= 0))}.",
           f"Largest single-sphere spin deviation at random sub-voxel offsets, vpd {vpds[fin]}: {off_dev:.1e}."]
     return ds, "\n".join(L) + "\n"
 
@@ -509,15 +533,16 @@ def figure(ds, path) -> None:
     a1.legend(fontsize=7)
     for i, v in enumerate(vpds):
         phis = np.r_[0.0, ds.fibre_phi.values]
-        Tm = np.r_[ds.fibre_single_period.values[i], ds.fibre_period_mean.values[:, i]]
-        Te = np.r_[0.0, ds.fibre_period_se.values[:, i]]
-        a2.errorbar(phis + 0.004 * i, Tm, Te, fmt="o-", capsize=3, label=f"{v} vox/d")
+        m = np.r_[1.0, 1.0 + ds.fibre_frequency_change_mean.values[:, i]]
+        e = np.r_[0.0, ds.fibre_frequency_change_se.values[:, i]]
+        a2.errorbar(phis + 0.004 * i, m, e, fmt="o-", capsize=3, label=f"{v} vox/d, mean +- s.e.")
         for a, phi in enumerate(ds.fibre_phi.values):
-            a2.plot(np.full(ds.seed.size, phi + 0.004 * i), ds.fibre_period.values[a, :, i], ".", color=f"C{i}",
-                    alpha=0.4)
+            a2.plot(np.full(ds.seed.size, phi + 0.004 * i), 1.0 + ds.fibre_frequency_change.values[a, :, i], ".",
+                    color=f"C{i}", alpha=0.4)
+    a2.axhline(1.0, color="k", lw=1)
     a2.set_xlabel(r"neighbour sphere volume fraction $\phi$")
-    a2.set_ylabel(r"fibre period $T$ [s] ($\dot\gamma$ = 1/s)")
-    a2.set_title(f"beta = {BETA:g} cylinder, frozen neighbours (mean +- s.e.)", fontsize=9)
+    a2.set_ylabel(r"orbit frequency $f / f_{alone}$ ($f = 1/T$, 0: stalled)")
+    a2.set_title(f"beta = {BETA:g} cylinder among frozen neighbour spheres (dots: seeds)", fontsize=9)
     a2.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
@@ -553,6 +578,8 @@ def main(argv=None) -> int:
             raw = f.load()
     else:
         raw = run(form)
+        a.out.mkdir(parents=True, exist_ok=True)
+        raw.to_netcdf(a.out / "rotation_neighbours.nc", engine="h5netcdf")  # the solves, kept if the analysis fails
     a.out.mkdir(parents=True, exist_ok=True)
     ds, table = analyse(raw)
     ds.to_netcdf(a.out / "rotation_neighbours.nc", engine="h5netcdf")
