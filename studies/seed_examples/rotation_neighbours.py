@@ -36,9 +36,14 @@ kappa = 1e3, CG tolerance 1e-6; every solve is solve_particles of pyfold.native.
        every other node bounds the quadrature error. beta_e = (tau + sqrt(tau^2 - 4)) / 2,
        tau = gamma_dot T / (2 pi), beside pyfold.kinematics.equivalent_aspect_ratio and the
        measured beta_e of docs/jeffery_orbits.md. Then the same fibre among neighbour spheres
-       (diameter d) at phi = 0.1, 0.2 (spheres' volume / cell volume), several seeds; the
-       spheres keep every gap >= d/6 from the disc swept by the fibre over a whole orbit, so
-       no orientation overlaps.
+       (diameter d) at phi = 0.1, 0.2 (spheres' volume / cell volume), several seeds; every
+       sphere's surface stays >= FIBRE_CLEARANCE = d/2 from the disc swept by the fibre over
+       a whole orbit, so no orientation overlaps and the gap is resolved (>= 2 voxels).
+       Statistics: omega_z >= 0 at a node means the frozen orbit has a fixed point (T
+       infinite); near one, T is huge, so the periods of different environments are
+       heavy-tailed. The orbit frequency f = 1/T (0 when stalled) is bounded, so the seed
+       mean and standard error are taken of f and of f / f_alone - 1 (paired with the lone
+       fibre at the same resolution); 1/<f> is quoted as the period, the median T beside it.
        Approximation ("frozen neighbours"): the neighbours stay where they were placed while
        the fibre turns; in a real suspension they are advected (by about gamma_dot T times
        their height, several cells, in one orbit), so each seed's T is the period the fibre
@@ -48,14 +53,16 @@ kappa = 1e3, CG tolerance 1e-6; every solve is solve_particles of pyfold.native.
 Placement
     Random uniform centres, then pairs closer than d + gap (minimum image) are pushed apart
     (and, for the fibre, spheres out of the swept disc) until every constraint holds:
-    gap = d/6, one voxel at 6 voxels per diameter, so no two bodies share a voxel there.
+    gap = d/6 between spheres, one voxel at 6 voxels per diameter, so no two spheres share
+    a voxel there.
     A random, not an equilibrium hard-sphere, configuration; seeded (numpy default_rng).
 Resolution and errors
     Voxels per diameter vpd = 4, 6 (small), 4, 6, 8 (--large). Discretisation error of a
     single-particle value: the difference between the two finest resolutions (the period
-    converges monotonically from above at these vpd, docs/jeffery_orbits.md); of a relative
-    change: the same difference of the paired change. A change is reported as significant
-    when it exceeds 2 standard errors over seeds plus that discretisation error.
+    converges monotonically from above at these vpd, docs/jeffery_orbits.md); of a seed
+    mean: the same difference of the paired (same configurations) means. A change is
+    reported as significant when it exceeds 2 standard errors over seeds plus that
+    discretisation error.
 
 Command
     nice -n 10 python studies/seed_examples/rotation_neighbours.py            # small form
@@ -63,9 +70,9 @@ Command
     Options: --seeds N, --vpd ..., --nphi N (even, >= 8), --out DIR,
     --reanalyse FILE.nc (tables and figure from a saved file, no solves).
 Cost on 2 cores (one solve at a time, serial FFTW; CPU time; load ~4)
-    one solve: 0.02-0.3 s (sphere cells 6^3-30^3), 0.3 s (fibre, 30^3) / 0.6 s (44^3).
+    one solve: 0.02-0.3 s (sphere cells 6^3-30^3), ~0.3 s (fibre cell 32^3) / ~0.6 s (48^3).
     small (8 seeds, vpd 4 and 6, 16 nodes per half orbit): ~640 solves, ~3 CPU minutes.
-    large (10 seeds, vpd 4, 6, 8, 24 nodes): fibre cells up to 60^3, ~2000 solves, ~1 CPU hour.
+    large (10 seeds, vpd 4, 6, 8, 24 nodes): fibre cells up to 64^3, ~2200 solves, estimated 1-2 CPU hours (not run).
 Outputs (under --out, default out/seed_examples/rotation_neighbours/)
     rotation_neighbours.nc   per-solve spins and per-orbit periods, seed means and errors
                              (xarray.open_dataset(path, engine="h5netcdf"))
