@@ -72,7 +72,8 @@ Command
 Cost on 2 cores (one solve at a time, serial FFTW; CPU time; load ~4)
     one solve: 0.02-0.3 s (sphere cells 6^3-30^3), ~0.3 s (fibre cell 32^3) / ~0.6 s (48^3).
     small (8 seeds, vpd 4 and 6, 16 nodes per half orbit): ~640 solves, ~3 CPU minutes.
-    large (10 seeds, vpd 4, 6, 8, 24 nodes): fibre cells up to 64^3, ~2200 solves, estimated 1-2 CPU hours (not run).
+    large (10 seeds, vpd 4, 6, 8, 24 nodes): fibre cells up to 64^3, ~2200 solves; measured 910 CPU-s
+    (20 min wall at load 3.6). Small form measured: 177 CPU-s (4 min wall at load ~3).
 Outputs (under --out, default out/seed_examples/rotation_neighbours/)
     rotation_neighbours.nc   per-solve spins and per-orbit periods, seed means and errors
                              (xarray.open_dataset(path, engine="h5netcdf"))
