@@ -567,7 +567,10 @@ def _args(argv=None):
     ap.add_argument("--reanalyse", type=Path, help="tables and figure from a saved .nc (no solves)")
     a = ap.parse_args(argv)
     base = LARGE if a.large else SMALL
-    form = Form(vpd=tuple(sorted(a.vpd)) if a.vpd else base.vpd, seeds=a.seeds or base.seeds, nphi=a.nphi or base.nphi)
+    # "is not None": an explicit 0 is a value to refuse, not a request for the default
+    form = Form(vpd=tuple(sorted(a.vpd)) if a.vpd else base.vpd,
+                seeds=a.seeds if a.seeds is not None else base.seeds,
+                nphi=a.nphi if a.nphi is not None else base.nphi)
     if form.seeds < 2:
         ap.error(f"--seeds: need >= 2 (a standard error over seeds), got {form.seeds}")
     if len(set(form.vpd)) < 2 or any(v < 2 or v % 2 for v in form.vpd):
