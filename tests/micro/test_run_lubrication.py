@@ -166,3 +166,23 @@ def test_lubrication_records_survive_a_resume(tmp_path):
         # Stokes tolerance 1e-6 on velocities of order 0.1 m/s
         np.testing.assert_allclose(b["lubrication_correction"][()], a["lubrication_correction"][()], rtol=0,
                                    atol=1e-6)
+
+
+def test_lubrication_is_off_by_default():
+    """A scene that does not ask for lubrication gets none: the resolved run file says 0,
+    so fold_run takes the flow's velocities unchanged (the run with lubrication = 0 above
+    is the one the closed-form factor is measured against)."""
+    import tomli_w
+
+    from pyfold.scene import parse_scene
+
+    data = {
+        "cell": {"dim": 3, "size": [1.0] * 3},
+        "flow": {"type": "simple_shear", "rate": 1.0},
+        "particles": [{"name": "balls", "shape": "sphere", "radius": 0.1, "count": 4}],
+        "model": {"hydrodynamics": "stokes"},
+        "numerics": {"dt": 0.01, "t_end": 0.1},
+    }
+    res = parse_scene(tomli_w.dumps(data))
+    assert res.scene.model.lubrication is False
+    assert int(res.resolved_datasets()["lubrication"][0]) == 0
