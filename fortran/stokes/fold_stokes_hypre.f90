@@ -31,7 +31,13 @@
 !> is u/(h/2); a wall edge has half a dual cell inside the cell (w_e = 1/2, 1
 !> elsewhere) and its viscosity is the harmonic mean of the two cells it touches. Second order
 !> for smooth viscosity (central differences on the staggered grid); at a viscosity
-!> jump the usual O(h) of the fictitious-domain penalisation.
+!> jump the usual O(h) of the fictitious-domain penalisation. The mirror ghost is exact
+!> only for u linear in y: in the row next to a wall the truncation error is O(1),
+!> eta u_yy/4 (the second difference (u(3h/2) - 3 u(h/2))/h^2 is 3/4 u_yy), an O(h)
+!> error of the wall flux confined to one row, which moves the velocity by only O(h^2)
+!> (supraconvergence of cell-centred Dirichlet walls); with eta varying along the wall
+!> that row reaches second order only on fine grids (docs/physics.md, hypre section;
+!> the operator and this truncation are checked in tests/test_stokes_hypre.f90, order3).
 !>
 !> Solver (Schur-complement CG, "Uzawa-CG"; Elman, Silvester & Wathen 2014, Finite
 !> Elements and Fast Iterative Solvers, ch. 4 and 9): with the divergence D and
