@@ -37,7 +37,7 @@
 !> error of the wall flux confined to one row, which moves the velocity by only O(h^2)
 !> (supraconvergence of cell-centred Dirichlet walls); with eta varying along the wall
 !> that row reaches second order only on fine grids (docs/physics.md, hypre section;
-!> the operator and this truncation are checked in tests/test_stokes_hypre.f90, order3).
+!> the operator and this truncation are checked in fortran/stokes/tests/test_stokes_hypre.f90, order3).
 !>
 !> Solver (Schur-complement CG, "Uzawa-CG"; Elman, Silvester & Wathen 2014, Finite
 !> Elements and Fast Iterative Solvers, ch. 4 and 9): with the divergence D and
