@@ -78,6 +78,9 @@ module fold_fft_backend
       procedure(reduce_iface), deferred :: sum_all
       !> Maximum of an array over all ranks (in place)
       procedure(reduce_iface), deferred :: max_all
+      !> Boundary planes of the slab ring (last axis, periodic): lo <- the previous rank's
+      !> last, hi <- the next rank's first (one rank: its own last and first)
+      procedure(halo_iface), deferred :: z_halo
       !> Release the FFTW plans
       procedure(destroy_iface), deferred :: destroy
       !> Allocate an aligned field of this grid
@@ -108,6 +111,13 @@ module fold_fft_backend
          class(fft_backend_t), intent(in) :: self
          real(dp), intent(inout) :: x(:)
       end subroutine reduce_iface
+      subroutine halo_iface(self, n, first, last, lo, hi)
+         import :: fft_backend_t, dp, i8
+         class(fft_backend_t), intent(in) :: self
+         integer(i8), intent(in) :: n
+         real(dp), intent(in) :: first(n), last(n)
+         real(dp), intent(out) :: lo(n), hi(n)
+      end subroutine halo_iface
       subroutine destroy_iface(self)
          import :: fft_backend_t
          class(fft_backend_t), intent(inout) :: self

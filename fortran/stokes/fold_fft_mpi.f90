@@ -11,7 +11,7 @@
 module fold_fft_mpi
    use, intrinsic :: iso_c_binding
    use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Allreduce, MPI_IN_PLACE, &
-                      MPI_DOUBLE_PRECISION, MPI_SUM, MPI_MAX
+                      MPI_DOUBLE_PRECISION, MPI_SUM, MPI_MAX, MPI_Sendrecv, MPI_STATUS_IGNORE
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag, spectral_natural
@@ -36,6 +36,7 @@ module fold_fft_mpi
       procedure :: c2r_sp => slab_c2r_sp
       procedure :: sum_all => slab_sum
       procedure :: max_all => slab_max
+      procedure :: z_halo => slab_z_halo
       procedure :: destroy => slab_destroy
    end type fft_mpi_t
 
@@ -234,6 +235,23 @@ contains
       real(dp), intent(inout) :: x(:)
       if (size(x) > 0) call MPI_Allreduce(MPI_IN_PLACE, x, size(x), MPI_DOUBLE_PRECISION, MPI_MAX, self%comm)
    end subroutine slab_max
+
+   !> Ring exchange of the slabs' boundary planes: send last to the next rank while
+   !> receiving lo from the previous one, then first to the previous one while
+   !> receiving hi from the next (with one rank, a copy through MPI).
+   subroutine slab_z_halo(self, n, first, last, lo, hi)
+      class(fft_mpi_t), intent(in) :: self
+      integer(i8), intent(in) :: n
+      real(dp), intent(in) :: first(n), last(n)
+      real(dp), intent(out) :: lo(n), hi(n)
+      integer :: prev, next
+      prev = modulo(self%rank - 1, self%nranks)
+      next = modulo(self%rank + 1, self%nranks)
+      call MPI_Sendrecv(last, int(n), MPI_DOUBLE_PRECISION, next, 41, lo, int(n), MPI_DOUBLE_PRECISION, prev, 41, &
+                        self%comm, MPI_STATUS_IGNORE)
+      call MPI_Sendrecv(first, int(n), MPI_DOUBLE_PRECISION, prev, 42, hi, int(n), MPI_DOUBLE_PRECISION, next, 42, &
+                        self%comm, MPI_STATUS_IGNORE)
+   end subroutine slab_z_halo
 
    subroutine slab_destroy(self)
       class(fft_mpi_t), intent(inout) :: self

@@ -23,6 +23,7 @@ module fold_fft_serial
       procedure :: c2r_sp => serial_c2r_sp
       procedure :: sum_all => serial_reduce
       procedure :: max_all => serial_reduce
+      procedure :: z_halo => serial_z_halo
       procedure :: destroy => serial_destroy
    end type fft_serial_t
 
@@ -146,5 +147,15 @@ contains
       self%fwd_sp = c_null_ptr
       self%bwd_sp = c_null_ptr
    end subroutine serial_destroy
+
+   !> One slab closes the ring on itself.
+   subroutine serial_z_halo(self, n, first, last, lo, hi)
+      class(fft_serial_t), intent(in) :: self
+      integer(i8), intent(in) :: n
+      real(dp), intent(in) :: first(n), last(n)
+      real(dp), intent(out) :: lo(n), hi(n)
+      lo = last
+      hi = first
+   end subroutine serial_z_halo
 
 end module fold_fft_serial

@@ -85,6 +85,12 @@ module fold_stokes_fft
                                  FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, FOLD_MIX_HARMONIC, &
                                  FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, &
                                  FOLD_FFT_SINGLE
+   use fold_cg_kernels_dp, only: direction_strain3, direction_strain2, viscous_energy3, viscous_energy2, &
+                                 apply_update3, apply_update2, direction_velocity3, stencil_update3, stencil_force
+   use fold_cg_kernels_sp, only: direction_strain3_sp => direction_strain3, direction_strain2_sp => direction_strain2, &
+                                 viscous_energy3_sp => viscous_energy3, viscous_energy2_sp => viscous_energy2, &
+                                 apply_update3_sp => apply_update3, apply_update2_sp => apply_update2, &
+                                 stencil_update3_sp => stencil_update3, stencil_force_sp => stencil_force
    implicit none
    private
 
@@ -102,6 +108,30 @@ module fold_stokes_fft
       type(fft_field_t), allocatable :: work(:)
       !> Viscosity at voxel centres [Pa s]
       type(fft_field_t) :: eta
+      !> 2 eta / N (nxp, nl(2), nl(3)), the stress factor of the unnormalised transforms
+      !> in the double-precision operator passes [Pa s]
+      real(dp), allocatable :: ceta(:, :, :)
+      !> The CG operator in its stencil form (3-D rotated finite differences, every rank
+      !> holding >= 1 z-plane): the uniform viscosity's part in Fourier space and the rest
+      !> by a real-space stencil over the particles' voxels, 3 + 3 transforms per
+      !> iteration instead of 5 + 5 (fortran/stokes/fold_cg_kernels.f90.in, stencil_force)
+      logical :: stencil = .false.
+      !> Stencil form: i phase of every mode, phase = e^{i pi sum_l m_l / n_l}, as
+      !> ph1(x index) * ph23(flattened local y, z index) (separable)
+      complex(dp), allocatable :: ph1(:), ph23(:)
+      !> Stencil form: A^-T(b, l) n_l / 4 of the lattice [1/m]
+      real(dp) :: aith(3, 3) = 0.0_dp
+      !> Stencil form: the slab's first corner plane and the next rank's (uhi), the force
+      !> on the corner plane after the slab (fover) and the previous rank's (frecv), each
+      !> (nxp, nl(2), 3); a scratch plane for the unused direction of an exchange
+      real(dp), allocatable :: hfirst(:, :, :), uhi(:, :, :), fover(:, :, :), frecv(:, :, :), hscr(:, :, :)
+      !> Stencil form: local centres whose viscosity differs from eta_f (i, j, k) and their
+      !> 2 (eta - eta_f) / N [Pa s]; nact of the capacity in use
+      integer(ip), allocatable :: act(:, :)
+      real(dp), allocatable :: dceta(:)
+      integer(ip) :: nact = 0
+      !> Stencil form: the uniform viscosity's part of <p, A p> from the direction pass
+      real(dp) :: e_uniform = 0.0_dp
       !> FOLD_FFT_SINGLE: 2 eta / N in single precision (nxp, nl(2), nl(3)) for the viscosity
       !> pass of the single-precision operator [Pa s]; else size 0
       real(c_float), allocatable :: eta_sp(:, :, :)
@@ -141,7 +171,8 @@ module fold_stokes_fft
    end type stokes_fft_t
 
    public :: stokes_fft_init, stokes_fft_new, stokes_fft_set_lattice, stokes_fft_solve, stokes_fft_velocity, &
-             stokes_fft_strain, stokes_fft_destroy, stokes_fft_true_residual, stokes_fft_apply, single_tol_min
+             stokes_fft_strain, stokes_fft_destroy, stokes_fft_true_residual, stokes_fft_apply, single_tol_min, &
+             stokes_fft_apply_cg, stokes_fft_project
 
    !> Unit round-off of single precision, 2^-24 [-]
    real(dp), parameter, public :: FOLD_SINGLE_ROUNDOFF = 0.5_dp*real(epsilon(1.0_c_float), dp)
@@ -209,6 +240,9 @@ contains
          call s%fft%alloc_field(s%vel(c))
       end do
       call s%fft%alloc_field(s%eta)
+      allocate (s%ceta(s%fft%nxp, s%fft%nl(2), s%fft%nl(3)))
+      s%ceta = 0.0_dp
+      call stencil_init(s)
       s%single = set%fft_precision == FOLD_FFT_SINGLE
       if (s%single) then
          call s%fft%plan_single(set%plan_effort, stat, errmsg)
@@ -328,8 +362,76 @@ contains
             end do
          end do
       end do
+      do l = 1, 3
+         s%aith(:, l) = ait(:, l)*0.25_dp*real(s%grid%n(l), dp)
+      end do
       s%lattice_set = .true.
    end subroutine stokes_fft_set_lattice
+
+   !> Decide the stencil form (3-D, rotated finite differences, >= 1 z-plane on every
+   !> rank: the halo exchange passes planes between neighbours) and allocate its tables.
+   !> Collective over the backend's ranks.
+   subroutine stencil_init(s)
+      type(stokes_fft_t), intent(inout) :: s
+      real(dp) :: ext(1)
+      integer(ip) :: i, j, k, m(3), ny
+      ext = [-real(s%fft%nl(3), dp)]
+      call s%fft%max_all(ext)
+      s%stencil = s%dim == 3 .and. s%set%derivative == FOLD_DERIV_FD .and. -ext(1) >= 1.0_dp
+      if (.not. s%stencil) return
+      ny = s%fft%nl(2)
+      allocate (s%ph1(s%fft%nxh), s%ph23(s%fft%nsl(2)*s%fft%nsl(3)))
+      allocate (s%hfirst(s%fft%nxp, ny, 3), s%uhi(s%fft%nxp, ny, 3), s%fover(s%fft%nxp, ny, 3), &
+                s%frecv(s%fft%nxp, ny, 3), s%hscr(s%fft%nxp, ny, 3), s%act(3, 0), s%dceta(0))
+      s%hfirst = 0.0_dp
+      s%uhi = 0.0_dp
+      s%fover = 0.0_dp
+      s%frecv = 0.0_dp
+      s%hscr = 0.0_dp
+      s%nact = 0
+      ! i phase, phase = prod_l e^{i th_l / 2}, th_l = 2 pi m_l / n_l with m_l in [0, n_l)
+      ! (the indices of the derivative tables of stokes_fft_set_lattice)
+      do i = 1, s%fft%nxh
+         s%ph1(i) = iu*exp(iu*pi*real(i - 1 + s%fft%soff(1), dp)/real(s%grid%n(s%fft%saxis(1)), dp))
+      end do
+      do k = 1, s%fft%nsl(3)
+         do j = 1, s%fft%nsl(2)
+            m(s%fft%saxis) = [0_ip, j - 1, k - 1] + s%fft%soff
+            s%ph23(j + (k - 1)*s%fft%nsl(2)) = exp(iu*pi*(real(m(s%fft%saxis(2)), dp)/ &
+                                                          real(s%grid%n(s%fft%saxis(2)), dp) &
+                                                          + real(m(s%fft%saxis(3)), dp)/ &
+                                                          real(s%grid%n(s%fft%saxis(3)), dp)))
+         end do
+      end do
+   end subroutine stencil_init
+
+   !> The stencil form's active centres: every local voxel whose viscosity differs from
+   !> eta_f, with 2 (eta - eta_f) / N (s%eta set). Grows the lists when needed (once per
+   !> solve, never inside the iteration).
+   subroutine stencil_active(s)
+      type(stokes_fft_t), intent(inout) :: s
+      integer(ip) :: i, j, k, n
+      real(dp) :: c
+      n = int(count(s%eta%r(1:s%grid%n(1), :, :) /= s%set%eta_f), ip)
+      if (size(s%dceta) < n) then
+         deallocate (s%act, s%dceta)
+         allocate (s%act(3, n + n/4), s%dceta(n + n/4))
+      end if
+      c = 2.0_dp/real(grid_total(s%grid), dp)
+      n = 0
+      do k = 1, s%grid%nl(3)
+         do j = 1, s%grid%nl(2)
+            do i = 1, s%grid%n(1)
+               if (s%eta%r(i, j, k) /= s%set%eta_f) then
+                  n = n + 1
+                  s%act(:, n) = [i, j, k]
+                  s%dceta(n) = c*(s%eta%r(i, j, k) - s%set%eta_f)
+               end if
+            end do
+         end do
+      end do
+      s%nact = n
+   end subroutine stencil_active
 
    !> Solve for u~ given chi (nx, n2l, n3l) at voxel centres and the mean velocity
    !> gradient G (G_ij = du_i/dx_j). FOLD_NOT_CONVERGED (message gives the
@@ -384,11 +486,16 @@ contains
       call s%fft%max_all(ext)
       s%eta0 = sqrt(-ext(1)*ext(2))
 
-      if (s%single) s%eta_sp = real((2.0_dp/real(grid_total(s%grid), dp))*s%eta%r, c_float)
+      s%ceta = (2.0_dp/real(grid_total(s%grid), dp))*s%eta%r
+      if (s%single) s%eta_sp = real(s%ceta, c_float)
+      if (s%stencil) call stencil_active(s)
 
       ! right-hand side b = -P B^H (2 eta E), from one FFT of 2 eta
       call rhs(s, s%r)
       bb = precond_dot(s, s%r)
+      ! the stencil form iterates on the unstaggered u^ = conj(i phase) u' (unitary per
+      ! mode: P, M^-1 and every dot product are unchanged); s%x returns staggered
+      if (s%stencil) call stagger(s, s%r, .false.)
       red = [bb, 0.0_dp]
       call s%fft%sum_all(red)
       bb = red(1)
@@ -411,6 +518,7 @@ contains
          end if
          ! guess re-projected on this lattice's divergence-free modes
          call project(s, s%x)
+         if (s%stencil) call stagger(s, s%x, .false.)
          ! r = b - A x by the passes of an iteration: p = x (direction update with z = 0
          ! and beta = 1), then r -= 1 A p, which also gives <r, M^-1 r>
          s%p = s%x
@@ -447,6 +555,7 @@ contains
             stat = FOLD_NUMERICAL
             write (errmsg, '(a,i0,a,es10.3)') "stokes_fft_solve: CG breakdown at iteration ", it, ", <p, A p> = ", pq
             s%iterations = it
+            if (s%stencil) call stagger(s, s%x, .true.)
             return
          end if
          alpha = rz/pq
@@ -460,6 +569,7 @@ contains
       end do
       ! the last step along p (deferred to the next direction update)
       if (it > 0) s%x = s%x + alpha*s%p
+      if (s%stencil) call stagger(s, s%x, .true.)
       s%iterations = it
       s%have_guess = .true.
       if (.not. (s%residual <= s%set%tol)) then
@@ -519,6 +629,10 @@ contains
       end if
       call field_free(s%eta)
       if (allocated(s%eta_sp)) deallocate (s%eta_sp)
+      if (allocated(s%ceta)) deallocate (s%ceta)
+      if (allocated(s%ph1)) deallocate (s%ph1, s%ph23, s%hfirst, s%uhi, s%fover, s%frecv, s%hscr, s%act, s%dceta)
+      s%nact = 0
+      s%stencil = .false.
       s%single = .false.
       if (allocated(s%fft)) then
          call s%fft%destroy()
@@ -592,6 +706,33 @@ contains
       complex(dp), intent(out) :: au(:, :, :, :)
       call apply(s, u, au)
    end subroutine stokes_fft_apply
+
+   !> au = A u by the CG iteration's own passes: the stencil form when s%stencil, the
+   !> transforms in the settings' precision (u as for stokes_fft_apply). Overwrites the
+   !> CG vectors p and r; for tests of the passes against stokes_fft_apply.
+   subroutine stokes_fft_apply_cg(s, u, au)
+      class(stokes_fft_t), intent(inout) :: s
+      complex(dp), intent(in) :: u(:, :, :, :)
+      complex(dp), intent(out) :: au(:, :, :, :)
+      real(dp) :: pq, rz
+      s%p = u
+      if (s%stencil) call stagger(s, s%p, .false.)
+      s%r = 0.0_dp
+      ! p <- 0 M^-1 r + 1 p = u (and x += 0 p)
+      call cg_direction_strain(s, 0.0_dp, 1.0_dp, 0.0_dp)
+      call cg_stress(s, pq)
+      s%r = 0.0_dp
+      rz = cg_apply_update(s, -1.0_dp)
+      if (s%stencil) call stagger(s, s%r, .true.)
+      au = s%r
+   end subroutine stokes_fft_apply_cg
+
+   !> Remove the divergent part and the excluded modes of a Fourier field (layout of s%x).
+   subroutine stokes_fft_project(s, u)
+      class(stokes_fft_t), intent(in) :: s
+      complex(dp), intent(inout) :: u(:, :, :, :)
+      call project(s, u)
+   end subroutine stokes_fft_project
 
    !> Smallest tolerance accepted with single-precision transforms on a grid of nvox
    !> voxels: (2 log2 nvox + 4) u_s (module header: the attainable residual).
@@ -737,6 +878,26 @@ contains
       end do
    end subroutine project
 
+   !> u <- i phase u (to_staggered) or conj(i phase) u, per mode (stencil form's tables).
+   subroutine stagger(s, u, to_staggered)
+      type(stokes_fft_t), intent(in) :: s
+      complex(dp), intent(inout) :: u(:, :, :, :)
+      logical, intent(in) :: to_staggered
+      integer(ip) :: i, j, k, c
+      complex(dp) :: ph
+      do c = 1, s%dim
+         do k = 1, s%fft%nsl(3)
+            do j = 1, s%fft%nsl(2)
+               do i = 1, s%fft%nxh
+                  ph = s%ph1(i)*s%ph23(j + (k - 1)*s%fft%nsl(2))
+                  if (.not. to_staggered) ph = conjg(ph)
+                  u(i, j, k, c) = ph*u(i, j, k, c)
+               end do
+            end do
+         end do
+      end do
+   end subroutine stagger
+
    !> Local <r, M^-1 r> (not yet summed over ranks).
    function precond_dot(s, r) result(v)
       type(stokes_fft_t), intent(in) :: s
@@ -776,32 +937,26 @@ contains
       end if
    end subroutine extrapolate_guess
 
-   ! ------------------------------------------------------------------ CG kernels
-   ! Every per-mode factor is real: rx(a, z) = a z written on the two parts, 2
-   ! multiplications, where Fortran's a*z converts a to complex and makes 4 (gfortran
-   ! keeps the 0 * imaginary products for the sign of zero), which made the two
-   ! spectral passes compute-bound.
-
-   !> a z for a real a and a complex z, on the real and imaginary parts.
-   elemental function rx(a, z) result(w)
-      real(dp), intent(in) :: a
-      complex(dp), intent(in) :: z
-      complex(dp) :: w
-      w = cmplx(a*real(z, dp), a*aimag(z), kind=dp)
-   end function rx
-
-   ! Explicit-shape dummies: the compiler sees contiguous, non-aliased arrays and
-   ! vectorises; the 3-D spectral arrays (nxh, nsl(2), nsl(3)) are passed as (nxh, njk).
+   ! ------------------------------------------------------------------ CG passes
+   ! (the kernels: fortran/stokes/fold_cg_kernels.f90.in)
 
    !> x += a_prev p_old; p = zs eta0 M^-1 r + beta p_old (zs = 1/eta0: the CG direction);
-   !> strain of p into the spectral views of work(cg_comp) (single ones if s%single).
+   !> then what the operator pass transforms: the velocity of p on the corner grid into
+   !> vel(1:3)%c (stencil form), else the strain of p into the spectral views of
+   !> work(cg_comp) (single ones if s%single).
    subroutine cg_direction_strain(s, a_prev, beta, zs)
       type(stokes_fft_t), intent(inout), target :: s
       real(dp), intent(in) :: a_prev, beta, zs
       integer(ip) :: nxh, njk
       nxh = s%fft%nxh
       njk = s%fft%nsl(2)*s%fft%nsl(3)
-      if (s%single .and. s%dim == 3) then
+      if (s%stencil) then
+         s%e_uniform = s%set%eta_f* &
+                       direction_velocity3(nxh, njk, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3), &
+                                           s%p(:, :, :, 1), s%p(:, :, :, 2), s%p(:, :, :, 3), s%x(:, :, :, 1), &
+                                           s%x(:, :, :, 2), s%x(:, :, :, 3), s%kv, s%ik2, s%wx, zs, a_prev, beta, &
+                                           s%vel(1)%c, s%vel(2)%c, s%vel(3)%c)
+      else if (s%single .and. s%dim == 3) then
          call direction_strain3_sp(nxh*njk, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3), s%p(:, :, :, 1), &
                                    s%p(:, :, :, 2), s%p(:, :, :, 3), s%x(:, :, :, 1), s%x(:, :, :, 2), &
                                    s%x(:, :, :, 3), s%kv, s%ik2, zs, a_prev, beta, &
@@ -822,71 +977,32 @@ contains
       end if
    end subroutine cg_direction_strain
 
-   !> Traceless strain (11, 22, 12, 13, 23; eps_33 = -eps_11 - eps_22 is not formed).
-   subroutine direction_strain3(n, r1, r2, r3, pp1, pp2, pp3, x1, x2, x3, kv, ik2, inv_eta0, a_prev, beta, &
-                                w1, w2, w4, w5, w6)
-      integer(ip), intent(in) :: n
-      complex(dp), intent(in) :: r1(n), r2(n), r3(n)
-      complex(dp), intent(inout) :: pp1(n), pp2(n), pp3(n), x1(n), x2(n), x3(n)
-      real(dp), intent(in) :: kv(3, n), ik2(n), inv_eta0, a_prev, beta
-      complex(dp), intent(out) :: w1(n), w2(n), w4(n), w5(n), w6(n)
-      integer(ip) :: m
-      complex(dp) :: p1, p2, p3
-      real(dp) :: z, d1, d2, d3
-      do m = 1, n
-         z = ik2(m)*inv_eta0
-         x1(m) = x1(m) + rx(a_prev, pp1(m))
-         x2(m) = x2(m) + rx(a_prev, pp2(m))
-         x3(m) = x3(m) + rx(a_prev, pp3(m))
-         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
-         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
-         p3 = rx(z, r3(m)) + rx(beta, pp3(m))
-         pp1(m) = p1
-         pp2(m) = p2
-         pp3(m) = p3
-         d1 = kv(1, m)
-         d2 = kv(2, m)
-         d3 = kv(3, m)
-         w1(m) = rx(d1, p1)
-         w2(m) = rx(d2, p2)
-         w4(m) = rx(0.5_dp, (rx(d1, p2) + rx(d2, p1)))
-         w5(m) = rx(0.5_dp, (rx(d1, p3) + rx(d3, p1)))
-         w6(m) = rx(0.5_dp, (rx(d2, p3) + rx(d3, p2)))
-      end do
-   end subroutine direction_strain3
-
-   !> Traceless strain (11, 12; eps_22 = -eps_11 is not formed).
-   subroutine direction_strain2(n, r1, r2, pp1, pp2, x1, x2, kv, ik2, inv_eta0, a_prev, beta, w1, w3)
-      integer(ip), intent(in) :: n
-      complex(dp), intent(in) :: r1(n), r2(n)
-      complex(dp), intent(inout) :: pp1(n), pp2(n), x1(n), x2(n)
-      real(dp), intent(in) :: kv(2, n), ik2(n), inv_eta0, a_prev, beta
-      complex(dp), intent(out) :: w1(n), w3(n)
-      integer(ip) :: m
-      complex(dp) :: p1, p2
-      real(dp) :: z, d1, d2
-      do m = 1, n
-         z = ik2(m)*inv_eta0
-         x1(m) = x1(m) + rx(a_prev, pp1(m))
-         x2(m) = x2(m) + rx(a_prev, pp2(m))
-         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
-         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
-         pp1(m) = p1
-         pp2(m) = p2
-         d1 = kv(1, m)
-         d2 = kv(2, m)
-         w1(m) = rx(d1, p1)
-         w3(m) = rx(0.5_dp, (rx(d1, p2) + rx(d2, p1)))
-      end do
-   end subroutine direction_strain2
-
-   !> Strain of p (spectral, work(cg_comp)) -> stress 2 eta eps(p) (spectral), unnormalised
-   !> like the strain: ncg c2r, the viscosity pass, ncg r2c; pq = <p, A p> summed over ranks.
+   !> The stress of p, back in Fourier space, and pq = <p, A p> summed over ranks.
+   !> Stencil form: 3 c2r of the corner velocity (double), the stencil pass (strain,
+   !> 2 eta, <p, A p>, force at the corners, stencil_force), 3 r2c of the force into
+   !> work(1:3). Spectral form: ncg c2r of the strain, the viscosity pass, ncg r2c of the
+   !> stress. Both unnormalised like the strain (the 1/N folds into ceta = 2 eta / N).
    subroutine cg_stress(s, pq)
       type(stokes_fft_t), intent(inout) :: s
       real(dp), intent(out) :: pq
       integer(ip) :: c
       real(dp) :: red(2)
+      if (s%stencil) then
+         do c = 1, 3
+            call s%fft%c2r(s%vel(c))
+         end do
+         red = [stencil_pass(s), 0.0_dp]
+         do c = 1, 3
+            if (s%single) then
+               call s%fft%r2c_sp(s%work(c))
+            else
+               call s%fft%r2c(s%work(c))
+            end if
+         end do
+         call s%fft%sum_all(red)
+         pq = red(1)
+         return
+      end if
       if (s%single) then
          do c = 1, s%ncg
             call s%fft%c2r_sp(s%work(s%cg_comp(c)))
@@ -897,7 +1013,7 @@ contains
          end do
       end if
       ! times 2 eta (the 1/N of the unnormalised c2r folds in); <p, A p> on the way
-      red = [cg_viscous_energy(s, 2.0_dp/real(grid_total(s%grid), dp)), 0.0_dp]
+      red = [cg_viscous_energy(s), 0.0_dp]
       if (s%single) then
          do c = 1, s%ncg
             call s%fft%r2c_sp(s%work(s%cg_comp(c)))
@@ -911,80 +1027,70 @@ contains
       pq = red(1)
    end subroutine cg_stress
 
-   !> work(cg_comp)%r <- c eta work(cg_comp)%r on the nx data columns (the strain
-   !> of p, unnormalised c2r, becomes the stress); returns the local
-   !> <p, A p> = sum_x c eta E:E with the full (traceless) 3 x 3 (2 x 2) Frobenius
+   !> The stencil pass on the corner velocity in vel(1:3)%r: the next rank's first
+   !> corner plane in, the corner force of the non-uniform viscosity into work(1:3)
+   !> (%rs if s%single; zero away from the particles), the force on the corner plane after
+   !> the slab out to the next rank; returns the local <p, A p> (uniform part included).
+   function stencil_pass(s) result(pq)
+      type(stokes_fft_t), intent(inout) :: s
+      real(dp) :: pq
+      integer(ip) :: c, nx, nz
+      nx = s%grid%n(1)
+      nz = s%grid%nl(3)
+      do c = 1, 3
+         s%hfirst(:, :, c) = s%vel(c)%r(:, :, 1)
+      end do
+      call s%fft%z_halo(size(s%hfirst, kind=i8), s%hfirst, s%hfirst, s%hscr, s%uhi)
+      s%fover = 0.0_dp
+      if (s%single) then
+         do c = 1, 3
+            s%work(c)%rs(1:nx, :, :) = 0.0
+         end do
+         call stencil_force_sp(nx, s%fft%nxp, s%grid%nl(2), nz, s%aith, s%vel(1)%r, s%vel(2)%r, s%vel(3)%r, &
+                               s%uhi, s%nact, s%act, s%dceta, s%work(1)%rs, s%work(2)%rs, s%work(3)%rs, s%fover, pq)
+      else
+         do c = 1, 3
+            s%work(c)%r(1:nx, :, :) = 0.0_dp
+         end do
+         call stencil_force(nx, s%fft%nxp, s%grid%nl(2), nz, s%aith, s%vel(1)%r, s%vel(2)%r, s%vel(3)%r, &
+                            s%uhi, s%nact, s%act, s%dceta, s%work(1)%r, s%work(2)%r, s%work(3)%r, s%fover, pq)
+      end if
+      ! the force on the corner plane after the slab belongs to the next rank's first
+      call s%fft%z_halo(size(s%fover, kind=i8), s%fover, s%fover, s%frecv, s%hscr)
+      do c = 1, 3
+         if (s%single) then
+            s%work(c)%rs(1:nx, :, 1) = real(s%work(c)%rs(1:nx, :, 1) + s%frecv(1:nx, :, c), c_float)
+         else
+            s%work(c)%r(1:nx, :, 1) = s%work(c)%r(1:nx, :, 1) + s%frecv(1:nx, :, c)
+         end if
+      end do
+      pq = pq + s%e_uniform
+   end function stencil_pass
+
+   !> work(cg_comp)%r <- ceta work(cg_comp)%r on the nx data columns (the strain of p,
+   !> unnormalised c2r, becomes the stress; ceta = 2 eta / N); returns the local
+   !> <p, A p> = sum_x ceta E:E with the full (traceless) 3 x 3 (2 x 2) Frobenius
    !> product, E the strain field as transformed.
-   function cg_viscous_energy(s, c) result(pq)
+   function cg_viscous_energy(s) result(pq)
       type(stokes_fft_t), intent(inout), target :: s
-      real(dp), intent(in) :: c
       real(dp) :: pq
       integer(ip) :: nrows
       nrows = s%grid%nl(2)*s%grid%nl(3)
       if (s%single .and. s%dim == 3) then
-         ! eta_sp holds c eta already (c = 2/N, stokes_fft_solve)
          pq = viscous_energy3_sp(s%grid%n(1), s%fft%nxp, nrows, s%eta_sp, s%work(1)%rs, s%work(2)%rs, &
                                  s%work(4)%rs, s%work(5)%rs, s%work(6)%rs)
       else if (s%single) then
          pq = viscous_energy2_sp(s%grid%n(1), s%fft%nxp, nrows, s%eta_sp, s%work(1)%rs, s%work(3)%rs)
       else if (s%dim == 3) then
-         pq = viscous_energy3(s%grid%n(1), s%fft%nxp, nrows, c, s%eta%r, s%work(1)%r, s%work(2)%r, &
+         pq = viscous_energy3(s%grid%n(1), s%fft%nxp, nrows, s%ceta, s%work(1)%r, s%work(2)%r, &
                               s%work(4)%r, s%work(5)%r, s%work(6)%r)
       else
-         pq = viscous_energy2(s%grid%n(1), s%fft%nxp, nrows, c, s%eta%r, s%work(1)%r, s%work(3)%r)
+         pq = viscous_energy2(s%grid%n(1), s%fft%nxp, nrows, s%ceta, s%work(1)%r, s%work(3)%r)
       end if
    end function cg_viscous_energy
 
-   !> Traceless: E:E = e11^2 + e22^2 + (e11 + e22)^2 + 2 (e12^2 + e13^2 + e23^2).
-   function viscous_energy3(nx, nxp, nrows, c, eta, w1, w2, w4, w5, w6) result(pq)
-      integer(ip), intent(in) :: nx, nxp, nrows
-      real(dp), intent(in) :: c, eta(nxp, nrows)
-      real(dp), intent(inout) :: w1(nxp, nrows), w2(nxp, nrows), w4(nxp, nrows), w5(nxp, nrows), w6(nxp, nrows)
-      real(dp) :: pq
-      integer(ip) :: i, r
-      real(dp) :: ce, e1, e2, e4, e5, e6
-      pq = 0.0_dp
-      do r = 1, nrows
-         do i = 1, nx
-            ce = c*eta(i, r)
-            e1 = w1(i, r)
-            e2 = w2(i, r)
-            e4 = w4(i, r)
-            e5 = w5(i, r)
-            e6 = w6(i, r)
-            pq = pq + ce*(e1*e1 + e2*e2 + (e1 + e2)**2 + 2.0_dp*(e4*e4 + e5*e5 + e6*e6))
-            w1(i, r) = ce*e1
-            w2(i, r) = ce*e2
-            w4(i, r) = ce*e4
-            w5(i, r) = ce*e5
-            w6(i, r) = ce*e6
-         end do
-      end do
-   end function viscous_energy3
-
-   !> Traceless: E:E = 2 e11^2 + 2 e12^2.
-   function viscous_energy2(nx, nxp, nrows, c, eta, w1, w3) result(pq)
-      integer(ip), intent(in) :: nx, nxp, nrows
-      real(dp), intent(in) :: c, eta(nxp, nrows)
-      real(dp), intent(inout) :: w1(nxp, nrows), w3(nxp, nrows)
-      real(dp) :: pq
-      integer(ip) :: i, r
-      real(dp) :: ce, e1, e3
-      pq = 0.0_dp
-      do r = 1, nrows
-         do i = 1, nx
-            ce = c*eta(i, r)
-            e1 = w1(i, r)
-            e3 = w3(i, r)
-            pq = pq + 2.0_dp*ce*(e1*e1 + e3*e3)
-            w1(i, r) = ce*e1
-            w3(i, r) = ce*e3
-         end do
-      end do
-   end function viscous_energy2
-
-   !> r -= alpha P B^H (stress in work(1:nc)%c) (zero on removed modes); returns the
-   !> local <r, M^-1 r>.
+   !> r -= alpha P B^H (stress in work(1:nc)%c) (zero on removed modes), or in the
+   !> stencil form r -= alpha P f' (force in work(1:3)%c); returns the local <r, M^-1 r>.
    function cg_apply_update(s, alpha) result(rz)
       type(stokes_fft_t), intent(inout), target :: s
       real(dp), intent(in) :: alpha
@@ -992,7 +1098,15 @@ contains
       integer(ip) :: nxh, njk
       nxh = s%fft%nxh
       njk = s%fft%nsl(2)*s%fft%nsl(3)
-      if (s%single .and. s%dim == 3) then
+      if (s%stencil .and. s%single) then
+         rz = stencil_update3_sp(nxh, njk, s%work(1)%cs, s%work(2)%cs, s%work(3)%cs, s%p(:, :, :, 1), &
+                                 s%p(:, :, :, 2), s%p(:, :, :, 3), s%set%eta_f, s%kv, s%ik2, &
+                                 s%wx, alpha, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3))
+      else if (s%stencil) then
+         rz = stencil_update3(nxh, njk, s%work(1)%c, s%work(2)%c, s%work(3)%c, s%p(:, :, :, 1), &
+                              s%p(:, :, :, 2), s%p(:, :, :, 3), s%set%eta_f, s%kv, s%ik2, &
+                              s%wx, alpha, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3))
+      else if (s%single .and. s%dim == 3) then
          rz = apply_update3_sp(nxh, njk, s%work(1)%cs, s%work(2)%cs, s%work(4)%cs, s%work(5)%cs, s%work(6)%cs, &
                                s%kv, s%ik2, s%wx, alpha, s%r(:, :, :, 1), s%r(:, :, :, 2), s%r(:, :, :, 3))
       else if (s%single) then
@@ -1007,250 +1121,5 @@ contains
       end if
       rz = rz/s%eta0
    end function cg_apply_update
-
-   !> Traceless stress: sigma_33 = -sigma_11 - sigma_22.
-   function apply_update3(nxh, njk, w1, w2, w4, w5, w6, kv, ik2, wx, alpha, q1, q2, q3) result(v)
-      integer(ip), intent(in) :: nxh, njk
-      complex(dp), intent(in) :: w1(nxh, njk), w2(nxh, njk), w4(nxh, njk), w5(nxh, njk), w6(nxh, njk)
-      real(dp), intent(in) :: kv(3, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
-      complex(dp), intent(inout) :: q1(nxh, njk), q2(nxh, njk), q3(nxh, njk)
-      real(dp) :: v
-      integer(ip) :: i, jk
-      complex(dp) :: f1, f2, f3, t, r1, r2, r3
-      real(dp) :: k1, k2, k3
-      v = 0.0_dp
-      do jk = 1, njk
-         do i = 1, nxh
-            k1 = kv(1, i, jk)
-            k2 = kv(2, i, jk)
-            k3 = kv(3, i, jk)
-            f1 = rx(k1, w1(i, jk)) + rx(k2, w4(i, jk)) + rx(k3, w5(i, jk))
-            f2 = rx(k1, w4(i, jk)) + rx(k2, w2(i, jk)) + rx(k3, w6(i, jk))
-            f3 = rx(k1, w5(i, jk)) + rx(k2, w6(i, jk)) - rx(k3, (w1(i, jk) + w2(i, jk)))
-            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2) + rx(k3, f3))
-            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
-            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
-            r3 = q3(i, jk) - rx(alpha, (f3 - rx(k3, t)))
-            q1(i, jk) = r1
-            q2(i, jk) = r2
-            q3(i, jk) = r3
-            v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2 &
-                                      + real(r3)**2 + aimag(r3)**2)
-         end do
-      end do
-   end function apply_update3
-
-   !> Traceless stress: sigma_22 = -sigma_11.
-   function apply_update2(nxh, njk, w1, w3, kv, ik2, wx, alpha, q1, q2) result(v)
-      integer(ip), intent(in) :: nxh, njk
-      complex(dp), intent(in) :: w1(nxh, njk), w3(nxh, njk)
-      real(dp), intent(in) :: kv(2, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
-      complex(dp), intent(inout) :: q1(nxh, njk), q2(nxh, njk)
-      real(dp) :: v
-      integer(ip) :: i, jk
-      complex(dp) :: f1, f2, t, r1, r2
-      real(dp) :: k1, k2
-      v = 0.0_dp
-      do jk = 1, njk
-         do i = 1, nxh
-            k1 = kv(1, i, jk)
-            k2 = kv(2, i, jk)
-            f1 = rx(k1, w1(i, jk)) + rx(k2, w3(i, jk))
-            f2 = rx(k1, w3(i, jk)) - rx(k2, w1(i, jk))
-            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2))
-            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
-            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
-            q1(i, jk) = r1
-            q2(i, jk) = r2
-            v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2)
-         end do
-      end do
-   end function apply_update2
-
-   ! --------------------------------------------- single-precision operator kernels
-   ! The same passes as above with the strain/stress fields in single precision: the
-   ! CG vectors (r, p, x), the directions' scalars and every sum stay double; a value
-   ! is rounded to single once when it enters a transform and widened when it leaves.
-
-   !> direction_strain3 with a single-precision strain.
-   subroutine direction_strain3_sp(n, r1, r2, r3, pp1, pp2, pp3, x1, x2, x3, kv, ik2, inv_eta0, a_prev, beta, &
-                                   w1, w2, w4, w5, w6)
-      integer(ip), intent(in) :: n
-      complex(dp), intent(in) :: r1(n), r2(n), r3(n)
-      complex(dp), intent(inout) :: pp1(n), pp2(n), pp3(n), x1(n), x2(n), x3(n)
-      real(dp), intent(in) :: kv(3, n), ik2(n), inv_eta0, a_prev, beta
-      complex(c_float_complex), intent(out) :: w1(n), w2(n), w4(n), w5(n), w6(n)
-      integer(ip) :: m
-      complex(dp) :: p1, p2, p3
-      real(dp) :: z, d1, d2, d3
-      do m = 1, n
-         z = ik2(m)*inv_eta0
-         x1(m) = x1(m) + rx(a_prev, pp1(m))
-         x2(m) = x2(m) + rx(a_prev, pp2(m))
-         x3(m) = x3(m) + rx(a_prev, pp3(m))
-         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
-         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
-         p3 = rx(z, r3(m)) + rx(beta, pp3(m))
-         pp1(m) = p1
-         pp2(m) = p2
-         pp3(m) = p3
-         d1 = kv(1, m)
-         d2 = kv(2, m)
-         d3 = kv(3, m)
-         w1(m) = cmplx(rx(d1, p1), kind=c_float_complex)
-         w2(m) = cmplx(rx(d2, p2), kind=c_float_complex)
-         w4(m) = cmplx(rx(0.5_dp, (rx(d1, p2) + rx(d2, p1))), kind=c_float_complex)
-         w5(m) = cmplx(rx(0.5_dp, (rx(d1, p3) + rx(d3, p1))), kind=c_float_complex)
-         w6(m) = cmplx(rx(0.5_dp, (rx(d2, p3) + rx(d3, p2))), kind=c_float_complex)
-      end do
-   end subroutine direction_strain3_sp
-
-   !> direction_strain2 with a single-precision strain.
-   subroutine direction_strain2_sp(n, r1, r2, pp1, pp2, x1, x2, kv, ik2, inv_eta0, a_prev, beta, w1, w3)
-      integer(ip), intent(in) :: n
-      complex(dp), intent(in) :: r1(n), r2(n)
-      complex(dp), intent(inout) :: pp1(n), pp2(n), x1(n), x2(n)
-      real(dp), intent(in) :: kv(2, n), ik2(n), inv_eta0, a_prev, beta
-      complex(c_float_complex), intent(out) :: w1(n), w3(n)
-      integer(ip) :: m
-      complex(dp) :: p1, p2
-      real(dp) :: z, d1, d2
-      do m = 1, n
-         z = ik2(m)*inv_eta0
-         x1(m) = x1(m) + rx(a_prev, pp1(m))
-         x2(m) = x2(m) + rx(a_prev, pp2(m))
-         p1 = rx(z, r1(m)) + rx(beta, pp1(m))
-         p2 = rx(z, r2(m)) + rx(beta, pp2(m))
-         pp1(m) = p1
-         pp2(m) = p2
-         d1 = kv(1, m)
-         d2 = kv(2, m)
-         w1(m) = cmplx(rx(d1, p1), kind=c_float_complex)
-         w3(m) = cmplx(rx(0.5_dp, (rx(d1, p2) + rx(d2, p1))), kind=c_float_complex)
-      end do
-   end subroutine direction_strain2_sp
-
-   !> viscous_energy3 on single-precision fields; ceta = c eta (single). Each row's
-   !> sum is formed in single (nx terms: relative error <= nx u_s, which only shifts the
-   !> step length alpha; x and r move by the same alpha p, so the recursion stays
-   !> consistent), the rows are summed in double.
-   function viscous_energy3_sp(nx, nxp, nrows, ceta, w1, w2, w4, w5, w6) result(pq)
-      integer(ip), intent(in) :: nx, nxp, nrows
-      real(c_float), intent(in) :: ceta(nxp, nrows)
-      real(c_float), intent(inout) :: w1(nxp, nrows), w2(nxp, nrows), w4(nxp, nrows), w5(nxp, nrows), &
-                                      w6(nxp, nrows)
-      real(dp) :: pq
-      integer(ip) :: i, r
-      real(c_float) :: ce, e1, e2, e4, e5, e6, row
-      pq = 0.0_dp
-      do r = 1, nrows
-         row = 0.0_c_float
-         do i = 1, nx
-            ce = ceta(i, r)
-            e1 = w1(i, r)
-            e2 = w2(i, r)
-            e4 = w4(i, r)
-            e5 = w5(i, r)
-            e6 = w6(i, r)
-            row = row + ce*(e1*e1 + e2*e2 + (e1 + e2)**2 + 2.0_c_float*(e4*e4 + e5*e5 + e6*e6))
-            w1(i, r) = ce*e1
-            w2(i, r) = ce*e2
-            w4(i, r) = ce*e4
-            w5(i, r) = ce*e5
-            w6(i, r) = ce*e6
-         end do
-         pq = pq + real(row, dp)
-      end do
-   end function viscous_energy3_sp
-
-   !> viscous_energy2 on single-precision fields (ceta = c eta; rows summed in single
-   !> as in viscous_energy3_sp).
-   function viscous_energy2_sp(nx, nxp, nrows, ceta, w1, w3) result(pq)
-      integer(ip), intent(in) :: nx, nxp, nrows
-      real(c_float), intent(in) :: ceta(nxp, nrows)
-      real(c_float), intent(inout) :: w1(nxp, nrows), w3(nxp, nrows)
-      real(dp) :: pq
-      integer(ip) :: i, r
-      real(c_float) :: ce, e1, e3, row
-      pq = 0.0_dp
-      do r = 1, nrows
-         row = 0.0_c_float
-         do i = 1, nx
-            ce = ceta(i, r)
-            e1 = w1(i, r)
-            e3 = w3(i, r)
-            row = row + 2.0_c_float*ce*(e1*e1 + e3*e3)
-            w1(i, r) = ce*e1
-            w3(i, r) = ce*e3
-         end do
-         pq = pq + real(row, dp)
-      end do
-   end function viscous_energy2_sp
-
-   !> apply_update3 reading a single-precision stress.
-   function apply_update3_sp(nxh, njk, w1, w2, w4, w5, w6, kv, ik2, wx, alpha, q1, q2, q3) result(v)
-      integer(ip), intent(in) :: nxh, njk
-      complex(c_float_complex), intent(in) :: w1(nxh, njk), w2(nxh, njk), w4(nxh, njk), w5(nxh, njk), w6(nxh, njk)
-      real(dp), intent(in) :: kv(3, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
-      complex(dp), intent(inout) :: q1(nxh, njk), q2(nxh, njk), q3(nxh, njk)
-      real(dp) :: v
-      integer(ip) :: i, jk
-      complex(dp) :: f1, f2, f3, t, r1, r2, r3, s1, s2, s4, s5, s6
-      real(dp) :: k1, k2, k3
-      v = 0.0_dp
-      do jk = 1, njk
-         do i = 1, nxh
-            k1 = kv(1, i, jk)
-            k2 = kv(2, i, jk)
-            k3 = kv(3, i, jk)
-            s1 = cmplx(w1(i, jk), kind=dp)
-            s2 = cmplx(w2(i, jk), kind=dp)
-            s4 = cmplx(w4(i, jk), kind=dp)
-            s5 = cmplx(w5(i, jk), kind=dp)
-            s6 = cmplx(w6(i, jk), kind=dp)
-            f1 = rx(k1, s1) + rx(k2, s4) + rx(k3, s5)
-            f2 = rx(k1, s4) + rx(k2, s2) + rx(k3, s6)
-            f3 = rx(k1, s5) + rx(k2, s6) - rx(k3, (s1 + s2))
-            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2) + rx(k3, f3))
-            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
-            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
-            r3 = q3(i, jk) - rx(alpha, (f3 - rx(k3, t)))
-            q1(i, jk) = r1
-            q2(i, jk) = r2
-            q3(i, jk) = r3
-            v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2 &
-                                      + real(r3)**2 + aimag(r3)**2)
-         end do
-      end do
-   end function apply_update3_sp
-
-   !> apply_update2 reading a single-precision stress.
-   function apply_update2_sp(nxh, njk, w1, w3, kv, ik2, wx, alpha, q1, q2) result(v)
-      integer(ip), intent(in) :: nxh, njk
-      complex(c_float_complex), intent(in) :: w1(nxh, njk), w3(nxh, njk)
-      real(dp), intent(in) :: kv(2, nxh, njk), ik2(nxh, njk), wx(nxh), alpha
-      complex(dp), intent(inout) :: q1(nxh, njk), q2(nxh, njk)
-      real(dp) :: v
-      integer(ip) :: i, jk
-      complex(dp) :: f1, f2, t, r1, r2, s1, s3
-      real(dp) :: k1, k2
-      v = 0.0_dp
-      do jk = 1, njk
-         do i = 1, nxh
-            k1 = kv(1, i, jk)
-            k2 = kv(2, i, jk)
-            s1 = cmplx(w1(i, jk), kind=dp)
-            s3 = cmplx(w3(i, jk), kind=dp)
-            f1 = rx(k1, s1) + rx(k2, s3)
-            f2 = rx(k1, s3) - rx(k2, s1)
-            t = rx(ik2(i, jk), rx(k1, f1) + rx(k2, f2))
-            r1 = q1(i, jk) - rx(alpha, (f1 - rx(k1, t)))
-            r2 = q2(i, jk) - rx(alpha, (f2 - rx(k2, t)))
-            q1(i, jk) = r1
-            q2(i, jk) = r2
-            v = v + wx(i)*ik2(i, jk)*(real(r1)**2 + aimag(r1)**2 + real(r2)**2 + aimag(r2)**2)
-         end do
-      end do
-   end function apply_update2_sp
 
 end module fold_stokes_fft
