@@ -1,14 +1,16 @@
 """Cost of the Stokes solver: one CG iteration in real-3-D-FFT units, CG iterations
 against kappa and grid, and what np = 2 buys.
 
-Question: how close is an iteration to its floor (10 real FFTs in 3-D: 5 traceless
-strain components back, 5 stress components forward), at 64^3 and 128^3; how do the
+Question: how close is an iteration to its floor (6 real FFTs in the 3-D stencil form:
+3 velocity components back, 3 force components forward; 10 in the spectral form), at
+64^3 and 128^3; how do the
 iterations to a 1e-6 residual grow with the contrast kappa and the grid; and what
 is the speed-up of np = 2 slabs over np = 1 at 128^3?
 Command:  python benchmarks/bench_stokes_fft.py [--build build/editable] [--repeats 5] [--quick]
           python benchmarks/bench_stokes_fft.py --mpi [--grids 64 128] [--rounds 5]
           python benchmarks/bench_stokes_fft.py --project T_C ALPHA BETA [--grids 128]
           python benchmarks/bench_stokes_fft.py --precision [--grids 72 128] [--rounds 3]
+          python benchmarks/bench_stokes_fft.py --forms [--grids 72] [--rounds 3]
 Cost: ~3 min (--quick: ~1 min; --mpi: 2-5 min per round of 64^3 and 128^3, 4.5 min at load 10). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
 plans, a sphere of radius n/8 on a sheared lattice, simple shear) and prints medians
 over repeats, with the load average before and after: the machine is shared, so read
@@ -23,6 +25,14 @@ transforms of the operator (fft_precision single) against double, serial, per gr
 rounds of double then single back to back, medians of the CPU seconds per iteration,
 of the iteration in units of one hot double FFT of the same process (CPU time), of the
 hot single FFT against the double one (wall), and the speed-up double/single.
+
+``--forms`` answers only: what does a serial CG iteration (double) cost in the stencil
+form (3 + 3 transforms and a real-space pass over the voxels with eta /= eta_f, the
+3-D default) against the spectral form (5 + 5 transforms), on a small sphere (0.8 % of
+the cell) and a large one (27 %): rounds of the four back to back, medians of the
+iteration in units of one hot double FFT (CPU time). The stencil pass grows with the
+covered fraction, the spectral form does not: the crossover sets
+STENCIL_FRACTION_MAX in fortran/stokes/fold_stokes_fft.f90.
 
 ``--mpi`` answers only the parallel question (docs/physics.md, "Parallel scaling of
 the slab decomposition"): per round and grid, back to back, np = 1 (serial FFTW),
@@ -57,9 +67,10 @@ def _run(exe: Path, args: list[str], ranks: int) -> str:
     return subprocess.run(cmd, capture_output=True, text=True, check=True, env=ENV).stdout
 
 
-def cost(exe: Path, n: int, ranks: int, repeats: int, backend: str = "auto", precision: str = "double") -> dict:
+def cost(exe: Path, n: int, ranks: int, repeats: int, backend: str = "auto", precision: str = "double",
+         shape: str = "sphere") -> dict:
     """Medians over repeats of the BENCH lines (first repeat dropped: page faults, caches)."""
-    out = _run(exe, [str(n), "1000", str(repeats + 1), "cost", "sphere", backend, precision], ranks)
+    out = _run(exe, [str(n), "1000", str(repeats + 1), "cost", shape, backend, precision], ranks)
     rows = [dict((k, float(v)) for k, v in re.findall(r"(\w+)=\s*(\S+)", line))
             for line in out.splitlines() if line.startswith("BENCH")][1:]
     return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
@@ -81,6 +92,11 @@ def alltoall(exe: Path, n: int, repeats: int) -> dict:
     return {key: statistics.median(r[key] for r in rows) for key in rows[0]}
 
 
+#: Transforms, hence slab all-to-alls, per CG iteration in the 3-D stencil form
+#: (fortran/stokes/fold_stokes_fft.f90; the spectral form makes 10)
+TRANSFORMS = 6
+
+
 def slab_a2a(p: int, n: int, alpha: float, beta: float) -> float:
     """Seconds of one slab all-to-all of the half spectrum on p ranks: p - 1 messages of V/p^2."""
     v = 16.0 * (n // 2 + 1) * n * n
@@ -97,24 +113,24 @@ def pencil_a2a(p: int, n: int, alpha: float, beta: float) -> float:
 
 
 def projection(n: int, t_c: float, alpha: float, beta: float, ps: list[int]) -> None:
-    """Strong scaling at n^3: t(P) = t_c/P + 10 a2a(P) per CG iteration (10 transforms,
+    """Strong scaling at n^3: t(P) = t_c/P + 6 a2a(P) per CG iteration (TRANSFORMS,
     one all-to-all each for slabs, two for pencils); slabs need P <= n."""
     print(f"\nprojected strong scaling at {n}^3 (t_c = {t_c:.3e} s, alpha = {alpha:.2e} s, beta = {beta:.2e} B/s)")
     print(f"{'P':>6} {'slab t_iter':>12} {'speed-up':>9} {'pencil t_iter':>14} {'speed-up':>9}")
     for p in ps:
-        slab = t_c / p + 10.0 * slab_a2a(p, n, alpha, beta) if p <= n else float("nan")
-        pen = t_c / p + 10.0 * pencil_a2a(p, n, alpha, beta)
+        slab = t_c / p + TRANSFORMS * slab_a2a(p, n, alpha, beta) if p <= n else float("nan")
+        pen = t_c / p + TRANSFORMS * pencil_a2a(p, n, alpha, beta)
         print(f"{p:>6} {slab:>12.3e} {t_c / slab:>9.1f} {pen:>14.3e} {t_c / pen:>9.1f}")
     # weak scaling: n^3/P = n0^3 points per rank, compute per rank ~ log2(n) (the FFTs)
     w = n ** 3 // 2
     print(f"\nprojected weak scaling at {w} points per rank (compute t_c/2 log2(n)/log2({n}); slabs need P <= n)")
     print(f"{'P':>6} {'n':>6} {'slab t_iter':>12} {'efficiency':>10} {'pencil t_iter':>14} {'efficiency':>10}")
-    t2 = t_c / 2 + 10.0 * slab_a2a(2, n, alpha, beta)
+    t2 = t_c / 2 + TRANSFORMS * slab_a2a(2, n, alpha, beta)
     for p in [2, 16, 128, 1024, 8192, 65536]:
         m = round((w * p) ** (1.0 / 3.0))
         comp = t_c / 2 * math.log2(m) / math.log2(n)
-        slab = comp + 10.0 * slab_a2a(p, m, alpha, beta) if p <= m else float("nan")
-        pen = comp + 10.0 * pencil_a2a(p, m, alpha, beta)
+        slab = comp + TRANSFORMS * slab_a2a(p, m, alpha, beta) if p <= m else float("nan")
+        pen = comp + TRANSFORMS * pencil_a2a(p, m, alpha, beta)
         print(f"{p:>6} {m:>6} {slab:>12.3e} {t2 / slab:>10.2f} {pen:>14.3e} {t2 / pen:>10.2f}")
 
 
@@ -159,8 +175,9 @@ def mpi_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
     big = min(a["t_big"] for a in a2a[n])
     beta = a2a[n][0]["bytes_pair"] / max(big - alpha, 1e-12)
     tc = min(t_c[n])
-    print(f"\nmodel at P = 2, {n}^3: t_c/2 + 10 a2a(2) = {tc / 2 + 10 * slab_a2a(2, n, alpha, beta):.3e} s per iteration "
-          f"(transposed; natural: {tc / 2 + 20 * slab_a2a(2, n, alpha, beta):.3e} s)")
+    t2 = tc / 2 + TRANSFORMS * slab_a2a(2, n, alpha, beta)
+    print(f"\nmodel at P = 2, {n}^3: t_c/2 + {TRANSFORMS} a2a(2) = {t2:.3e} s per iteration "
+          f"(transposed; natural: {tc / 2 + 2 * TRANSFORMS * slab_a2a(2, n, alpha, beta):.3e} s)")
     projection(n, tc, alpha, beta, [1, 2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096])
 
 
@@ -188,6 +205,27 @@ def precision_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> 
                   f"({len(vals)} rounds)")
 
 
+def forms_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None:
+    """Serial CG iteration, stencil against spectral form, small and large sphere."""
+    cases = [(shape, form) for shape in ("sphere", "ball") for form in ("auto", "spectral")]
+    rows: dict[tuple[int, str, str], list[float]] = {}
+    print(f"{'round':>5} {'grid':>6} {'load 1/5/15 min':>17} " + " ".join(f"{s + '/' + f:>16}" for s, f in cases))
+    for r in range(rounds):
+        for n in grids:
+            before = load()
+            vals = []
+            for shape, form in cases:
+                c = cost(exe, n, 1, repeats, form, "double", shape)
+                vals.append(c["t_iter_cpu"] / c["t_fft_cpu"])
+                rows.setdefault((n, shape, form), []).append(vals[-1])
+            print(f"{r:>5} {n:>5}^3 {before:>17} " + " ".join(f"{v:>16.2f}" for v in vals), flush=True)
+    print("\nmedian [min, max] over rounds of FFT-eq per iteration (CPU time; auto = the stencil form; "
+          "sphere 0.8 %, ball 27 % of the cell)")
+    for (n, shape, form), v in rows.items():
+        print(f"  {n:>4}^3 {shape:<7} {('stencil' if form == 'auto' else 'spectral'):<9} "
+              f"{statistics.median(v):6.2f} [{min(v):.2f}, {max(v):.2f}]  ({len(v)} rounds)")
+
+
 def iterations(exe: Path, n: int, kappa: float, shape: str = "sphere") -> int:
     out = _run(exe, [str(n), str(kappa), "1", "iters", shape], 1)
     m = re.search(r"iterations=\s*(\d+)", out)
@@ -202,7 +240,9 @@ def main() -> None:
     ap.add_argument("--mpi", action="store_true", help="only np = 2 against np = 1 (transposed, natural, batched)")
     ap.add_argument("--precision", action="store_true",
                     help="only the serial iteration with single- against double-precision transforms")
-    ap.add_argument("--grids", type=int, nargs="+", default=[64, 128], help="grids of --mpi and --precision")
+    ap.add_argument("--forms", action="store_true",
+                    help="only the serial iteration in the stencil against the spectral form, small and large sphere")
+    ap.add_argument("--grids", type=int, nargs="+", default=[64, 128], help="grids of --mpi, --precision and --forms")
     ap.add_argument("--rounds", type=int, default=5, help="rounds of --mpi and --precision")
     ap.add_argument("--project", type=float, nargs=3, metavar=("T_C", "ALPHA", "BETA"),
                     help="only print the projected scaling at max(--grids) for a serial iteration T_C [s], "
@@ -222,6 +262,10 @@ def main() -> None:
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
     if args.precision:
         precision_rounds(exe, args.grids, args.rounds, args.repeats)
+        print(f"\nload average after: {load()}")
+        return
+    if args.forms:
+        forms_rounds(exe, args.grids, args.rounds, args.repeats)
         print(f"\nload average after: {load()}")
         return
     if args.mpi:

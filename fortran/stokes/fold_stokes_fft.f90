@@ -22,7 +22,14 @@
 !> and so is the stress 2 eta eps (eta is a scalar field): eps_33 = -eps_11 - eps_22
 !> and sigma_33 = -sigma_11 - sigma_22 pointwise. Only the 5 (2-D: 2) independent
 !> components are transformed: 10 real 3-D FFTs per iteration in 3-D (4 in 2-D)
-!> instead of 12 (6).
+!> instead of 12 (6). That is the spectral form (spectral derivatives, and 2-D). In 3-D
+!> with the default rotated differences the solver takes the stencil form
+!> (stencil_init): 2 eta = 2 eta_f + 2 (eta - eta_f), the uniform part applied in
+!> Fourier space (eta_f |kv|^2 p for a divergence-free p) and the rest by the
+!> real-space stencil of the scheme over the voxels where eta /= eta_f only
+!> (stencil_force, fortran/stokes/fold_cg_kernels.f90.in): 3 c2r of the corner
+!> velocity and 3 r2c of the corner force per iteration. The stencil form iterates on
+!> the corner grid's own coefficients (unstaggered; converted on entry and exit).
 !> Wavevectors of the skewed lattice are k = 2 pi A^-T m. Derivative schemes:
 !>  * FOLD_DERIV_SPECTRAL: d = i k; velocity and strain at voxel centres. Every
 !>    mode with a Nyquist index is removed from the unknowns (on even grids its
@@ -49,12 +56,15 @@
 !> (relative preconditioned, i.e. energy-like, residual).
 !> No allocation happens inside the iteration; the FFT plans are made once.
 !>
-!> Single-precision transforms (settings fft_precision = FOLD_FFT_SINGLE). The 2 ncg
-!> transforms of each iteration (and of the warm start's r = b - A x) run on fftwf
-!> plans over the first half of the work fields' memory (fft_field_t%rs/cs): the
-!> direction pass rounds the strain to single as it writes it, the viscosity pass
-!> multiplies by 2 eta/N held in single and sums <p, A p> in double, the update pass
-!> widens the stress to double. x, r, p, the preconditioner, every dot product and
+!> Single-precision transforms (settings fft_precision = FOLD_FFT_SINGLE). Spectral
+!> form: the 2 ncg transforms of each iteration (and of the warm start's r = b - A x)
+!> run on fftwf plans over the first half of the work fields' memory
+!> (fft_field_t%rs/cs): the direction pass rounds the strain to single as it writes it,
+!> the viscosity pass multiplies by 2 eta/N held in single and sums <p, A p> in double,
+!> the update pass widens the stress to double. Stencil form: the velocity goes to
+!> real space in double (a difference of rounded corner values would magnify their
+!> round-off by up to max|kv| / min|kv|), the force is accumulated and transformed in
+!> single: one rounding per contribution and one transform, within the bound below. x, r, p, the preconditioner, every dot product and
 !> the residual stay double, and so do the right-hand side, the velocity and strain
 !> outputs and stokes_fft_true_residual. CG therefore runs with a perturbed operator
 !> A + dA, |dA p| <= eps |A p| in the sense of the stress field, with
@@ -99,6 +109,13 @@ module fold_stokes_fft
              FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, &
              FOLD_FFT_SINGLE
 
+   !> Largest fraction of the cell's voxels with eta /= eta_f for which a solve takes the
+   !> stencil form: its pass costs in proportion to those voxels, the spectral form's
+   !> 4 extra transforms do not (the two forms give the same operator to round-off, so
+   !> this chooses the speed only). Crossover measured with
+   !> benchmarks/bench_stokes_fft.py --forms (docs/physics.md#fft-stokes-solver).
+   real(dp), parameter, public :: STENCIL_FRACTION_MAX = 0.3_dp
+
    !> Solver state: plans, grid, work fields and the Fourier-space solution.
    type, extends(stokes_solver_t), public :: stokes_fft_t
       class(fft_backend_t), allocatable :: fft
@@ -116,6 +133,11 @@ module fold_stokes_fft
       !> by a real-space stencil over the particles' voxels, 3 + 3 transforms per
       !> iteration instead of 5 + 5 (fortran/stokes/fold_cg_kernels.f90.in, stencil_force)
       logical :: stencil = .false.
+      !> The stencil form is available (3-D, rotated differences, >= 1 z-plane per rank);
+      !> each solve takes it when the voxels with eta /= eta_f are at most
+      !> stencil_fraction_max of the cell (STENCIL_FRACTION_MAX; < 0: never)
+      logical :: stencil_ok = .false.
+      real(dp) :: stencil_fraction_max = STENCIL_FRACTION_MAX
       !> Stencil form: i phase of every mode, phase = e^{i pi sum_l m_l / n_l}, as
       !> ph1(x index) * ph23(flattened local y, z index) (separable)
       complex(dp), allocatable :: ph1(:), ph23(:)
@@ -377,8 +399,9 @@ contains
       integer(ip) :: i, j, k, m(3), ny
       ext = [-real(s%fft%nl(3), dp)]
       call s%fft%max_all(ext)
-      s%stencil = s%dim == 3 .and. s%set%derivative == FOLD_DERIV_FD .and. -ext(1) >= 1.0_dp
-      if (.not. s%stencil) return
+      s%stencil = .false.
+      s%stencil_ok = s%dim == 3 .and. s%set%derivative == FOLD_DERIV_FD .and. -ext(1) >= 1.0_dp
+      if (.not. s%stencil_ok) return
       ny = s%fft%nl(2)
       allocate (s%ph1(s%fft%nxh), s%ph23(s%fft%nsl(2)*s%fft%nsl(3)))
       allocate (s%hfirst(s%fft%nxp, ny, 3), s%uhi(s%fft%nxp, ny, 3), s%fover(s%fft%nxp, ny, 3), &
@@ -405,14 +428,20 @@ contains
       end do
    end subroutine stencil_init
 
-   !> The stencil form's active centres: every local voxel whose viscosity differs from
-   !> eta_f, with 2 (eta - eta_f) / N (s%eta set). Grows the lists when needed (once per
-   !> solve, never inside the iteration).
+   !> Choose the form of this solve (s%stencil: the voxels with eta /= eta_f are at most
+   !> stencil_fraction_max of the cell, counted over all ranks) and, for the stencil
+   !> form, list them with 2 (eta - eta_f) / N (s%eta set). Grows the lists when needed
+   !> (once per solve, never inside the iteration). Collective.
    subroutine stencil_active(s)
       type(stokes_fft_t), intent(inout) :: s
       integer(ip) :: i, j, k, n
-      real(dp) :: c
+      real(dp) :: c, frac(1)
       n = int(count(s%eta%r(1:s%grid%n(1), :, :) /= s%set%eta_f), ip)
+      frac = [real(n, dp)]
+      call s%fft%sum_all(frac)
+      s%stencil = frac(1) <= s%stencil_fraction_max*real(grid_total(s%grid), dp)
+      s%nact = 0
+      if (.not. s%stencil) return
       if (size(s%dceta) < n) then
          deallocate (s%act, s%dceta)
          allocate (s%act(3, n + n/4), s%dceta(n + n/4))
@@ -488,7 +517,7 @@ contains
 
       s%ceta = (2.0_dp/real(grid_total(s%grid), dp))*s%eta%r
       if (s%single) s%eta_sp = real(s%ceta, c_float)
-      if (s%stencil) call stencil_active(s)
+      if (s%stencil_ok) call stencil_active(s)
 
       ! right-hand side b = -P B^H (2 eta E), from one FFT of 2 eta
       call rhs(s, s%r)
@@ -633,6 +662,7 @@ contains
       if (allocated(s%ph1)) deallocate (s%ph1, s%ph23, s%hfirst, s%uhi, s%fover, s%frecv, s%hscr, s%act, s%dceta)
       s%nact = 0
       s%stencil = .false.
+      s%stencil_ok = .false.
       s%single = .false.
       if (allocated(s%fft)) then
          call s%fft%destroy()

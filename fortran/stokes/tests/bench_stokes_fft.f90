@@ -8,7 +8,10 @@
 !>     extension use), FFTW-MPI slabs on several (spectrum left transposed: one
 !>     all-to-all per transform); "mpi": FFTW-MPI slabs even on one rank;
 !>     "natural": FFTW-MPI slabs with the spectrum in the real-space order (two
-!>     all-to-alls per transform; the layout before the transposed one).
+!>     all-to-alls per transform; the layout before the transposed one);
+!>     "spectral": serial, with the CG operator in its spectral form (5 + 5 transforms)
+!>     instead of the 3-D stencil form (3 + 3 and a stencil pass over the particles'
+!>     voxels), to compare the two on one geometry.
 !>   mode "cost" (default): wall time of one CG iteration in units of one real 3-D
 !>     FFT of the same grid, two ways: against a "hot" FFT (r2c + c2r of one field,
 !>     repeated; K's original unit) and against the FFTs as the iteration sees them
@@ -33,7 +36,9 @@
 !>     transposed transform (16 (n/2 + 1) n^2 / P^2 bytes per pair); bw = bytes each
 !>     rank sends to the others / t_big; one line per repeat:
 !>       A2A n= ranks= t_small= t_big= bytes_pair= bw=
-!> Geometry (shape): "sphere" (default), radius N/8 voxels, or "spheroid", a prolate
+!> Geometry (shape): "sphere" (default), radius N/8 voxels (0.8 % of the cell);
+!> "ball", radius 0.4 N (27 % of the cell: the stencil pass over many voxels); or
+!> "spheroid", a prolate
 !> spheroid of semi-axes 1/4 and 1/32 (aspect ratio 8; 4 voxels per diameter at
 !> N = 64) along (1, 1, 1)/sqrt(3); binary chi, in a unit cell on a sheared
 !> (Lees-Edwards, offset 0.2) lattice, simple shear, FFTW_MEASURE plans, FFTW-MPI
@@ -129,6 +134,7 @@ program bench_stokes_fft
    end if
    call stokes_fft_init(s, fft, set, stat, msg)
    call check("stokes_fft_init")
+   if (trim(backend) == "spectral") s%stencil_fraction_max = -1.0_dp
    call stokes_fft_set_lattice(s, shear_lattice([1.0_dp, 1.0_dp, 1.0_dp], 0.2_dp), stat, msg)
    call check("stokes_fft_set_lattice")
    allocate (chi(n, s%grid%nl(2), s%grid%nl(3)))
@@ -139,6 +145,8 @@ program bench_stokes_fft
             if (trim(shape) == "spheroid") then
                along = dot_product(x, ax)
                chi(i, j, k) = merge(1.0_dp, 0.0_dp, (along/0.25_dp)**2 + sum((x - along*ax)**2)/0.03125_dp**2 < 1.0_dp)
+            else if (trim(shape) == "ball") then
+               chi(i, j, k) = merge(1.0_dp, 0.0_dp, norm2(x) < 0.4_dp)
             else
                chi(i, j, k) = merge(1.0_dp, 0.0_dp, norm2(x) < 0.125_dp)
             end if

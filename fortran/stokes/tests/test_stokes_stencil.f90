@@ -73,7 +73,7 @@ contains
       call check(stat == FOLD_OK, "set_lattice: "//trim(msg), failures)
       select type (s)
       type is (stokes_fft_t)
-         call check(s%stencil, "the 3-D rotated-difference solver takes the stencil form", failures)
+         call check(s%stencil_ok, "the 3-D rotated-difference solver has the stencil form", failures)
          ! a sphere of radius 0.3 of the cell with a one-voxel partial-volume ramp
          allocate (chi(n(1), s%grid%nl(2), s%grid%nl(3)))
          do k = 1, s%grid%nl(3)
@@ -88,6 +88,7 @@ contains
          G(1, 2) = 1.0_dp
          call s%solve(chi, G, stat, msg)
          call check(stat == FOLD_OK, "solve: "//trim(msg), failures)
+         call check(s%stencil, "a sphere of 13 % of the cell is solved in the stencil form", failures)
          res = stokes_fft_true_residual(s)
          call check(res <= 2.0_dp*set%tol, "true residual <= 2 tol", failures)
          if (rank == 0) print '(a,3(1x,i0),a,i0,a,es9.2,a,i0,a,es9.2)', "grid", n, " precision ", precision, &
