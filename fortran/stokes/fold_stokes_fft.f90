@@ -114,7 +114,7 @@ module fold_stokes_fft
    !> 4 extra transforms do not (the two forms give the same operator to round-off, so
    !> this chooses the speed only). Crossover measured with
    !> benchmarks/bench_stokes_fft.py --forms (docs/physics.md#fft-stokes-solver).
-   real(dp), parameter, public :: STENCIL_FRACTION_MAX = 0.3_dp
+   real(dp), parameter, public :: STENCIL_FRACTION_MAX = 0.2_dp
 
    !> Solver state: plans, grid, work fields and the Fourier-space solution.
    type, extends(stokes_solver_t), public :: stokes_fft_t
