@@ -16,8 +16,9 @@
 !>     FFT of the same grid, two ways: against a "hot" FFT (r2c + c2r of one field,
 !>     repeated; K's original unit) and against the FFTs as the iteration sees them
 !>     (c2r then r2c over the ncg strain fields in turn). The floor is the number of
-!>     FFTs per iteration (10 in 3-D: 5 traceless strain components back, 5 stress
-!>     components forward). One line per repeat:
+!>     FFTs per iteration, ffts: 6 in the 3-D stencil form (3 velocity components back,
+!>     3 force components forward), 10 in the spectral form (5 traceless strain
+!>     components back, 5 stress components forward). One line per repeat:
 !>       BENCH n= ranks= t_fft= t_fft_seq= t_iter= ratio= ratio_seq= ffts= t_fft_sp= t_iter_cpu= t_fft_cpu=
 !>   mode "fft": the time of one hot real 3-D FFT (r2c + c2r of one field, 50 pairs
 !>     per repeat), wall and CPU seconds of this process; one line per repeat:
@@ -275,7 +276,7 @@ program bench_stokes_fft
          c_it = (c1 - c0 - c_fft)/max(s%iterations, 1)
          if (rank == 0) print '(a,i0,a,i0,a,es10.3,a,es10.3,a,es10.3,a,f6.2,a,f6.2,a,i0,3(a,es10.3))', "BENCH n=", n, &
             " ranks=", nranks, " t_fft=", t_fft, " t_fft_seq=", t_seq, " t_iter=", t_it, " ratio=", t_it/t_fft, &
-            " ratio_seq=", t_it/t_seq, " ffts=", 2*s%ncg, " t_fft_sp=", t_fft_sp, " t_iter_cpu=", c_it, &
+            " ratio_seq=", t_it/t_seq, " ffts=", merge(6_ip, 2*s%ncg, s%stencil), " t_fft_sp=", t_fft_sp, " t_iter_cpu=", c_it, &
             " t_fft_cpu=", c_fft
       end do
    end if
