@@ -106,7 +106,7 @@ from pyfold.command_line import check_single_line, job_line
 from pyfold.closures import get_closure
 from pyfold.correlations import PUBLISHED_RANGE, correlations_at
 from pyfold.ensemble import ensemble_mean, paired_difference
-from pyfold.errors import PyfoldError
+from pyfold.errors import InputError, PyfoldError
 from pyfold.run_file import read_setup
 from pyfold.runs import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
@@ -305,7 +305,7 @@ def main() -> None:
     if args.write_scenes:
         try:  # before anything is written: the commands are printed one per line
             check_single_line("--out", args.out)
-        except PyfoldError as exc:
+        except InputError as exc:
             ap.error(str(exc))
     study = LARGE if args.large else SMALL
     if args.seeds:
