@@ -53,10 +53,16 @@ def command_line(argv: Iterable[Argument]) -> str:
     return shlex.join(path_argument(a) if isinstance(a, os.PathLike) else str(a) for a in argv)
 
 
-def pyfold_executable() -> Path:
-    """The ``pyfold`` launcher beside the running interpreter (the venv's own), so
-    that a batch job running a generated line needs no PATH set-up."""
-    return Path(sys.executable).parent / "pyfold"
+def pyfold_executable() -> str:
+    """The ``pyfold`` that generated lines call.
+
+    The launcher beside the running interpreter (the venv's own), so that a batch
+    job running a generated line needs no PATH set-up; where the interpreter has no
+    launcher beside it (pyfold imported from a source tree), plain ``pyfold``, found
+    on PATH when the line runs.
+    """
+    launcher = Path(sys.executable).parent / "pyfold"
+    return str(launcher) if launcher.is_file() else "pyfold"
 
 
 def check_single_line(option: str, path: os.PathLike | str) -> None:

@@ -87,10 +87,10 @@ Command
     On a cluster every simulation is an independent `pyfold run`: write the scenes and
     one command per line, submit them as an array job of a batch scheduler (Slurm
     shown; any scheduler that runs line i in task i will do), then run the study, which
-    finds the finished runs and only analyses. Each line calls the pyfold of the venv
-    that wrote it, every argument shell-quoted (pyfold.command_line), so `sh` runs that
-    pyfold with exactly the paths given, whatever characters --run-folder holds (a
-    line break is refused: one command per line):
+    finds the finished runs and only analyses. Each line calls the pyfold beside the
+    python that wrote it (pyfold.command_line.pyfold_executable), every argument
+    shell-quoted, so `sh` runs that pyfold with exactly the paths given, whatever
+    characters --run-folder holds (a line break is refused: one command per line):
 
         .venv/bin/python studies/closures_vs_dns/closure_verdict.py --large --write-scenes
         sbatch --array=1-$(wc -l < out/closures_vs_dns/runs/commands.txt) \\

@@ -82,8 +82,8 @@ Command
     Cluster: every (beta, n L^3, seed) run is an independent `pyfold run` job.
     `--emit-scenes DIR [--large]` writes one scene per run and DIR/jobs.txt with one
     command line per run (`VENV/bin/pyfold run DIR/NAME.toml -o
-    out/interaction_coefficient/runs/NAME.h5 --np N`: the pyfold of the venv that wrote
-    it, every argument shell-quoted by pyfold.command_line, so `sh` runs exactly that
+    out/interaction_coefficient/runs/NAME.h5 --np N`: the pyfold beside the python that
+    wrote it, every argument shell-quoted by pyfold.command_line, so `sh` runs exactly that
     pyfold on exactly those paths; a line break in DIR or --out is refused), e.g. for a
     batch-scheduler array (Slurm: `sbatch --array=1-$(wc -l < DIR/jobs.txt) --wrap
     'sed -n "${SLURM_ARRAY_TASK_ID}p" DIR/jobs.txt | sh'`); then

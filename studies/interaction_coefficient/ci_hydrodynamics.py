@@ -54,7 +54,7 @@ Command
     large (a cluster; each run an independent ``pyfold run`` job):
         .venv/bin/python studies/interaction_coefficient/ci_hydrodynamics.py --large --write-scenes
             # writes runs/<model>_seed<k>.toml and prints one `pyfold run` command per run
-            # and line (the venv's pyfold, every argument shell-quoted, so `> jobs.txt`
+            # and line (the pyfold beside the python, every argument shell-quoted, so `> jobs.txt`
             # gives a file whose line i `sh` runs as job i; e.g. a batch job array,
             # `--np 8` each), then:
         .venv/bin/python studies/interaction_coefficient/ci_hydrodynamics.py --large --analyse-only

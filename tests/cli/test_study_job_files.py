@@ -223,6 +223,13 @@ def test_path_argument_guards_only_a_leading_dash():
     assert command_line(["-s", Path("-p")]) == "-s ./-p"  # strings (options) are kept as given
 
 
+def test_job_line_calls_the_venv_pyfold_or_pyfold_on_path(tmp_path, monkeypatch):
+    monkeypatch.setattr(sys, "executable", str(tmp_path / "a b" / "python"))
+    assert job_line(["run", "x"]) == "pyfold run x"  # no launcher beside the interpreter
+    launcher = _recorder(tmp_path / "a b" / "pyfold", tmp_path / "argv")
+    assert job_line(["run", "x"]) == f"{shlex.quote(str(launcher))} run x"
+
+
 def test_job_line_refuses_a_line_break():
     with pytest.raises(InputError, match="line break"):
         job_line(["run", Path("a\nb.toml")])
