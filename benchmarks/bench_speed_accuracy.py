@@ -94,6 +94,7 @@ sys.path.insert(0, str(ROOT / "studies" / "stokes_validation"))
 from jeffery_period import (BETA, CELLS_PER_LENGTH, jeffery_period, orientations,  # noqa: E402
                             period_from_omegas, spheroid_at)
 
+from pyfold.command_line import command_line  # noqa: E402
 from pyfold.kinematics import aspect_ratio_to_xi  # noqa: E402
 from pyfold.native.geometry import Cell, jeffery_advance  # noqa: E402
 from pyfold.native.stokes import StokesSettings, march, solve_particles  # noqa: E402
@@ -334,7 +335,7 @@ def main() -> None:
     ds["T"].attrs["long_name"] = "Jeffery orbit period (gamma_dot = 1)"
     ds.attrs.update(
         format="pyfold.bench.speed_accuracy", creator=creator(), created=datetime.now(timezone.utc).isoformat(),
-        command=" ".join([Path(sys.executable).name, *sys.argv]), beta=BETA, cell_lengths=CELLS_PER_LENGTH,
+        command=command_line([Path(sys.executable).name, *sys.argv]), beta=BETA, cell_lengths=CELLS_PER_LENGTH,
         jeffery_T=T_J, base=f"n={n0}, kappa={base.kappa:g}, tol={base.tol:g}, derivative={base.derivative}, "
                             f"mixing={base.mixing}, subsamples={base.subsamples}, ntheta={ntheta}",
         order_grid_triples=np.array([p for p, _ in fits_a]), order_grid_lsq=lsq_a[2], order_grid_lsq_err=lsq_err_a[2],

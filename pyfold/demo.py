@@ -28,6 +28,7 @@ import xarray as xr
 
 import pyfold
 from pyfold.closures import available
+from pyfold.command_line import command_line
 from pyfold.fit import fit_parameters, synthetic_dataset
 from pyfold.kinematics import simple_shear
 from pyfold.models import FolgarTucker, solve_orientation, status_message
@@ -164,7 +165,7 @@ def main(outdir, *, quiet: bool = False) -> dict:
             "format_version": FORMAT_VERSION,
             "creator": f"pyfold {pyfold.__version__}",
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            "command": " ".join(sys.argv) or "pyfold.demo.main",
+            "command": command_line(sys.argv) or "pyfold.demo.main",
             "ci": CI,
             "xi": XI,
             "shear_rate": 1.0,

@@ -36,7 +36,6 @@ import argparse
 import atexit
 import importlib
 import os
-import shlex
 import shutil
 import signal
 import subprocess
@@ -47,6 +46,7 @@ import time
 from collections import deque
 from pathlib import Path
 
+from pyfold.command_line import command_line
 from pyfold.errors import InputError, PyfoldError
 
 #: Environment variable naming the fold_run executable explicitly.
@@ -375,14 +375,14 @@ def run(args: argparse.Namespace) -> int:
     command, env = _launch_command(fold_run, partial, args.np, resume=resume_from is not None)
     argv = getattr(args, "argv", None) or ([args.scene, "-o", str(out), "--np", str(args.np)]
                                           + (["--force"] if args.force else []))
-    resume_hint = f"pyfold run {shlex.quote(str(args.scene))} -o {shlex.quote(str(out))} --resume"
+    resume_hint = command_line(["pyfold", "run", Path(args.scene), "-o", Path(out), "--resume"])
 
     if resume_from is None:
         from pyfold.run_file import write_run_file
         from pyfold.scene.initial import initial_state
 
         initial = initial_state(resolved)
-        cli = "pyfold run " + " ".join(shlex.quote(a) for a in argv)
+        cli = command_line(["pyfold", "run", *argv])
         try:
             write_run_file(partial, resolved, initial, cli)
         except BaseException as exc:

@@ -87,7 +87,10 @@ Command
     On a cluster every simulation is an independent `pyfold run`: write the scenes and
     one command per line, submit them as an array job of a batch scheduler (Slurm
     shown; any scheduler that runs line i in task i will do), then run the study, which
-    finds the finished runs and only analyses:
+    finds the finished runs and only analyses. Each line calls the pyfold beside the
+    python that wrote it (pyfold.command_line.pyfold_executable), every argument
+    shell-quoted, so `sh` runs that pyfold with exactly the paths given, whatever
+    characters --run-folder holds (a line break is refused: one command per line):
 
         .venv/bin/python studies/closures_vs_dns/closure_verdict.py --large --write-scenes
         sbatch --array=1-$(wc -l < out/closures_vs_dns/runs/commands.txt) \\
@@ -129,7 +132,6 @@ import argparse
 import glob
 import json
 import math
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -146,6 +148,7 @@ from pyfold.closure_check import (
     exact_closure_sampling_floor,
     window_means,
 )
+from pyfold.command_line import check_single_line, job_line, write_job_file
 from pyfold.ensemble import ensemble_mean, holm, paired_difference, rank_paired
 from pyfold.errors import InadmissibleOrientationWarning, InputError
 from pyfold.fit import fit_parameters
@@ -228,12 +231,9 @@ def write_scenes(params: dict, folder: Path, ranks: int) -> Path:
                 scene.write_text(sheared_fibres(beta, n_l3, seed, params["t_end"]).toml)
                 out = folder / f"{name}.h5"
                 if not is_finished(out):
-                    # the venv's own pyfold, so that a batch job needs no PATH set-up
-                    lines.append(f"{Path(sys.executable).parent / 'pyfold'} run {scene} -o {out} --np {ranks}"
-                                 + (" --resume" if out.with_name(out.name + ".partial").exists() else ""))
-    commands = folder / "commands.txt"
-    commands.write_text("".join(line + "\n" for line in lines))
-    return commands
+                    resume = ["--resume"] if out.with_name(out.name + ".partial").exists() else []
+                    lines.append(job_line(["run", scene, "-o", out, "--np", str(ranks), *resume]))
+    return write_job_file(folder / "commands.txt", lines)
 
 
 def describe(path: Path) -> dict:
@@ -679,6 +679,11 @@ def main() -> None:
     parser.add_argument("--run-folder", type=Path, default=Path("out/closures_vs_dns/runs"),
                         help="where the study's own runs are written and re-used")
     args = parser.parse_args()
+    if args.write_scenes:
+        try:  # before anything is written: commands.txt holds one command per line
+            check_single_line("--run-folder", args.run_folder)
+        except InputError as exc:
+            parser.error(str(exc))
     if args.out is None:
         args.out = Path("out/closures_vs_dns") / ("given_runs" if args.runs else "") / (
             {"fit": "ci_fit", "regression": "ci_regression"}.get(args.ci, ""))

@@ -80,10 +80,13 @@ Command
     was 9x SLOWER than serial for 213 fibres, so the default is 1), --trajectory-fit,
     --rsc, --seeds, --t-end, --out, --analyse-only, --emit-scenes DIR.
     Cluster: every (beta, n L^3, seed) run is an independent `pyfold run` job.
-    `--emit-scenes DIR [--large]` writes one scene per run and jobs.txt with one
-    command line per run (`pyfold run SCENE -o out/interaction_coefficient/runs/NAME.h5
-    [--np N]`), e.g. for a batch-scheduler array (Slurm: `sbatch --array=1-$(wc -l <
-    jobs.txt) ...` running line $SLURM_ARRAY_TASK_ID); then
+    `--emit-scenes DIR [--large]` writes one scene per run and DIR/jobs.txt with one
+    command line per run (`VENV/bin/pyfold run DIR/NAME.toml -o
+    out/interaction_coefficient/runs/NAME.h5 --np N`: the pyfold beside the python that
+    wrote it, every argument shell-quoted by pyfold.command_line, so `sh` runs exactly that
+    pyfold on exactly those paths; a line break in DIR or --out is refused), e.g. for a
+    batch-scheduler array (Slurm: `sbatch --array=1-$(wc -l < DIR/jobs.txt) --wrap
+    'sed -n "${SLURM_ARRAY_TASK_ID}p" DIR/jobs.txt | sh'`); then
     `ci_concentration.py [--large] --analyse-only` reads the run files.
 
 Cost (2 shared cores, serial runs, measured with other jobs loading the machine)
@@ -126,6 +129,7 @@ import xarray as xr
 
 from pyfold import pipeline
 from pyfold.ci_estimators import ci_rate_regression, ci_steady_state_match
+from pyfold.command_line import check_single_line, job_line, write_job_file
 from pyfold.correlations import (CORRELATIONS, FOLGAR_TUCKER_1984, PUBLISHED_RANGE, n_l2d, phi_beta)
 from pyfold.ensemble import ensemble_mean, paired_difference
 from pyfold.errors import InputError, PyfoldError
@@ -325,6 +329,12 @@ def main() -> None:
     parser.add_argument("--emit-scenes", type=Path, help="write scenes + jobs.txt for a cluster and stop")
     parser.add_argument("--out", type=Path, default=Path("out/interaction_coefficient"))
     args = parser.parse_args()
+    if args.emit_scenes:
+        try:  # before anything is written: jobs.txt holds one command per line
+            check_single_line("--emit-scenes", args.emit_scenes)
+            check_single_line("--out", args.out)
+        except InputError as exc:
+            parser.error(str(exc))
     form = LARGE if args.large else SMALL
     seeds = tuple(args.seeds) if args.seeds else form.seeds
     t_end = args.t_end or form.t_end
@@ -340,9 +350,9 @@ def main() -> None:
             for s in seeds:
                 name = run_name(b, n, s, t_end)
                 (args.emit_scenes / f"{name}.toml").write_text(scene_of(b, n, s, t_end).toml, encoding="utf-8")
-                lines.append(f"pyfold run {args.emit_scenes / (name + '.toml')} -o {runs / (name + '.h5')} "
-                             f"--np {args.np}")
-        (args.emit_scenes / "jobs.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")
+                lines.append(job_line(["run", args.emit_scenes / f"{name}.toml", "-o", runs / f"{name}.h5",
+                                       "--np", str(args.np)]))
+        write_job_file(args.emit_scenes / "jobs.txt", lines)
         print(f"{len(lines)} scenes and jobs.txt written to {args.emit_scenes}")
         return
 

@@ -54,7 +54,9 @@ Command
     large (a cluster; each run an independent ``pyfold run`` job):
         .venv/bin/python studies/interaction_coefficient/ci_hydrodynamics.py --large --write-scenes
             # writes runs/<model>_seed<k>.toml and prints one `pyfold run` command per run
-            # (e.g. a batch job array, `--np 8` each), then:
+            # and line (the pyfold beside the python, every argument shell-quoted, so `> jobs.txt`
+            # gives a file whose line i `sh` runs as job i; e.g. a batch job array,
+            # `--np 8` each), then:
         .venv/bin/python studies/interaction_coefficient/ci_hydrodynamics.py --large --analyse-only
     Finished runs whose stored scene equals the study's are re-used; a killed run
     (``.h5.partial``) is resumed (``pyfold run --resume``).
@@ -100,10 +102,11 @@ import xarray as xr
 from pyfold import pipeline
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.cli import main as cli_main
+from pyfold.command_line import check_single_line, job_line
 from pyfold.closures import get_closure
 from pyfold.correlations import PUBLISHED_RANGE, correlations_at
 from pyfold.ensemble import ensemble_mean, paired_difference
-from pyfold.errors import PyfoldError
+from pyfold.errors import InputError, PyfoldError
 from pyfold.run_file import read_setup
 from pyfold.runs import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
@@ -198,12 +201,13 @@ def _cpu_seconds() -> float:
 
 
 def write_scenes(study: Study, runs: Path, ranks: int) -> None:
-    """Scenes for independent jobs (a batch array), and the command of each."""
+    """Scenes for independent jobs (a batch array), and the command of each on stdout
+    (one line per run, shell-quoted by pyfold.command_line)."""
     for seed in study.seeds:
         for model in MODELS:
             toml_path, out, _ = run_paths(runs, model, seed)
             toml_path.write_text(study.scene(model, seed).toml)
-            print(f"pyfold run {toml_path} -o {out} --np {ranks}")
+            print(job_line(["run", toml_path, "-o", out, "--np", str(ranks)]))
 
 
 # Solver: estimates from one run
@@ -298,6 +302,11 @@ def main() -> None:
                     help="single-fibre check on the scene grid times each factor (default: 1, the scene grid)")
     ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/hydrodynamics"))
     args = ap.parse_args()
+    if args.write_scenes:
+        try:  # before anything is written: the commands are printed one per line
+            check_single_line("--out", args.out)
+        except InputError as exc:
+            ap.error(str(exc))
     study = LARGE if args.large else SMALL
     if args.seeds:
         study = dataclasses.replace(study, seeds=tuple(args.seeds))

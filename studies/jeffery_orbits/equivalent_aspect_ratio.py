@@ -94,6 +94,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
+from pyfold.command_line import command_line
 from pyfold.kinematics import equivalent_aspect_ratio
 from pyfold.native.stokes import Particles, StokesSettings, solve_particles
 
@@ -360,7 +361,7 @@ def run(a):
         data["kappa_period"] = _var(("shape", "kappa"), Tk, "s", "T of the rigidity study")
     return xr.Dataset(data, coords=coords, attrs=dict(
         format="pyfold.study.equivalent_aspect_ratio", format_version="1.0", creator=f"pyfold {_git_hash()}",
-        created=datetime.datetime.now(datetime.timezone.utc).isoformat(), command=" ".join(sys.argv),
+        created=datetime.datetime.now(datetime.timezone.utc).isoformat(), command=command_line(sys.argv),
         shear_rate=SHEAR_RATE, diameter=DIAMETER, eta_f=ETA_F, kappa_base=KAPPA, tol=TOL, nphi=a.nphi,
         cell_lengths=a.cell, image_beta=a.image_beta, image_vpd=a.image_vpd, fibre_ends=settings.fibre_ends,
         mixing=settings.mixing, derivative=settings.derivative, subsamples=settings.subsamples,

@@ -58,6 +58,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from pyfold.command_line import command_line
 from pyfold.native.stokes import Particles, StokesSettings, solve_particles
 from pyfold.runs import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
@@ -284,8 +285,9 @@ def main() -> None:
         lines += text + [""]
     stem = "fibre_stress" if not args.analyse else "fibre_stress_analysed"
     combined = xr.concat(sets, dim="run", combine_attrs="drop") if len(sets) > 1 else sets[0]
-    combined.attrs.update(command="python studies/rheology/fibre_stress.py" + (" --large" if args.large else "")
-                          + (" --analyse " + " ".join(map(str, args.analyse)) if args.analyse else ""),
+    combined.attrs.update(command=command_line(["python", "studies/rheology/fibre_stress.py"]
+                                               + (["--large"] if args.large else [])
+                                               + (["--analyse", *args.analyse] if args.analyse else [])),
                           cpu_seconds_analysis=time.process_time() - cpu0)
     combined.to_netcdf(args.out / f"{stem}.nc", engine="h5netcdf")
     (args.out / f"{stem}.md").write_text("\n".join(lines), encoding="utf-8")

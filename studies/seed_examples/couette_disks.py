@@ -71,6 +71,7 @@ import numpy as np
 import tomli_w
 import xarray as xr
 
+from pyfold.command_line import command_line
 from pyfold.ensemble import ensemble_mean
 from pyfold.runs import open_run
 
@@ -331,7 +332,7 @@ def run(hydrodynamics: str, form: Form, out: Path, analyse_only: bool = False, f
                 "collisions": ("case", [CASES[c][0] for c in cases])},
         attrs={"hydrodynamics": hydrodynamics, "scene": str(SCENE.relative_to(ROOT)), "radius": radius,
                "cell_lengths": list(lengths), "t_end": form.t_end, "cells_per_diameter": form.cells_per_diameter,
-               "command": " ".join(sys.argv)},
+               "command": command_line(sys.argv)},
     )
     if all("wall_shear_stress" in results[c][s] for c in cases for s in seeds):
         ds["wall_shear_stress"] = (("case", "seed", "record_time"), stack("wall_shear_stress"),

@@ -93,6 +93,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pyfold.command_line import command_line
 from pyfold.ensemble import ensemble_mean
 from pyfold.errors import InputError
 from pyfold.kinematics import equivalent_aspect_ratio
@@ -365,7 +366,7 @@ def run(form: Form, log=print):
     )
     return xr.Dataset(data, coords=c, attrs=dict(
         format="pyfold.study.rotation_neighbours", format_version="1.0", creator=f"pyfold {_git_hash()}",
-        created=datetime.datetime.now(datetime.timezone.utc).isoformat(), command=" ".join(sys.argv),
+        created=datetime.datetime.now(datetime.timezone.utc).isoformat(), command=command_line(sys.argv),
         shear_rate=SHEAR_RATE, diameter=DIAMETER, eta_f=ETA_F, kappa=KAPPA, tol=TOL, beta=BETA,
         fibre_cell_d=fcell, sphere_cell_d=SPHERE_CELL, gap_d=GAP, fibre_clearance_d=FIBRE_CLEARANCE, nphi=form.nphi,
         backend="fft", cpu_time_total=cpu))

@@ -87,6 +87,7 @@ import ci_hydrodynamics as ch  # noqa: E402
 import sphere_viscosity as sv  # noqa: E402
 
 from pyfold.cli import main as cli_main  # noqa: E402
+from pyfold.command_line import command_line  # noqa: E402
 from pyfold.ensemble import ensemble_mean, paired_difference  # noqa: E402
 from pyfold.native.stokes import StokesSettings, solve_particles  # noqa: E402
 from pyfold.report import fit_ci_trajectory  # noqa: E402
@@ -527,7 +528,7 @@ def main() -> None:
     ds["error"].attrs["long_name"] = "relative error (period, eta_eff) or |C_I - C_I(Stokes reference)|"
     ds["value"].attrs["long_name"] = "period [s, gamma_dot = 1], eta_eff [eta_f] or C_I [1]"
     ds.attrs.update(format="pyfold.study.speed_accuracy", creator=creator(),
-                    created=datetime.now(timezone.utc).isoformat(), command=" ".join([Path(sys.executable).name, *sys.argv]),
+                    created=datetime.now(timezone.utc).isoformat(), command=command_line([Path(sys.executable).name, *sys.argv]),
                     form="large" if args.large else "small", evidence_disagreements=json.dumps(bad),
                     trajectory_fit=json.dumps(traj), **{k: v for k, v in info.items()})
     ds.to_netcdf(args.out / "pareto.nc", engine="h5netcdf")
