@@ -710,7 +710,7 @@ contains
       set%walls = setup%walls
       ! the kappa the solver can carry at this grid, tolerance and precision
       ! (fold_stokes_trust); FOLD_RUN_UNCHECKED_KAPPA set in the environment waives it, for
-      ! the test of the run-time stress check only (tests/micro/test_kappa_range.py)
+      ! the test of the run-time stress check only (tests/micro/test_stokes_trust.py)
       call get_environment_variable("FOLD_RUN_UNCHECKED_KAPPA", status=envstat)
       if (envstat /= 0) then
          call stokes_kappa_check(set, product(int(setup%stokes_grid, i8)), stat, errmsg)
