@@ -234,17 +234,19 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
 end subroutine fold_stokes_march
 
 !> The largest viscosity contrast the solver carries on nvox voxels at tolerance tol with
-!> transforms of precision fft_precision (0 double, 1 single), and the operator's relative
-!> round-off eps_op there (fold_stokes_trust, the one place both are computed).
-subroutine fold_stokes_kappa_max(nvox, tol, fft_precision, kmax, eps_op)
+!> transforms of precision fft_precision (0 double, 1 single), the largest tolerance that
+!> carries kappa, and the operator's relative round-off eps_op there (fold_stokes_trust,
+!> the one place they are computed).
+subroutine fold_stokes_kappa_max(nvox, tol, kappa, fft_precision, kmax, tmax, eps_op)
    use fold_kinds, only: dp, ip, i8
-   use fold_stokes_trust, only: kappa_max, operator_roundoff
+   use fold_stokes_trust, only: kappa_max, tolerance_max, operator_roundoff
    implicit none
    integer(i8), intent(in) :: nvox
-   real(dp), intent(in) :: tol
+   real(dp), intent(in) :: tol, kappa
    integer(ip), intent(in) :: fft_precision
-   real(dp), intent(out) :: kmax, eps_op
+   real(dp), intent(out) :: kmax, tmax, eps_op
    kmax = kappa_max(nvox, tol, fft_precision)
+   tmax = tolerance_max(nvox, kappa, fft_precision)
    eps_op = operator_roundoff(nvox, fft_precision)
 end subroutine fold_stokes_kappa_max
 

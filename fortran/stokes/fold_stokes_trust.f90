@@ -21,14 +21,16 @@
 !>     derivation of fold_stokes_fft's header). eta0 cancels between 2 and 3:
 !>        |delta eta_eff| <= (kappa - 1) (tol + eps_op) eta_f sqrt(phi Delta).
 !>  5. The stress of a solid voxel is 2 kappa eta_f (E + eps(u~)), a cancellation:
-!>     eps(u~) carries eps_op |E|, so the sum adds at most kappa eps_op eta_f phi.
+!>     eps(u~) carries the round-off eps_d of the double-precision transforms that give
+!>     the strain (always double: fold_stokes_fft), so the sum adds at most
+!>     kappa eps_d eta_f phi.
 !> Relative to the contribution eta_f Delta, with Delta >= phi (the solid alone gives
 !> int eps(u~):eps(u~) >= phi V E:E), the error is at most
-!>        delta = (kappa - 1) tol + (2 kappa - 1) eps_op.
+!>        delta = (kappa - 1) (tol + eps_op) + kappa eps_d.
 !> kappa is allowed while delta <= 1: the computed eta_eff then stays >= eta_f, as the
 !> exact one does (minimum dissipation: every viscosity >= eta_f), i.e. the sign of the
 !> particles' contribution is guaranteed. That is
-!>        kappa <= kappa_max = (1 + tol + eps_op) / (tol + 2 eps_op),
+!>        kappa <= kappa_max = (1 + tol + eps_op) / (tol + eps_op + eps_d),
 !> within [FOLD_KAPPA_MIN, FOLD_KAPPA_MAX]. The penalty error falls like 1/kappa while
 !> the solver's grows like kappa tol, so beyond kappa_max a larger kappa buys a larger
 !> error. The bound is the FFT solver's; the hypre backend takes the same rule.
@@ -47,7 +49,7 @@ module fold_stokes_trust
    !> Unit round-off of double precision, 2^-53 [-]
    real(dp), parameter, public :: FOLD_DOUBLE_ROUNDOFF = 0.5_dp*epsilon(1.0_dp)
 
-   public :: operator_roundoff, kappa_max, stokes_kappa_check, stokes_stress_check
+   public :: operator_roundoff, kappa_max, tolerance_max, stokes_kappa_check, stokes_stress_check
 
 contains
 
@@ -63,7 +65,8 @@ contains
    end function operator_roundoff
 
    !> Largest kappa whose bound on the stress error stays within the particles'
-   !> contribution: (1 + tol + eps_op)/(tol + 2 eps_op), at most FOLD_KAPPA_MAX (header).
+   !> contribution: (1 + tol + eps_op)/(tol + eps_op + eps_d), at most FOLD_KAPPA_MAX
+   !> (header; eps_d: the double-precision round-off).
    pure function kappa_max(nvox, tol, fft_precision) result(k)
       integer(i8), intent(in) :: nvox
       real(dp), intent(in) :: tol
@@ -71,8 +74,23 @@ contains
       real(dp) :: k
       real(dp) :: e
       e = operator_roundoff(nvox, fft_precision)
-      k = min(FOLD_KAPPA_MAX, (1.0_dp + tol + e)/(tol + 2.0_dp*e))
+      k = min(FOLD_KAPPA_MAX, (1.0_dp + tol + e)/(tol + e + operator_roundoff(nvox, 0_ip)))
    end function kappa_max
+
+   !> Largest tolerance at which kappa (> 1) is allowed: (1 - (kappa - 1) eps_op - kappa eps_d)
+   !> / (kappa - 1), 0 when no tolerance is small enough; huge for kappa <= 1.
+   pure function tolerance_max(nvox, kappa, fft_precision) result(t)
+      integer(i8), intent(in) :: nvox
+      real(dp), intent(in) :: kappa
+      integer(ip), intent(in) :: fft_precision
+      real(dp) :: t
+      if (kappa <= 1.0_dp) then
+         t = huge(1.0_dp)
+         return
+      end if
+      t = max(0.0_dp, (1.0_dp - (kappa - 1.0_dp)*operator_roundoff(nvox, fft_precision) - &
+                       kappa*operator_roundoff(nvox, 0_ip))/(kappa - 1.0_dp))
+   end function tolerance_max
 
    !> Refuse a kappa above kappa_max on a grid of nvox voxels (FOLD_INPUT_ERROR, the
    !> message naming kappa, its allowed range and the largest tolerance for this kappa).
@@ -81,19 +99,19 @@ contains
       integer(i8), intent(in) :: nvox
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      real(dp) :: kmax, e, tmax
+      real(dp) :: kmax, e
       stat = FOLD_OK
       errmsg = ""
       kmax = kappa_max(nvox, set%tol, set%fft_precision)
       if (set%kappa <= kmax) return
       stat = FOLD_INPUT_ERROR
       e = operator_roundoff(nvox, set%fft_precision)
-      tmax = (1.0_dp + e - 2.0_dp*set%kappa*e)/(set%kappa - 1.0_dp)
       write (errmsg, '(a,es10.3,a,i0,a,es9.2,a,a,a,es9.2,a,es10.3,a,es9.2,a)') &
          "stokes settings: kappa ", set%kappa, " is beyond what the solver resolves on ", nvox, &
          " voxels at tol ", set%tol, " with ", trim(merge("single", "double", set%fft_precision == FOLD_FFT_SINGLE)), &
-         " transforms (stress error bound (kappa-1) tol + (2 kappa-1) eps_op > 1 of the particles' share, eps_op = ", &
-         e, "); allowed: kappa in [1, ", kmax, "] or, for this kappa, tol <= ", max(tmax, 0.0_dp), &
+         " transforms (stress error bound (kappa-1) (tol + eps_op) + kappa eps_d > 1 of the particles' share, "// &
+         "eps_op = ", e, "); allowed: kappa in [1, ", kmax, "] or, for this kappa, tol <= ", &
+         tolerance_max(nvox, set%kappa, set%fft_precision), &
          " (docs/physics.md#how-large-a-penalty-the-solver-can-carry)"
    end subroutine stokes_kappa_check
 

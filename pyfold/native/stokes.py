@@ -77,25 +77,38 @@ def backend_for(walls: bool) -> str:
 #: FOLD_KAPPA_MIN, FOLD_KAPPA_MAX; fold_run_file refuses the same range). kappa = 1 is
 #: a particle-free fluid, a test of the solver; the rigidity error falls like 1/kappa
 #: (docs/physics.md#fictitious-domain-penalisation) and 1e12 keeps kappa eta_f and the
-#: CG residuals within double precision. A run allows at most :func:`kappa_max` of its
+#: CG residuals within double precision. A run allows at most the kappa_max of :func:`kappa_range` at its
 #: grid, tolerance and precision, usually far less.
 KAPPA_MIN, KAPPA_MAX = 1.0, 1.0e12
 
 
-def kappa_max(voxels: int, tol: float, fft_precision: str = "double") -> tuple[float, float]:
-    """The largest kappa a run accepts on a grid of ``voxels`` points at CG tolerance
-    ``tol`` with transforms of ``fft_precision`` (a key of :data:`FFT_PRECISIONS`), and
-    the operator's relative round-off ``eps_op = (2 log2 N + 4) u`` there.
+@dataclass(frozen=True)
+class KappaRange:
+    """What a grid, tolerance and precision allow (:func:`kappa_range`)."""
 
-    ``kappa_max = (1 + tol + eps_op) / (tol + 2 eps_op)`` (at most :data:`KAPPA_MAX`):
-    beyond it the bound on the solver's error of the particles' stress contribution,
-    ``(kappa - 1) tol + (2 kappa - 1) eps_op`` of it, exceeds the contribution itself
-    (docs/physics.md#how-large-a-penalty-the-solver-can-carry). Computed by the
-    Fortran of fortran/stokes/fold_stokes_trust.f90, which fold_run applies too.
+    #: largest kappa accepted at the tolerance
+    kappa_max: float
+    #: largest tolerance at which the kappa asked about is accepted
+    tolerance_max: float
+    #: relative round-off of the CG operator, (2 log2 N + 4) u of its transforms
+    eps_op: float
+
+
+def kappa_range(voxels: int, tol: float, kappa: float = 1.0, fft_precision: str = "double") -> KappaRange:
+    """The largest kappa a run accepts on a grid of ``voxels`` points at CG tolerance
+    ``tol`` with transforms of ``fft_precision`` (a key of :data:`FFT_PRECISIONS`), the
+    largest tolerance that accepts ``kappa``, and the operator's round-off ``eps_op``.
+
+    ``kappa_max = (1 + tol + eps_op) / (tol + eps_op + eps_d)`` (at most :data:`KAPPA_MAX`;
+    ``eps_d`` the double-precision round-off): beyond it the bound on the solver's error
+    of the particles' stress contribution, ``(kappa - 1)(tol + eps_op) + kappa eps_d`` of
+    it, exceeds the contribution itself
+    (docs/physics.md#how-large-a-penalty-the-solver-can-carry). Computed by the Fortran
+    of fortran/stokes/fold_stokes_trust.f90, which fold_run applies too.
     """
-    kmax, eps_op = load("_fold_stokes").fold_stokes_kappa_max(int(voxels), float(tol),
-                                                              FFT_PRECISIONS[fft_precision])
-    return float(kmax), float(eps_op)
+    kmax, tmax, eps_op = load("_fold_stokes").fold_stokes_kappa_max(int(voxels), float(tol), float(kappa),
+                                                                    FFT_PRECISIONS[fft_precision])
+    return KappaRange(float(kmax), float(tmax), float(eps_op))
 
 
 def stress_check(eta_eff: float, eta_f: float, voxels: int, kappa: float, tol: float) -> None:

@@ -814,7 +814,7 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                          f"round-off of the transforms, (2 log2 N + 4) 2^-24 = {tol_min:.3g} on the "
                          f"{' x '.join(map(str, grid[:dim]))} grid; allowed: tolerance >= {tol_min:.3g} or "
                          f"fft_precision = 'double', got {st.tolerance:g}")
-    if grid is not None:
+    if grid is not None and grid_points <= st.max_grid_points:
         check_kappa(st, grid[:dim], grid_points, problems)
     voxel_text = ""
     if grid is not None and grid_points <= st.max_grid_points and good and G is not None and shear_flow:

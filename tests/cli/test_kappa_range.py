@@ -19,7 +19,7 @@ import pytest
 
 from conftest import write_scene
 from pyfold.cli import main
-from pyfold.native.stokes import kappa_max
+from pyfold.native.stokes import kappa_range
 
 RADIUS = 0.125
 GRID_POINTS = 16**3  # cells_per_diameter 4 across 2 R = 1/4 of the unit cell
@@ -40,17 +40,25 @@ def two_spheres(**stokes) -> dict:
     }
 
 
+def _eps(precision: str) -> float:
+    """(2 log2 N + 4) u for the 16^3 grid."""
+    return (2 * math.log2(GRID_POINTS) + 4) * (2.0**-24 if precision == "single" else 2.0**-53)
+
+
 def test_kappa_max_is_the_edge_of_the_derived_bound_and_falls_with_the_tolerance():
-    """(kappa - 1) tol + (2 kappa - 1) eps_op = 1 at kappa_max, eps_op = (2 log2 N + 4) u."""
-    for precision, unit, tol in (("double", 2.0**-53, 1e-6), ("double", 2.0**-53, 1e-3), ("single", 2.0**-24, 1e-4)):
-        kmax, eps_op = kappa_max(GRID_POINTS, tol, precision)
-        assert eps_op == pytest.approx((2 * math.log2(GRID_POINTS) + 4) * unit, rel=1e-14)
-        assert (kmax - 1) * tol + (2 * kmax - 1) * eps_op == pytest.approx(1.0, rel=1e-12)
-    assert kappa_max(GRID_POINTS, 1e-4)[0] < kappa_max(GRID_POINTS, 1e-6)[0]
-    # the default kappa = 1e3 stays allowed down to the loosest tolerance the docs recommend
-    assert kappa_max(72**3, 1e-3)[0] >= 1e3
+    """(kappa - 1)(tol + eps_op) + kappa eps_d = 1 at kappa_max, and at tolerance_max for
+    a given kappa; eps_op = (2 log2 N + 4) u of the transforms, eps_d that of double."""
+    for precision, tol in (("double", 1e-6), ("double", 1e-3), ("single", 1e-4)):
+        r = kappa_range(GRID_POINTS, tol, 1e5, precision)
+        eps_op, eps_d = _eps(precision), _eps("double")
+        assert r.eps_op == pytest.approx(eps_op, rel=1e-14)
+        assert (r.kappa_max - 1) * (tol + eps_op) + r.kappa_max * eps_d == pytest.approx(1.0, rel=1e-12)
+        assert (1e5 - 1) * (r.tolerance_max + eps_op) + 1e5 * eps_d == pytest.approx(1.0, rel=1e-12)
+    assert kappa_range(GRID_POINTS, 1e-4).kappa_max < kappa_range(GRID_POINTS, 1e-6).kappa_max
+    # the default kappa = 1e3 stays allowed at the loosest double tolerance the docs measure
+    assert kappa_range(72**3, 1e-3).kappa_max >= 1e3
     # no tolerance lifts kappa beyond the absolute cap
-    assert kappa_max(GRID_POINTS, 1e-15)[0] == 1e12
+    assert kappa_range(GRID_POINTS, 1e-15).kappa_max == 1e12
 
 
 @pytest.mark.parametrize("kappa", [1e12, 1e8])
@@ -58,7 +66,7 @@ def test_kappa_beyond_the_bound_is_refused_by_validate_and_run_naming_key_and_ra
     """The reviewer's kappa = 1e12 (effective viscosity of either sign, status ok) and 1e8
     (a larger rigidity error than 1e3) are beyond kappa_max = 1e6 at 16^3, tol 1e-6."""
     scene = write_scene(tmp_path / "two_spheres.toml", two_spheres(kappa=kappa))
-    kmax, _ = kappa_max(GRID_POINTS, TOL)
+    kmax = kappa_range(GRID_POINTS, TOL).kappa_max
     for command in (["validate", str(scene)], ["run", str(scene), "-o", str(tmp_path / "out.h5")]):
         assert main(command) == 2
         err = capsys.readouterr().err
@@ -73,10 +81,11 @@ def _eta_eff(path: Path) -> tuple[str, np.ndarray]:
         return (status.decode() if isinstance(status, bytes) else str(status)), f["effective_viscosity"][()]
 
 
-def _solver_error_bound(kappa: float, delta: float, eps_op: float) -> float:
-    """|error of eta_eff| <= eta_f ((kappa - 1)(tol + eps_op) sqrt(phi Delta) + kappa eps_op phi)
-    (fortran/stokes/fold_stokes_trust.f90), eta_f = 1."""
-    return (kappa - 1) * (TOL + eps_op) * math.sqrt(PHI * delta) + kappa * eps_op * PHI
+def _solver_error_bound(kappa: float, delta: float) -> float:
+    """|error of eta_eff| <= eta_f ((kappa - 1)(tol + eps_op) sqrt(phi Delta) + kappa eps_d phi)
+    (fortran/stokes/fold_stokes_trust.f90), eta_f = 1, double transforms: eps_op = eps_d."""
+    eps = _eps("double")
+    return (kappa - 1) * (TOL + eps) * math.sqrt(PHI * delta) + kappa * eps * PHI
 
 
 def test_kappa_at_the_edge_runs_and_stays_on_the_large_kappa_trend(tmp_path, capsys):
@@ -85,7 +94,7 @@ def test_kappa_at_the_edge_runs_and_stays_on_the_large_kappa_trend(tmp_path, cap
     infinity, 3 phi / (2 (kappa + 1)) (Taylor 1932: intrinsic viscosity (5 kappa + 2) /
     (2 kappa + 2)); the exact eta_eff grows with kappa (minimum dissipation), so the
     difference is bounded on both sides. At kappa = 1e12 the same difference was 15-1500."""
-    kmax, eps_op = kappa_max(GRID_POINTS, TOL)
+    kmax = kappa_range(GRID_POINTS, TOL).kappa_max
     etas = {}
     for kappa in (1e3, kmax):
         scene = write_scene(tmp_path / f"k{kappa:.0e}.toml", two_spheres(kappa=kappa))
@@ -96,7 +105,7 @@ def test_kappa_at_the_edge_runs_and_stays_on_the_large_kappa_trend(tmp_path, cap
         assert np.all(etas[kappa] >= 1.0)  # minimum dissipation: eta_eff >= eta_f
     delta = etas[1e3] - 1.0
     assert np.all(delta > 0)
-    bound = (np.array([_solver_error_bound(kmax, d, eps_op) + _solver_error_bound(1e3, d, eps_op) for d in delta])
+    bound = (np.array([_solver_error_bound(kmax, d) + _solver_error_bound(1e3, d) for d in delta])
              + 3 * PHI / (2 * (1e3 + 1)))
     diff = etas[kmax] - etas[1e3]
     assert np.all(np.abs(diff) <= bound), (diff, bound)

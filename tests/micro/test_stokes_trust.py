@@ -2,7 +2,7 @@
 range it refuses beyond, and the run-time check that ends a run whose effective
 viscosity falls below the fluid's, impossible for particles at least as viscous as the
 fluid (minimum dissipation). The range and the check are the same Fortran that
-`pyfold validate` calls (pyfold.native.stokes.kappa_max)."""
+`pyfold validate` calls (pyfold.native.stokes.kappa_range)."""
 from __future__ import annotations
 
 import math
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from pyfold.errors import NumericalError
-from pyfold.native.stokes import kappa_max, stress_check
+from pyfold.native.stokes import kappa_range, stress_check
 from test_run_common import run_fold, write_run_file
 
 DOUBLE_ROUNDOFF = 2.0**-53
@@ -48,7 +48,7 @@ def test_fold_run_refuses_kappa_beyond_the_range_with_exit_2(tmp_path):
     _two_spheres(path, 1e12, 1e-6, 0.05)
     proc = run_fold(path)
     assert proc.returncode == 2, proc.stderr
-    kmax, _ = kappa_max(16**3, 1e-6)
+    kmax = kappa_range(16**3, 1e-6).kappa_max
     assert "/setup/resolved/stokes_kappa" in proc.stderr and f"allowed: kappa in [1, {kmax:10.3E}]" in proc.stderr
     with h5py.File(path) as f:
         assert "effective_viscosity" not in f
