@@ -31,7 +31,7 @@
 !> exact one does (minimum dissipation: every viscosity >= eta_f), i.e. the sign of the
 !> particles' contribution is guaranteed. That is
 !>        kappa <= kappa_max = (1 + tol + eps_op) / (tol + eps_op + eps_d),
-!> within [FOLD_KAPPA_MIN, FOLD_KAPPA_MAX]. The penalty error falls like 1/kappa while
+!> at most FOLD_KAPPA_MAX. The penalty error falls like 1/kappa while
 !> the solver's grows like kappa tol, so beyond kappa_max a larger kappa buys a larger
 !> error. The bound is the FFT solver's; the hypre backend takes the same rule.
 !>
@@ -41,7 +41,7 @@
 module fold_stokes_trust
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
-   use fold_stokes_solver, only: stokes_settings_t, FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, FOLD_FFT_SINGLE
+   use fold_stokes_solver, only: stokes_settings_t, FOLD_KAPPA_MAX, FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE
    use fold_stokes_fft, only: FOLD_SINGLE_ROUNDOFF
    implicit none
    private
@@ -74,7 +74,7 @@ contains
       real(dp) :: k
       real(dp) :: e
       e = operator_roundoff(nvox, fft_precision)
-      k = min(FOLD_KAPPA_MAX, (1.0_dp + tol + e)/(tol + e + operator_roundoff(nvox, 0_ip)))
+      k = min(FOLD_KAPPA_MAX, (1.0_dp + tol + e)/(tol + e + operator_roundoff(nvox, FOLD_FFT_DOUBLE)))
    end function kappa_max
 
    !> Largest tolerance at which kappa (> 1) is allowed: (1 - (kappa - 1) eps_op - kappa eps_d)
@@ -89,7 +89,7 @@ contains
          return
       end if
       t = max(0.0_dp, (1.0_dp - (kappa - 1.0_dp)*operator_roundoff(nvox, fft_precision) - &
-                       kappa*operator_roundoff(nvox, 0_ip))/(kappa - 1.0_dp))
+                       kappa*operator_roundoff(nvox, FOLD_FFT_DOUBLE))/(kappa - 1.0_dp))
    end function tolerance_max
 
    !> Refuse a kappa above kappa_max on a grid of nvox voxels (FOLD_INPUT_ERROR, the
