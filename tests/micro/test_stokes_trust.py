@@ -5,9 +5,8 @@ fluid (minimum dissipation). The range and the check are the same Fortran that
 `pyfold validate` calls (pyfold.native.stokes.kappa_range)."""
 from __future__ import annotations
 
-import math
-import os
 import re
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -17,6 +16,7 @@ from pyfold.errors import NumericalError
 from pyfold.native.stokes import kappa_range, stress_check
 from test_run_common import run_fold, write_run_file
 
+ROOT = Path(__file__).resolve().parents[2]
 DOUBLE_ROUNDOFF = 2.0**-53
 
 
@@ -82,3 +82,28 @@ def test_untrustworthy_stress_ends_the_run_failed_keeping_the_last_good_records(
         assert np.all(eta >= 1.0), eta  # the failing solve's value is in no record
         np.testing.assert_array_equal(f["/checkpoint/x"][()], f["x"][-1])
         assert f["x"].shape[0] == step  # snapshots of steps 0 .. N - 1
+
+
+@pytest.mark.parametrize("side", [-1, +1])
+def test_kappa_bound_is_the_same_in_validate_and_fold_run(side, tmp_path):
+    """Just above kappa_max both pyfold validate and fold_run refuse (exit 2), just below
+    both accept: one Fortran function decides for both. 1e-9 relative is far outside the
+    round-off of evaluating the bound and far inside its change with the tolerance."""
+    from pyfold.scene import parse_scene
+
+    base = (ROOT / "data/scenes/stokes_small.toml").read_text()
+    grid = parse_scene(base).resolved_datasets()["stokes_grid"][0]
+    kappa = kappa_range(int(np.prod([int(v) for v in grid])), 1e-6).kappa_max * (1.0 - side * 1e-9)
+    scene = base.replace("kappa = 1e3 ", f"kappa = {kappa!r} ")
+    if side > 0:
+        parse_scene(scene)
+    else:
+        with pytest.raises(ValueError, match=r"numerics.stokes.kappa.*allowed: kappa in \[1, "):
+            parse_scene(scene)
+    path = tmp_path / "edge.h5"
+    kappa = kappa_range(16**3, 1e-6).kappa_max * (1.0 - side * 1e-9)
+    _two_spheres(path, kappa, 1e-6, 0.01)
+    proc = run_fold(path)
+    assert proc.returncode == (2 if side < 0 else 0), (proc.returncode, proc.stderr)
+    if side < 0:
+        assert "/setup/resolved/stokes_kappa" in proc.stderr, proc.stderr
