@@ -146,7 +146,8 @@ class StokesSettings:
     ----------
     eta_f : fluid viscosity [Pa s], > 0.
     kappa : viscosity contrast η_solid/η_f, in [KAPPA_MIN, KAPPA_MAX]; rigidity error ~ 1/κ,
-        CG iterations ~ √κ.
+        CG iterations ~ √κ. These bindings take any such κ (tests explore the solver beyond
+        what a run accepts); a run accepts at most the ``kappa_max`` of :func:`kappa_range`.
     tol : relative preconditioned residual at which CG stops, in (0, 1).
     max_iter : CG iteration cap, >= 1.
     derivative : ``"fd"`` (rotated finite differences, Willot 2015, *C. R. Mécanique*
