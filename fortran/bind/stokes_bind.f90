@@ -232,3 +232,32 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    end do
    call stokes_context_destroy(ctx)
 end subroutine fold_stokes_march
+
+!> The largest viscosity contrast the solver carries on nvox voxels at tolerance tol with
+!> transforms of precision fft_precision (0 double, 1 single), the largest tolerance that
+!> carries kappa, and the operator's relative round-off eps_op there (fold_stokes_trust,
+!> the one place they are computed).
+subroutine fold_stokes_kappa_max(nvox, tol, kappa, fft_precision, kmax, tmax, eps_op)
+   use fold_kinds, only: dp, ip, i8
+   use fold_stokes_trust, only: kappa_max, tolerance_max, operator_roundoff
+   implicit none
+   integer(i8), intent(in) :: nvox
+   real(dp), intent(in) :: tol, kappa
+   integer(ip), intent(in) :: fft_precision
+   real(dp), intent(out) :: kmax, tmax, eps_op
+   kmax = kappa_max(nvox, tol, fft_precision)
+   tmax = tolerance_max(nvox, kappa, fft_precision)
+   eps_op = operator_roundoff(nvox, fft_precision)
+end subroutine fold_stokes_kappa_max
+
+!> fold_run's run-time check of a solve's effective viscosity (fold_stokes_trust).
+subroutine fold_stokes_stress_check(eta_eff, eta_f, nvox, kappa, tol, stat, errmsg)
+   use fold_kinds, only: dp, i8, msg_len
+   use fold_stokes_trust, only: stokes_stress_check
+   implicit none
+   real(dp), intent(in) :: eta_eff, eta_f, kappa, tol
+   integer(i8), intent(in) :: nvox
+   integer, intent(out) :: stat
+   character(len=msg_len), intent(out) :: errmsg
+   call stokes_stress_check(eta_eff, eta_f, nvox, kappa, tol, stat, errmsg)
+end subroutine fold_stokes_stress_check

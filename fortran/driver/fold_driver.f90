@@ -36,7 +36,9 @@
 !> broadcasts the status of each write, so an I/O failure stops every rank.
 !>
 !> Failure (contact cap with on_cap = stop, NaN, Stokes solver not converged:
-!> the message gives the residual reached, the iterations and kappa): the state at the start of the
+!> the message gives the residual reached, the iterations and kappa; an untrustworthy
+!> stress, an effective viscosity below the fluid's (`fold_stokes_trust`), fails the
+!> step whose record would hold it): the state at the start of the
 !> failing step (the last good state) is restored and written as the last record,
 !> a snapshot and /checkpoint; the root attribute `status` says "failed: step N,
 !> t = T: cause" and `steps_done` = N - 1. I/O failure (the first failed HDF5 call
@@ -47,6 +49,7 @@
 !> record. Nothing here stops the program: the outcome is returned to `fold_run`.
 module fold_driver
    use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
+   use, intrinsic :: ieee_arithmetic, only: ieee_value, ieee_quiet_nan
    use mpi_f08
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR, FOLD_OVERLAP, FOLD_NUMERICAL, FOLD_NOT_CONVERGED
@@ -62,6 +65,7 @@ module fold_driver
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
                                stokes_rigid_velocities, stokes_context_lubrication
+   use fold_stokes_trust, only: stokes_kappa_check, stokes_stress_check
    use fold_time_scheme, only: FOLD_AB2, scheme_velocity
    use fold_output, only: run_output_t, run_record_t, record_init, output_open, output_resume, output_record, &
                           output_snapshot, output_checkpoint, output_status, output_close, output_failed_status, &
@@ -126,6 +130,8 @@ contains
       real(dp), allocatable :: v_sb(:, :), w_sb(:, :), v_est(:, :), w_est(:, :)
       real(dp) :: t_a, t_b
       logical :: have_b
+      !> The last stokes_solve failed the stress check (fold_stokes_trust)
+      logical :: untrusted
 
       call MPI_Comm_rank(MPI_COMM_WORLD, rank)
       call MPI_Comm_size(MPI_COMM_WORLD, nranks)
@@ -266,6 +272,11 @@ contains
          call stokes_solve(stat, errmsg)
          t_a = t
          if (stat /= FOLD_OK) then
+            if (untrusted) then
+               ! the starting configuration has no trusted stress: its record reads NaN
+               rec%stress = ieee_value(1.0_dp, ieee_quiet_nan)
+               rec%effective_viscosity = ieee_value(1.0_dp, ieee_quiet_nan)
+            end if
             call fail(step0 + 1, trim(errmsg), stat)
             return
          end if
@@ -392,6 +403,12 @@ contains
                t_a = t
             end if
             call stokes_solve(stat, errmsg)
+            if (stat /= FOLD_OK .and. untrusted) then
+               ! the stress of this step's record is not a result: the step fails, the
+               ! state before it (good, its record already trusted) is kept
+               call fail(step, trim(errmsg), stat)
+               return
+            end if
             if (stat /= FOLD_OK) then
                ! the configuration at t is good; it is the next step that cannot be made
                good%x = parts%x
@@ -519,6 +536,17 @@ contains
             parts%omega = w_hyd
             w_hyd = tmp
          end block
+         untrusted = .false.
+         if (sstat == FOLD_OK) then
+            call stokes_stress_check(srec%bulk%eta_eff, setup%stokes%eta_f, product(int(setup%stokes_grid, i8)), &
+                                     setup%stokes%kappa, setup%stokes%tol, sstat, smsg)
+            untrusted = sstat /= FOLD_OK
+            if (untrusted) then
+               ! no number of this solve goes into a record
+               smsg = "Stokes solve: "//trim(smsg)
+               return
+            end if
+         end if
          if (sstat == FOLD_OK .or. sstat == FOLD_NOT_CONVERGED) then
             cg_total = cg_total + srec%iterations
             rec%stokes_iterations = max(rec%stokes_iterations, int(srec%iterations, i8))
@@ -675,10 +703,22 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       class(stokes_solver_t), allocatable :: solver
       type(stokes_settings_t) :: set
+      integer :: envstat
 
       ! walls are a property of the cell (fold_cell): the backend imposes them when set
       set = setup%stokes
       set%walls = setup%walls
+      ! the kappa the solver can carry at this grid, tolerance and precision
+      ! (fold_stokes_trust); FOLD_RUN_UNCHECKED_KAPPA set in the environment waives it, for
+      ! the test of the run-time stress check only (tests/micro/test_stokes_trust.py)
+      call get_environment_variable("FOLD_RUN_UNCHECKED_KAPPA", status=envstat)
+      if (envstat /= 0) then
+         call stokes_kappa_check(set, product(int(setup%stokes_grid, i8)), stat, errmsg)
+         if (stat /= FOLD_OK) then
+            errmsg = "/setup/resolved/stokes_kappa: "//trim(errmsg)
+            return
+         end if
+      end if
       call stokes_solver_create(set, setup%dim, setup%stokes_grid, MPI_COMM_WORLD, solver, stat, errmsg)
       if (stat /= FOLD_OK) then
          errmsg = "/setup/resolved/stokes_*: "//trim(errmsg)

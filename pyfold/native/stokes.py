@@ -77,8 +77,47 @@ def backend_for(walls: bool) -> str:
 #: FOLD_KAPPA_MIN, FOLD_KAPPA_MAX; fold_run_file refuses the same range). kappa = 1 is
 #: a particle-free fluid, a test of the solver; the rigidity error falls like 1/kappa
 #: (docs/physics.md#fictitious-domain-penalisation) and 1e12 keeps kappa eta_f and the
-#: CG residuals within double precision.
+#: CG residuals within double precision. A run allows at most the kappa_max of :func:`kappa_range` at its
+#: grid, tolerance and precision, usually far less.
 KAPPA_MIN, KAPPA_MAX = 1.0, 1.0e12
+
+
+@dataclass(frozen=True)
+class KappaRange:
+    """What a grid, tolerance and precision allow (:func:`kappa_range`)."""
+
+    #: largest kappa accepted at the tolerance
+    kappa_max: float
+    #: largest tolerance at which the kappa asked about is accepted
+    tolerance_max: float
+    #: relative round-off of the CG operator, (2 log2 N + 4) u of its transforms
+    eps_op: float
+
+
+def kappa_range(voxels: int, tol: float, kappa: float = 1.0, fft_precision: str = "double") -> KappaRange:
+    """The largest kappa a run accepts on a grid of ``voxels`` points at CG tolerance
+    ``tol`` with transforms of ``fft_precision`` (a key of :data:`FFT_PRECISIONS`), the
+    largest tolerance that accepts ``kappa``, and the operator's round-off ``eps_op``.
+
+    ``kappa_max = (1 + tol + eps_op) / (tol + eps_op + eps_d)`` (at most :data:`KAPPA_MAX`;
+    ``eps_d`` the double-precision round-off): beyond it the bound on the solver's error
+    of the particles' stress contribution, ``(kappa - 1)(tol + eps_op) + kappa eps_d`` of
+    it, exceeds the contribution itself
+    (docs/physics.md#how-large-a-penalty-the-solver-can-carry). Computed by the Fortran
+    of fortran/stokes/fold_stokes_trust.f90, which fold_run applies too.
+    """
+    kmax, tmax, eps_op = load("_fold_stokes").fold_stokes_kappa_max(int(voxels), float(tol), float(kappa),
+                                                                    FFT_PRECISIONS[fft_precision])
+    return KappaRange(float(kmax), float(tmax), float(eps_op))
+
+
+def stress_check(eta_eff: float, eta_f: float, voxels: int, kappa: float, tol: float) -> None:
+    """fold_run's run-time check of a solve: raise :class:`~pyfold.errors.PyfoldError`
+    with fold_run's cause when ``eta_eff`` is below ``eta_f`` (less the round-off of the
+    sums over ``voxels``), impossible for particles at least as viscous as the fluid."""
+    stat, msg = load("_fold_stokes").fold_stokes_stress_check(float(eta_eff), float(eta_f), int(voxels),
+                                                              float(kappa), float(tol))
+    checked(stat, msg)
 
 #: The one source of the defaults of every solver setting that changes results: the
 #: scene schema (pyfold.scene.schema.StokesSettings, names of the scene file) and
@@ -107,7 +146,8 @@ class StokesSettings:
     ----------
     eta_f : fluid viscosity [Pa s], > 0.
     kappa : viscosity contrast η_solid/η_f, in [KAPPA_MIN, KAPPA_MAX]; rigidity error ~ 1/κ,
-        CG iterations ~ √κ.
+        CG iterations ~ √κ. These bindings take any such κ (tests explore the solver beyond
+        what a run accepts); a run accepts at most the ``kappa_max`` of :func:`kappa_range`.
     tol : relative preconditioned residual at which CG stops, in (0, 1).
     max_iter : CG iteration cap, >= 1.
     derivative : ``"fd"`` (rotated finite differences, Willot 2015, *C. R. Mécanique*

@@ -17,6 +17,7 @@ from pyfold.native import stokes as stokes_codes
 from pyfold.scene import shapes
 from pyfold.scene._problems import Problems
 from pyfold.scene.hydrodynamics_evidence import auto_evidence
+from pyfold.scene.kappa_range import check_kappa
 from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY,
                                  Scene)
 
@@ -813,6 +814,8 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                          f"round-off of the transforms, (2 log2 N + 4) 2^-24 = {tol_min:.3g} on the "
                          f"{' x '.join(map(str, grid[:dim]))} grid; allowed: tolerance >= {tol_min:.3g} or "
                          f"fft_precision = 'double', got {st.tolerance:g}")
+    if grid is not None and grid_points <= st.max_grid_points:
+        check_kappa(st, grid[:dim], grid_points, problems)
     voxel_text = ""
     if grid is not None and grid_points <= st.max_grid_points and good and G is not None and shear_flow:
         # walls: the lattice stays rectangular (no Lees-Edwards offset widens the span)

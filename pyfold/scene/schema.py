@@ -193,7 +193,8 @@ class StokesSettings(_Table):
     max_iterations: Annotated[int, Field(ge=1, le=1_000_000)] = _STOKES["max_iterations"]
     #: viscosity contrast of the penalisation eta_solid / eta_fluid (seed: 1e3); rigidity
     #: error ~ 1/kappa, CG iterations ~ sqrt(kappa) (docs/physics.md#fictitious-domain-penalisation,
-    #: docs/physics.md#solver-vs-contrast) [-]
+    #: docs/physics.md#solver-vs-contrast); at most kappa_max ~ 1/tolerance of the grid and
+    #: precision (pyfold/scene/kappa_range.py, docs/physics.md#how-large-a-penalty-the-solver-can-carry) [-]
     kappa: Annotated[float, Field(ge=KAPPA_MIN, le=KAPPA_MAX), AfterValidator(_finite)] = _STOKES["kappa"]
     #: grid cells per diameter of the thinnest particle (4-8, docs/physics.md#resolution) [-]
     cells_per_diameter: Annotated[int, Field(ge=1, le=64)] = 4
