@@ -22,6 +22,7 @@ import warnings
 
 from pyfold import __version__
 from pyfold.errors import InputError, PyfoldError, PyfoldWarning
+from pyfold.memory import describe_load_failure  # imported now: it must work when memory is short
 
 #: command name -> (module under pyfold.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -81,6 +82,17 @@ def _signals_raise():
             signal.signal(sig, old if old is not None else signal.SIG_DFL)
 
 
+def load_failure(exc: BaseException) -> str:
+    """One line for a library that could not be loaded or memory that could not be had.
+
+    Under a low address-space limit (``ulimit -v``) the dynamic loader cannot map a
+    shared library (``failed to map segment from shared object``), Python cannot
+    allocate (MemoryError), or a library's own import fails with ENOMEM; each is
+    reported as ``not enough memory to load ...: raise the memory limit (ulimit -v)``.
+    Any other ImportError is a missing or broken installed package, named."""
+    return describe_load_failure(exc)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pyfold", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"pyfold {__version__}")
@@ -115,7 +127,14 @@ def _plain_warnings(command: str):
 
 def main(argv: list[str] | None = None) -> int:
     global _depth
-    args = build_parser().parse_args(argv)
+    try:
+        parser = build_parser()  # imports every command module, and with them numpy, xarray, ...
+    except (ImportError, MemoryError) as exc:
+        words = [a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("-")]
+        command = words[0] if words and words[0] in COMMANDS else None
+        print(f"pyfold{' ' + command if command else ''}: failed: {load_failure(exc)}", file=sys.stderr)
+        return EXIT_FAILURE
+    args = parser.parse_args(argv)
     _depth += 1
     try:
         with _signals_raise(), _plain_warnings(args.command):
@@ -125,6 +144,11 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INPUT
     except PyfoldError as exc:
         print(f"pyfold {args.command}: failed: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except (ImportError, MemoryError) as exc:  # commands import numpy, JAX, h5py, ... lazily
+        if _depth > 1:
+            raise
+        print(f"pyfold {args.command}: failed: {load_failure(exc)}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt as exc:
         if _depth > 1:  # the outer command cleans up and sets the status
