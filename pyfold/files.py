@@ -20,6 +20,7 @@ import contextlib
 import errno
 import itertools
 import os
+import re
 import stat
 from pathlib import Path
 from typing import Iterator
@@ -44,12 +45,17 @@ def _kind(mode: int) -> str:
 def describe_os_error(exc: BaseException) -> str:
     """``strerror (ENAME)`` of an OSError (``No space left on device (ENOSPC)``), else its text.
 
-    Libraries that wrap the C error (HDF5, PIL) sometimes drop ``errno``; their text
-    is kept whole, and a full disk named in it is named again as ENOSPC."""
+    Libraries that wrap the C error sometimes drop ``errno``: HDF5's text carries
+    ``errno = 28``, which is used; other texts are kept whole, a full disk named in
+    them named again as ENOSPC."""
     code = getattr(exc, "errno", None)
     if isinstance(exc, OSError) and code in errno.errorcode:
-        return f"{exc.strerror or os.strerror(code)} ({errno.errorcode[code]})"
+        return f"{os.strerror(code)} ({errno.errorcode[code]})"  # not exc.strerror: h5py puts its whole text there
     text = str(exc) or type(exc).__name__
+    found = re.search(r"errno = (\d+)", text)  # HDF5's "file write failed: ..., errno = 28, ..."
+    if found and int(found.group(1)) in errno.errorcode:
+        code = int(found.group(1))
+        return f"{os.strerror(code)} ({errno.errorcode[code]})"
     if "No space left on device" in text and "ENOSPC" not in text:
         text += " (ENOSPC)"
     return text
@@ -135,7 +141,7 @@ def atomic_output(path: str | Path) -> Iterator[Path]:
     the suffix, such as ``savefig``, pick the right format) for the caller to write;
     when the block ends without an exception the temporary is fsynced and renamed to
     ``path`` (replacing an earlier file). On any exception the temporary is removed;
-    an OSError (or a library error wrapping one, such as HDF5's) becomes a
+    an OSError (HDF5's and PIL's failed writes are OSErrors too) becomes a
     :class:`PyfoldError` ``cannot write PATH: CAUSE``; other exceptions (an
     interruption, a bug) pass unchanged.
 
@@ -156,8 +162,4 @@ def atomic_output(path: str | Path) -> Iterator[Path]:
             raise
     except OSError as exc:
         raise PyfoldError(f"cannot write {path}: {describe_os_error(exc)}") from None
-    except RuntimeError as exc:  # h5netcdf / HDF5 report some failed writes as RuntimeError
-        if "No space left" in str(exc) or "write failed" in str(exc).lower():
-            raise PyfoldError(f"cannot write {path}: {describe_os_error(exc)}") from None
-        raise
     _fsync_folder(folder)

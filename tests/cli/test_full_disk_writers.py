@@ -78,6 +78,19 @@ def test_atomic_output_on_a_full_disk_keeps_the_earlier_file_and_no_temporary(di
     assert contents(disk) == {"summary.txt"}
 
 
+def test_netcdf_on_a_full_disk_raises_naming_enospc_and_leaves_nothing(disk):
+    """results.nc goes through h5netcdf / HDF5, which reports the failed write in its own words."""
+    import xarray as xr
+
+    fill(disk)
+    ds = xr.Dataset({"ci": (("closure",), np.linspace(0.0, 1.0, 50_000))})
+    with pytest.raises(PyfoldError) as caught:
+        with atomic_output(disk / "results.nc") as tmp:
+            ds.to_netcdf(tmp, engine="h5netcdf")
+    assert str(caught.value) == f"cannot write {disk / 'results.nc'}: {ENOSPC}"
+    assert contents(disk) == set()
+
+
 @pytest.fixture(scope="module")
 def setup_run(tmp_path_factory) -> Path:
     """A run file as `pyfold run` writes it before fold_run (/setup, /initial)."""
