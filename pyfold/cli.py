@@ -3,8 +3,9 @@
 Each command lives in ``pyfold/commands/<name>.py`` and exposes
 ``add_arguments(parser)`` and ``run(args) -> int``. Exit status: 0 success,
 2 bad input (argument or scene; the message names the key and the allowed
-range), 1 any other failure (solver blow-up, I/O), with the cause printed;
-interrupted: 130 (SIGINT, Ctrl-C), 143 (SIGTERM), 129 (SIGHUP), i.e. 128 + the
+range), 1 any other failure (solver blow-up, I/O, a library that cannot be loaded
+for lack of memory under ``ulimit -v``: :mod:`pyfold.memory`), with the cause
+printed; interrupted: 130 (SIGINT, Ctrl-C), 143 (SIGTERM), 129 (SIGHUP), i.e. 128 + the
 signal number. While a command runs, these three signals raise
 :class:`Interrupted` (a KeyboardInterrupt) in the main thread, so every command
 cleans up on the way out (``pyfold run`` terminates its fold_run / mpirun process
@@ -22,7 +23,8 @@ import warnings
 
 from pyfold import __version__
 from pyfold.errors import InputError, PyfoldError, PyfoldWarning
-from pyfold.memory import describe_load_failure  # imported now: it must work when memory is short
+# Imported now, while memory lasts: it explains a library that could not be loaded for lack of it
+from pyfold.memory import describe_load_failure
 
 #: command name -> (module under pyfold.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -82,17 +84,6 @@ def _signals_raise():
             signal.signal(sig, old if old is not None else signal.SIG_DFL)
 
 
-def load_failure(exc: BaseException) -> str:
-    """One line for a library that could not be loaded or memory that could not be had.
-
-    Under a low address-space limit (``ulimit -v``) the dynamic loader cannot map a
-    shared library (``failed to map segment from shared object``), Python cannot
-    allocate (MemoryError), or a library's own import fails with ENOMEM; each is
-    reported as ``not enough memory to load ...: raise the memory limit (ulimit -v)``.
-    Any other ImportError is a missing or broken installed package, named."""
-    return describe_load_failure(exc)
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pyfold", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"pyfold {__version__}")
@@ -132,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ImportError, MemoryError) as exc:
         words = [a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("-")]
         command = words[0] if words and words[0] in COMMANDS else None
-        print(f"pyfold{' ' + command if command else ''}: failed: {load_failure(exc)}", file=sys.stderr)
+        print(f"pyfold{' ' + command if command else ''}: failed: {describe_load_failure(exc)}", file=sys.stderr)
         return EXIT_FAILURE
     args = parser.parse_args(argv)
     _depth += 1
@@ -148,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ImportError, MemoryError) as exc:  # commands import numpy, JAX, h5py, ... lazily
         if _depth > 1:
             raise
-        print(f"pyfold {args.command}: failed: {load_failure(exc)}", file=sys.stderr)
+        print(f"pyfold {args.command}: failed: {describe_load_failure(exc)}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt as exc:
         if _depth > 1:  # the outer command cleans up and sets the status
