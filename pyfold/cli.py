@@ -3,8 +3,9 @@
 Each command lives in ``pyfold/commands/<name>.py`` and exposes
 ``add_arguments(parser)`` and ``run(args) -> int``. Exit status: 0 success,
 2 bad input (argument or scene; the message names the key and the allowed
-range), 1 any other failure (solver blow-up, I/O), with the cause printed;
-interrupted: 130 (SIGINT, Ctrl-C), 143 (SIGTERM), 129 (SIGHUP), i.e. 128 + the
+range), 1 any other failure (solver blow-up, I/O, a library that cannot be loaded
+for lack of memory under ``ulimit -v``: :mod:`pyfold.memory`), with the cause
+printed; interrupted: 130 (SIGINT, Ctrl-C), 143 (SIGTERM), 129 (SIGHUP), i.e. 128 + the
 signal number. While a command runs, these three signals raise
 :class:`Interrupted` (a KeyboardInterrupt) in the main thread, so every command
 cleans up on the way out (``pyfold run`` terminates its fold_run / mpirun process
@@ -22,6 +23,8 @@ import warnings
 
 from pyfold import __version__
 from pyfold.errors import InputError, PyfoldError, PyfoldWarning
+# Imported now, while memory lasts: it explains a library that could not be loaded for lack of it
+from pyfold.memory import describe_load_failure
 
 #: command name -> (module under pyfold.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -115,7 +118,14 @@ def _plain_warnings(command: str):
 
 def main(argv: list[str] | None = None) -> int:
     global _depth
-    args = build_parser().parse_args(argv)
+    try:
+        parser = build_parser()  # imports every command module, and with them numpy, xarray, ...
+    except (ImportError, MemoryError) as exc:
+        words = [a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("-")]
+        command = words[0] if words and words[0] in COMMANDS else None
+        print(f"pyfold{' ' + command if command else ''}: failed: {describe_load_failure(exc)}", file=sys.stderr)
+        return EXIT_FAILURE
+    args = parser.parse_args(argv)
     _depth += 1
     try:
         with _signals_raise(), _plain_warnings(args.command):
@@ -125,6 +135,11 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INPUT
     except PyfoldError as exc:
         print(f"pyfold {args.command}: failed: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except (ImportError, MemoryError) as exc:  # commands import numpy, JAX, h5py, ... lazily
+        if _depth > 1:
+            raise
+        print(f"pyfold {args.command}: failed: {describe_load_failure(exc)}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt as exc:
         if _depth > 1:  # the outer command cleans up and sets the status

@@ -29,6 +29,7 @@ import xarray as xr
 import pyfold
 from pyfold.closures import available
 from pyfold.command_line import command_line
+from pyfold.files import atomic_output
 from pyfold.fit import fit_parameters, synthetic_dataset
 from pyfold.kinematics import simple_shear
 from pyfold.models import FolgarTucker, solve_orientation, status_message
@@ -182,7 +183,8 @@ def main(outdir, *, quiet: bool = False) -> dict:
         },
     )
     paths["netcdf"] = outdir / "macro_demo.nc"
-    ds.to_netcdf(paths["netcdf"], engine="h5netcdf")
+    with atomic_output(paths["netcdf"]) as tmp:
+        ds.to_netcdf(tmp, engine="h5netcdf")
 
     final = {c: histories[c][-1] for c in closures}
     if not quiet:

@@ -32,6 +32,7 @@ import numpy as np
 import xarray as xr
 
 from pyfold.errors import InputError, PyfoldError
+from pyfold.files import atomic_output
 
 #: Closures fitted and judged by default (a representative spread: the classic
 #: hybrid, the two best orthotropic fits, the exact closure for Jeffery flows).
@@ -449,7 +450,8 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
     axes[0].legend(fontsize=7, frameon=False)
     fig.suptitle("Direct simulation vs Folgar–Tucker with the fitted C_I, per closure", fontsize=10)
     paths.append(outdir / "a2_dns_vs_fitted_ft.png")
-    fig.savefig(paths[-1], dpi=130)
+    with atomic_output(paths[-1]) as tmp:
+        fig.savefig(tmp, dpi=130)
 
     fig = Figure(figsize=(10, 3.8))
     fig.subplots_adjust(left=0.08, right=0.99, bottom=0.2, top=0.9, wspace=0.22)
@@ -474,7 +476,8 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
     right.grid(alpha=0.3, axis="y")
     fig.suptitle("Closures against the simulation's own a4 (left); fitted C_I per closure (right)", fontsize=10)
     paths.append(outdir / "closures_vs_dns.png")
-    fig.savefig(paths[-1], dpi=130)
+    with atomic_output(paths[-1]) as tmp:
+        fig.savefig(tmp, dpi=130)
     return paths
 
 

@@ -13,6 +13,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from pyfold.files import atomic_output
+
 __all__ = ["plot_a2_histories", "plot_fit", "plot_report_a2", "plot_closure_report", "plot_ci_vs_correlations",
            "DEFAULT_COMPONENTS"]
 
@@ -29,7 +31,8 @@ def _save(fig: Figure, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=120)
+    with atomic_output(path) as tmp:  # whole or absent: never a truncated PNG
+        fig.savefig(tmp, dpi=120)
     return path
 
 

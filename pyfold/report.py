@@ -42,7 +42,8 @@ from typing import Sequence
 import numpy as np
 import xarray as xr
 
-from pyfold.errors import InputError
+from pyfold.errors import InputError, PyfoldError
+from pyfold.files import atomic_output, describe_os_error, regular_file
 
 #: Records per run on which closures are evaluated: a longer run is thinned to every
 #: k-th record (the rate regression gives the same C_I at record spacings 0.1 to 0.5,
@@ -496,8 +497,7 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str], allow_fai
     if not paths:
         raise InputError("RUN.h5: give at least one run file")
     for p in paths:
-        if not p.is_file():
-            raise InputError(f"RUN.h5: no such file: {p}")
+        regular_file(p, "RUN.h5")  # a folder, FIFO or device: refused before HDF5 opens it
     closures = pipeline.check_closures(closures)
     datasets = [pipeline.open_checked_run(p, allow_failed=allow_failed, command="pyfold report") for p in paths]
     seeds = check_same_scene(paths)
@@ -808,15 +808,21 @@ def check_report_folder(out: Path, force: bool = False) -> Path:
 def write_report(rep: Report, out: Path, extra_summary: Sequence[str] = ()) -> list[Path]:
     """Write figures, results.nc, summary.txt and summary.md into ``out``.
 
-    The files are written into a hidden folder inside ``out`` and moved into place
-    when all are complete, so an interrupted report leaves the earlier files (if any)
-    or the new ones, never a mixture of half-written files.
+    The files are written into a hidden folder inside ``out``, each whole
+    (:func:`pyfold.files.atomic_output`: flushed to disk), and moved into place when
+    all are complete, so an interrupted report leaves the earlier files (if any) or
+    the new ones, never a mixture of half-written files. A failed write (a full disk)
+    removes the hidden folder and raises :class:`PyfoldError` naming the file and the
+    cause (``No space left on device (ENOSPC)``).
     """
     from pyfold import plotting
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=".report-", dir=out))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        work = Path(tempfile.mkdtemp(prefix=".report-", dir=out))
+    except OSError as exc:
+        raise PyfoldError(f"cannot write the report in {out}: {describe_os_error(exc)}") from None
     try:
         g = rep.gamma_dot
         dns = {r.seed: (r.t * g, r.a2) for r in rep.runs}
@@ -830,14 +836,22 @@ def write_report(rep: Report, out: Path, extra_summary: Sequence[str] = ()) -> l
                                      rep.correlations, rep.ranking, work / "closures_vs_dns.png")
         plotting.plot_ci_vs_correlations(rep.phi_beta, shown,
                                          work / "ci_vs_correlations.png")
-        results_dataset(rep).to_netcdf(work / "results.nc", engine="h5netcdf")
+        with atomic_output(work / "results.nc") as tmp:
+            results_dataset(rep).to_netcdf(tmp, engine="h5netcdf")
         text = "\n".join(summary_lines(rep) + ([""] + list(extra_summary) if extra_summary else [])) + "\n"
-        (work / "summary.txt").write_text(text, encoding="utf-8")
-        (work / "summary.md").write_text(summary_markdown(rep, extra_summary), encoding="utf-8")
+        with atomic_output(work / "summary.txt") as tmp:
+            tmp.write_text(text, encoding="utf-8")
+        with atomic_output(work / "summary.md") as tmp:
+            tmp.write_text(summary_markdown(rep, extra_summary), encoding="utf-8")
         written = []
         for name in REPORT_FILES:
-            os.replace(work / name, out / name)
+            try:
+                os.replace(work / name, out / name)
+            except OSError as exc:
+                raise PyfoldError(f"cannot write {out / name}: {describe_os_error(exc)}") from None
             written.append(out / name)
+    except PyfoldError as exc:  # name the report file, not its temporary in the hidden folder
+        raise PyfoldError(str(exc).replace(f"{work}{os.sep}", f"{out}{os.sep}")) from None
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return written

@@ -19,6 +19,7 @@ import numpy as np
 import xarray as xr
 
 from pyfold.errors import InputError, PyfoldError
+from pyfold.files import atomic_output
 from pyfold.run_file import check_format, read_setup
 
 __all__ = ["open_run", "write_xdmf", "run_summary", "complete_counts", "AXIS_LABELS"]
@@ -264,7 +265,8 @@ def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
     text = ('<?xml version="1.0" ?>\n<Xdmf Version="3.0"><Domain>'
             '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">'
             + "\n".join(grids) + "</Grid></Domain></Xdmf>\n")
-    xmf.write_text(text, encoding="utf-8")
+    with atomic_output(xmf) as tmp:  # whole or absent: a full disk leaves no 0-byte .xmf
+        tmp.write_text(text, encoding="utf-8")
     return xmf
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pyfold.errors import InputError
+from pyfold.files import atomic_output, regular_file
 from pyfold.pipeline import DEFAULT_CLOSURES
 
 
@@ -34,14 +34,14 @@ def run(args: argparse.Namespace) -> int:
     from pyfold import pipeline
 
     run_path = Path(args.run_file)
-    if not run_path.is_file():
-        raise InputError(f"RUN.h5: no such file: {run_path}")
+    regular_file(run_path, "RUN.h5")  # a folder, FIFO or device: refused before HDF5 opens it
     closures = pipeline.check_closures(args.closures)
     ds = pipeline.open_checked_run(run_path, allow_failed=args.allow_failed)
     closures = pipeline.check_closures(closures, dim=ds.sizes["i"])
     out = Path(args.out) if args.out else run_path.with_name(run_path.stem + "_analysis")
     pipeline.check_output_folder(out)
     chain = pipeline.fit_and_compare(run_path, out, closures=closures, run=ds)
-    pipeline.results_dataset(chain).to_netcdf(out / "results.nc", engine="h5netcdf")
+    with atomic_output(out / "results.nc") as tmp:
+        pipeline.results_dataset(chain).to_netcdf(tmp, engine="h5netcdf")
     print(f"pyfold analyse: figures and results.nc in {out}")
     return 0

@@ -28,7 +28,11 @@ Exit status: 0 success; 2 bad scene, option or run file (from ``fold_run``
 too); 1 failure; 130 / 143 / 129 interrupted by SIGINT / SIGTERM / SIGHUP. On a
 ``fold_run`` failure (exit 1: blow-up, unresolvable overlap, I/O) the file with
 the results up to the last good state and ``status = "failed: ..."`` is kept
-as ``OUT.h5``.
+as ``OUT.h5``. A complete run whose ``OUT.xmf`` cannot be written (a full disk)
+keeps ``OUT.h5``, the result, with no ``OUT.xmf`` (never a half-written one:
+:func:`pyfold.files.atomic_output`), prints the summary and exits 1 naming the
+cause; ``python -c "from pyfold.runs import write_xdmf; write_xdmf('OUT.h5')"``
+writes it once there is space.
 """
 from __future__ import annotations
 
@@ -361,7 +365,7 @@ def _plan_output(args: argparse.Namespace) -> tuple[Path, Path, Path, Path | Non
 
 
 def run(args: argparse.Namespace) -> int:
-    from pyfold.scene import load_scene
+    from pyfold.scene import load_scene, read_scene_text
 
     check_ranks(args.np, getattr(args, "oversubscribe", False))
     if not hasattr(args, "resume"):
@@ -398,7 +402,7 @@ def run(args: argparse.Namespace) -> int:
             setup = read_setup(resume_from)
         except (OSError, KeyError) as exc:
             raise InputError(f"--resume: {resume_from} is not a readable run file: {exc}") from None
-        if setup.scene_toml != Path(args.scene).read_text(encoding="utf-8"):
+        if setup.scene_toml != read_scene_text(args.scene):
             print(f"pyfold run: warning: {args.scene} differs from the scene {resume_from} was made from; "
                   "--resume continues the run recorded in the file", file=sys.stderr)
         n_steps = int(setup.resolved.get("n_steps", resolved.n_steps))
@@ -423,10 +427,11 @@ def run(args: argparse.Namespace) -> int:
     os.replace(partial, out)
     from pyfold.runs import run_summary, write_xdmf
 
-    written = None
+    written, no_xdmf = None, None
     try:
         written = write_xdmf(out, xmf)
-    except PyfoldError as exc:
+    except PyfoldError as exc:  # e.g. a full disk: the run file is the result and is kept; exit 1 below
+        no_xdmf = exc
         print(f"pyfold run: warning: no XDMF written: {exc}", file=sys.stderr)
     if rc != 0:
         cause = _cause(tail)
@@ -447,6 +452,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"pyfold run: {out}" + (f" (ParaView: {written})" if written else ""))
     print(resolved.summary().splitlines()[0])
     print(run_summary(out))
+    if no_xdmf is not None:
+        raise PyfoldError(f"the run is complete in {out}, but its XDMF {xmf} was not written: {no_xdmf}")
     return 0
 
 

@@ -13,11 +13,13 @@ from pathlib import Path
 import numpy as np
 
 from pyfold.errors import InputError
+from pyfold.files import regular_file
 from pyfold.native import stokes as stokes_codes
 from pyfold.scene import shapes
 from pyfold.scene._problems import Problems
 from pyfold.scene.hydrodynamics_evidence import auto_evidence
 from pyfold.scene.kappa_range import check_kappa
+from pyfold.scene.vectors import unit_rows
 from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY,
                                  Scene)
 
@@ -415,6 +417,12 @@ def _table(value, path: str, dim: int, base_dir: Path, problems: Problems, unit:
         if suffix not in GIVEN_POSITION_SUFFIXES:
             problems.add(path, f"a file must be .csv or .npy (one row per particle), got {value!r}")
             return None
+        if file.exists() and not file.is_file():  # a folder, FIFO or device: never opened (a FIFO blocks)
+            try:
+                regular_file(file, path)
+            except InputError as exc:
+                problems.add(path, str(exc).removeprefix(f"{path}: "))
+                return None
         try:
             if suffix == ".npy":
                 arr = np.load(file, allow_pickle=False)
@@ -461,11 +469,10 @@ def _table(value, path: str, dim: int, base_dir: Path, problems: Problems, unit:
         arr = np.asarray(value, dtype=np.float64)
         where = ""
     if unit:
-        norms = np.linalg.norm(arr, axis=1)
-        if np.any(~(norms > 0.0)):
-            problems.add(path, f"{where}axes must be non-zero vectors; row {int(np.argmin(norms))} is zero")
+        arr, why = unit_rows(arr, "row")
+        if why is not None:
+            problems.add(path, f"{where}axes: {why}")
             return None
-        arr = arr / norms[:, None]
     return arr
 
 
@@ -706,12 +713,10 @@ def _axes(vectors, path: str, dim: int, problems: Problems) -> np.ndarray | None
         problems.add(path, f"each axis must have {dim} components (cell.dim = {dim}); "
                      f"entry {bad[0]} has {len(vectors[bad[0]])}")
         return None
-    arr = np.asarray(vectors, dtype=np.float64)
-    norms = np.linalg.norm(arr, axis=1)
-    if np.any(norms == 0.0):
-        problems.add(path, f"axes must be non-zero vectors; entry {int(np.argmin(norms))} is zero")
-        return None
-    return arr / norms[:, None]
+    arr, why = unit_rows(vectors, "entry")
+    if why is not None:
+        problems.add(path, why if len(vectors) > 1 else why.replace("entry 0 ", "the vector ", 1))
+    return arr
 
 
 def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None = None) -> ResolvedScene:
@@ -1074,6 +1079,8 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
             update["equivalent_aspect_ratio"] = raw.equivalent_aspect_ratio or EQUIVALENT_ASPECT_RATIO_DEFAULT
         if raw.orientation == "aligned":
             update["direction"] = [float(v) for v in f.axes[0]]
+        elif f.orientation == "given" and not isinstance(raw.orientations, str):
+            update["orientations"] = f.axes.tolist()  # inline axes, normalised like direction
         if f.orientation != raw.orientation:
             update["orientation"] = f.orientation
         fam_tables.append(raw.model_copy(update=update))

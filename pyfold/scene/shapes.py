@@ -99,12 +99,14 @@ def regime(number_density: float, length: float, diameter: float, dim: int) -> t
 
 
 def unit_vectors(vectors, path: str, dim: int) -> np.ndarray:
-    """Normalise axis vectors ``(n, dim)``; a zero vector is an input error at ``path``."""
-    arr = np.asarray(vectors, dtype=np.float64).reshape(-1, dim)
-    norms = np.linalg.norm(arr, axis=1)
-    if np.any(norms <= 0.0):
-        raise InputError(f"{path}: axis vectors must be non-zero")
-    return arr / norms[:, None]
+    """Normalise axis vectors ``(n, dim)`` (:func:`pyfold.scene.vectors.unit_rows`); a zero or
+    non-finite vector is an input error at ``path``."""
+    from pyfold.scene.vectors import unit_rows
+
+    unit, why = unit_rows(np.asarray(vectors, dtype=np.float64).reshape(-1, dim))
+    if why is not None:
+        raise InputError(f"{path}: {why}")
+    return unit
 
 
 def half_segment(shape: str, radius: float, length: float) -> float:
