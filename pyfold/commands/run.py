@@ -36,6 +36,7 @@ import argparse
 import atexit
 import importlib
 import os
+import secrets
 import shlex
 import shutil
 import signal
@@ -421,8 +422,8 @@ def _write_xdmf_replacing(out: Path, xmf: Path) -> Path:
     at ``xmf`` is replaced, its target untouched, and readers never see half a file."""
     from pyfold.runs import write_xdmf
 
-    fd, tmp = tempfile.mkstemp(prefix=".xmf-", suffix=".tmp", dir=xmf.parent)  # a short name: within NAME_MAX
-    os.close(fd)
+    tmp = xmf.parent / f".xmf-{os.getpid()}-{secrets.token_hex(4)}.tmp"  # a short name: within NAME_MAX
+    os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666))  # umask applies
     try:
         write_xdmf(out, tmp)
         os.replace(tmp, xmf)
