@@ -15,7 +15,22 @@ the new file is complete (atomic rename).
 
 ``--resume`` continues ``OUT.h5.partial`` (or a failed ``OUT.h5``, whose
 ``status`` is not ``ok``) from its last checkpoint with ``fold_run --resume``,
-then finishes like a run (rename, ``OUT.xmf`` rewritten, summary).
+then finishes like a run (rename, ``OUT.xmf`` rewritten, summary). A file another
+process holds open (a reader's HDF5 lock: an undone ``ds.close()``) is refused
+with exit 2 naming that process, before anything is moved.
+
+One writer per destination (:mod:`pyfold.destination`): before anything is
+written the run takes an exclusive lock on ``OUT.h5.lock`` (pid, host, start
+time and command recorded in it), held until it ends and inherited by
+``fold_run`` / ``mpirun``, so an orphaned ``fold_run`` of a killed pyfold still
+holds it; a second ``pyfold run`` or ``--resume`` of the same ``-o`` is refused
+(exit 2) naming the holder. A failed run removes only a ``.partial`` it created
+itself. Links: a symbolic link at ``OUT.h5``, ``OUT.xmf`` or ``OUT.h5.partial``
+counts as an existing file (refused without ``--force``); with ``--force`` the
+link itself is replaced by a new file, its target is never written;
+``--resume`` refuses a link. The scene file is never an output (also through a
+symbolic or hard link): refused with exit 2 naming both paths. ``-o ""`` and a
+name that, with ``.partial``, exceeds its folder's NAME_MAX are refused.
 
 ``--np`` is bounded by :func:`rank_bound` (``OVERSUBSCRIBE_FACTOR`` ranks per
 usable core; more only with ``--oversubscribe``, never more than
@@ -25,7 +40,10 @@ pyfold ends for any reason (an exception, SIGINT, SIGTERM, SIGHUP: see
 and waited for, and ``OUT.h5.partial`` is kept for ``--resume``.
 
 Exit status: 0 success; 2 bad scene, option or run file (from ``fold_run``
-too); 1 failure; 130 / 143 / 129 interrupted by SIGINT / SIGTERM / SIGHUP. On a
+too), or a destination another process writes; 1 failure; 130 / 143 / 129
+interrupted by SIGINT / SIGTERM / SIGHUP before ``OUT.h5`` was complete and in
+place (after that, the XDMF and summary are finished and the status is the
+run's). On a
 ``fold_run`` failure (exit 1: blow-up, unresolvable overlap, I/O) the file with
 the results up to the last good state and ``status = "failed: ..."`` is kept
 as ``OUT.h5``.
