@@ -173,6 +173,15 @@ class DestinationLock:
         self.release()
 
 
+def make_parent(target: Path, option: str) -> None:
+    """Create the folder that holds ``target`` (and so its lock file), with its parents."""
+    parent = Path(os.path.abspath(target)).parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{option}: cannot create the folder {parent} for {target}: {exc.strerror or exc}") from None
+
+
 def acquire(target: Path, option: str, command: str = "") -> DestinationLock:
     """Take the exclusive lock of the destination ``target`` (before anything is written).
 

@@ -94,16 +94,19 @@ def run(args: argparse.Namespace) -> int:
     parent = Path(args.out)
     if parent.exists() and not parent.is_dir():
         raise InputError(f"--out: must be a folder (or not exist yet), got the file {parent}")
-    from pyfold.destination import acquire
+    from pyfold.destination import acquire, make_parent
 
-    Path(os.path.abspath(parent)).parent.mkdir(parents=True, exist_ok=True)  # where its lock file goes
+    make_parent(parent, "--out")  # where its lock file goes
     with acquire(parent, "--out", command=f"pyfold main --out {parent}"):
         return _run_locked(parent, scene, args.np, args.seeds, closures)
 
 
 def _run_locked(parent: Path, scene: Path, processes: int, n_seeds: int, closures: tuple[str, ...]) -> int:
     """The job, with its results folder ``parent`` locked."""
-    parent.mkdir(parents=True, exist_ok=True)
+    try:
+        parent.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder {parent}: {exc.strerror or exc}") from None
     stamp = time.strftime("run-%Y%m%d-%H%M%S")
     final = parent / stamp
     suffix = 1

@@ -39,12 +39,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pyfold import report
 
-    from pyfold.destination import acquire
+    from pyfold.destination import acquire, make_parent
 
     paths = [Path(p) for p in args.run_files]
     if args.out == "":
         raise InputError("--out: empty path; name the report folder (or leave --out out for <first RUN>_report)")
     out = Path(args.out) if args.out else paths[0].with_name(paths[0].stem + "_report")
+    make_parent(out, "--out")  # where its lock file goes (the folder itself is made by the report)
     with acquire(out, "--out", command="pyfold report ... --out " + shlex.quote(str(out))):
         rep, _ = report.report(paths, out, args.closures, allow_failed=args.allow_failed, force=args.force,
                                progress=lambda text: print(f"pyfold report: {text}", flush=True))

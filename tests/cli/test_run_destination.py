@@ -189,19 +189,20 @@ def test_report_and_main_folders_locked(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(report, "report", fake_report)
     monkeypatch.setattr(report, "summary_lines", lambda rep: [])
     monkeypatch.setattr(main_job, "_job", fake_job)
-    rep_out, main_out = tmp_path / "rep", tmp_path / "main"
+    rep_out, main_out = tmp_path / "new" / "rep", tmp_path / "main"  # a new parent folder is made, as before
     for argv, target in ((["report", str(tmp_path / "run.h5"), "--out", str(rep_out)], rep_out),
                          (["main", "--out", str(main_out), "--seeds", "1", "--np", "1"], main_out)):
+        assert main(argv) == 0, capsys.readouterr().err  # nobody holds it (the folders are made)
         holder = _holder(target)
         try:
             assert main(argv) == 2
             err = capsys.readouterr().err
             assert f"pid {holder.pid} on host {HOST}" in err and "--out" in err, err
-            assert not calls and not target.exists()
+            assert len(calls) == 1  # refused before the report / job
         finally:
             _kill(holder)
         assert main(argv) == 0, capsys.readouterr().err
-        assert len(calls) == 1 and not target.with_name(target.name + ".lock").exists()
+        assert len(calls) == 2 and not target.with_name(target.name + ".lock").exists()
         calls.clear()
     assert (rep_out / "summary.txt").read_text() == "stand-in report\n"
     assert (main_out / "latest" / "summary.txt").read_text() == "stand-in job\n"
