@@ -97,16 +97,27 @@ def refuse_input_as_output(source: Path, outputs: tuple[Path, ...], option: str,
 
 
 def _holder_text(fd: int) -> str:
-    """The holder's record in a lock file (waits up to :data:`HOLDER_INFO_WAIT` for it to appear)."""
+    """The holder's record in a lock file. Waits up to :data:`HOLDER_INFO_WAIT` for
+    it to appear, and for a record of an ended process on this host to be replaced
+    (a new holder writes its record just after taking the lock)."""
     deadline = time.monotonic() + HOLDER_INFO_WAIT
     while True:
         try:
             text = os.pread(fd, 4096, 0).decode("utf-8", errors="replace").strip()
         except OSError:
             text = ""
-        if text or time.monotonic() >= deadline:
+        if time.monotonic() >= deadline or (text and not _ended_here(text)):
             return text
         time.sleep(0.02)
+
+
+def _ended_here(text: str) -> bool:
+    """Whether a lock file's record names a process of this host that has ended."""
+    try:
+        info = json.loads(text)
+        return str(info["host"]) == socket.gethostname() and not _alive(int(info["pid"]))
+    except (ValueError, KeyError, TypeError):
+        return False
 
 
 def describe_holder(text: str) -> str:
@@ -122,7 +133,7 @@ def describe_holder(text: str) -> str:
         words += f", since {info['started']}"
     if info.get("command"):
         words += f" ({info['command']})"
-    if host == socket.gethostname() and not _alive(pid):
+    if _ended_here(text):
         words += ("; that process has ended, but a process it started (fold_run, mpirun) still holds the lock "
                   "and may still write: wait for it to end, or end it")
     return words

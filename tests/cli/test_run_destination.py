@@ -329,3 +329,13 @@ def test_resume_of_a_file_open_in_a_reader_names_the_reader(scene, tmp_path, fak
     finally:
         _kill(reader)
     assert main(["run", str(scene), "-o", str(out), "--resume"]) == 0  # closed: it resumes
+
+
+def test_a_link_at_the_lock_file_is_refused_its_target_untouched(scene, tmp_path, fake_fold_run, capsys):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    (tmp_path / "x.h5.lock").symlink_to(victim.name)
+    assert main(["run", str(scene), "-o", str(tmp_path / "x.h5"), "--force"]) == 2
+    err = capsys.readouterr().err
+    assert "-o" in err and "x.h5.lock" in err and "symbolic link" in err
+    assert victim.read_text() == "precious" and not (tmp_path / "x.h5").exists()
