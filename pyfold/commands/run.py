@@ -524,6 +524,11 @@ def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | No
         raise
 
     if rc == 2:
+        reader = open_elsewhere(partial) if "temporarily unavailable" in _cause(tail) else None
+        if reader:  # opened by a reader after the check above: locked, not damaged
+            raise InputError(f"fold_run could not open {partial}: it is open in {reader}, which holds HDF5's lock "
+                             "on it; the file is not damaged. Close it there (ds.close(), f.close()), then continue "
+                             f"with: {resume_hint}")
         raise InputError(f"fold_run rejected the run file {partial} (kept for inspection):\n{_cause(tail)}")
     complete = _identity(partial)
     try:

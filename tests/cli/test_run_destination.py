@@ -339,3 +339,32 @@ def test_a_link_at_the_lock_file_is_refused_its_target_untouched(scene, tmp_path
     err = capsys.readouterr().err
     assert "-o" in err and "x.h5.lock" in err and "symbolic link" in err
     assert victim.read_text() == "precious" and not (tmp_path / "x.h5").exists()
+
+
+def test_a_reader_opening_the_partial_file_under_fold_run_is_named_not_damaged(scene, tmp_path, monkeypatch, capsys):
+    """A reader that opens OUT.h5.partial between pyfold's check and fold_run's open makes
+    fold_run fail to lock it ("Resource temporarily unavailable"): named as a reader, exit 2."""
+    readers = tmp_path / "reader.pid"
+    script = tmp_path / "fold_run"
+    script.write_text(
+        f"#!{sys.executable}\n"
+        "import subprocess, sys, time\n"
+        "reader = subprocess.Popen([sys.executable, '-c', 'import h5py, sys, time; f = h5py.File(sys.argv[1], \"r\"); "
+        "print(1, flush=True); time.sleep(600)', sys.argv[1]], stdout=subprocess.PIPE, start_new_session=True)\n"
+        "reader.stdout.readline()\n"
+        f"open({str(readers)!r}, 'w').write(str(reader.pid))\n"
+        "print(f'fold_run: bad run file {sys.argv[1]}: cannot open {sys.argv[1]} as an HDF5 file '\n"
+        "      '(Resource temporarily unavailable) (damaged?)', file=sys.stderr)\n"
+        "sys.exit(2)\n")
+    script.chmod(0o755)
+    monkeypatch.setenv("PYFOLD_FOLD_RUN", str(script))
+    out = tmp_path / "x.h5"
+    try:
+        assert main(["run", str(scene), "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        pid = int(readers.read_text())
+        assert f"pid {pid}" in err and "not damaged" in err and "--resume" in err, err
+    finally:
+        if readers.exists():
+            os.kill(int(readers.read_text()), signal.SIGKILL)
+    assert (tmp_path / "x.h5.partial").is_file()  # kept for --resume
