@@ -559,7 +559,7 @@ def _finish(args: argparse.Namespace, out: Path, partial: Path, xmf: Path, rc: i
     written = None
     try:
         written = _write_xdmf_replacing(out, xmf)
-    except PyfoldError as exc:
+    except (PyfoldError, OSError) as exc:  # e.g. a full disk: the run file is what counts
         print(f"pyfold run: warning: no XDMF written: {exc}", file=sys.stderr)
     if rc != 0:
         cause = _cause(tail)
