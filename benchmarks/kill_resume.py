@@ -9,6 +9,8 @@ Command (a few minutes on 2 cores; each try costs about one to two runs of the s
 ~3 s each):
     .venv/bin/python benchmarks/kill_resume.py [--tries 40] [--seed 1] [--max-kills 3]
         [--again 0.5] [--n 64] [--steps 3000] [--checkpoint-every 2] [--out out/kill_resume]
+        [--concurrent 0]
+    (a small form: --tries 2 --concurrent 6 --steps 1000, about a minute)
 
 Scene: N fibres (aspect ratio 20, L = 1) in a periodic 5^3 cell, simple shear, Jeffery
 kinematics with the collision strategy (collisions = 1, alpha = 0.005), dt = 0.01; a
