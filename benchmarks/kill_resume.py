@@ -9,6 +9,8 @@ Command (a few minutes on 2 cores; each try costs about one to two runs of the s
 ~3 s each):
     .venv/bin/python benchmarks/kill_resume.py [--tries 40] [--seed 1] [--max-kills 3]
         [--again 0.5] [--n 64] [--steps 3000] [--checkpoint-every 2] [--out out/kill_resume]
+        [--concurrent 0]
+    (a small form: --tries 2 --concurrent 6 --steps 1000, about a minute)
 
 Scene: N fibres (aspect ratio 20, L = 1) in a periodic 5^3 cell, simple shear, Jeffery
 kinematics with the collision strategy (collisions = 1, alpha = 0.005), dt = 0.01; a
@@ -30,6 +32,18 @@ resume runs to its end. Outcome of a try:
   * "wrong": exit 0 with different results (must be 0);
   * "other": anything else (exit 1, a signal, a file h5py cannot open) -- also a
     defect to look at.
+
+Concurrent writers (`--concurrent N`, N tries; `--tries 0 --concurrent N` runs only
+these): `pyfold run SCENE -o TRY.h5` with the same scene as a TOML file, and at a
+time drawn uniformly over [0, 1.05 x the wall time of a reference `pyfold run`]
+after its start a second `pyfold run` on the same destination, plain or
+`--resume` (even odds). Outcome of a try:
+  * "refused naming holder": one exits 0 with results bit for bit the reference's,
+    the other exits 2 naming the winner's pid (the destination lock);
+  * "refused otherwise": one exits 0 bitwise, the other exits 2 for the state it
+    found (it started after the winner ended: OUT.h5 exists / nothing to resume);
+  * "wrong": no exit 0, both exit 0, or the winner's results differ (must be 0);
+  * "other": anything else.
 
 Outputs: the counts, the load average (before / after), the command to reproduce on
 stdout; one CSV row per try in OUT/kill_resume_seed<seed>.csv (try, kills, kill times
@@ -146,6 +160,108 @@ def same_run(ref: Path, path: Path, steps: int) -> str:
     return ""
 
 
+CONCURRENT_SCENE = """title = "kill_resume: concurrent writers"
+[cell]
+dim = 3
+size = [5.0, 5.0, 5.0]
+[flow]
+type = "simple_shear"
+rate = 1.0
+[[particles]]
+name = "fibres"
+shape = "fibre"
+length = 1.0
+radius = 0.025
+count = {n}
+[model]
+alpha = 0.005
+[numerics]
+dt = 0.01
+t_end = {t_end}
+seed = 7
+[output]
+interval = 0.01
+snapshot_interval = 0.07
+checkpoint_interval = {checkpoint}
+"""
+
+
+def pyfold_run(*args: str) -> subprocess.Popen:
+    """`pyfold run ...` as a child process (stdout discarded, stderr kept)."""
+    return subprocess.Popen([sys.executable, "-m", "pyfold.cli", "run", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, env=ENV)
+
+
+def same_records(ref: Path, path: Path) -> str:
+    """"" when `path` has status ok and every record/snapshot dataset of `ref` bit for bit."""
+    try:
+        with h5py.File(ref) as a, h5py.File(path) as b:
+            status = b.attrs.get("status")
+            status = status.decode() if isinstance(status, bytes) else str(status)
+            if status != "ok":
+                return f"status {status!r}"
+            for name in COMPARED:
+                if name in a and (name not in b or not np.array_equal(a[name][()], b[name][()])):
+                    return f"/{name} differs"
+    except OSError as exc:
+        return f"unreadable: {exc}"
+    return ""
+
+
+def concurrent_tries(args, rng, tmp: Path, w) -> dict[str, int]:
+    """`--concurrent` tries: a second `pyfold run` / `--resume` on a destination being written."""
+    counts = {"refused naming holder": 0, "refused otherwise": 0, "wrong": 0, "other": 0}
+    toml = tmp / "concurrent.toml"
+    toml.write_text(CONCURRENT_SCENE.format(n=args.n, t_end=args.steps * 0.01,
+                                            checkpoint=args.checkpoint_every * 0.01))
+    ref = tmp / "concurrent_ref.h5"
+    t0 = time.monotonic()
+    first = pyfold_run(str(toml), "-o", str(ref))
+    _, err = first.communicate()
+    wall = time.monotonic() - t0
+    if first.returncode != 0:
+        print(f"reference pyfold run failed (exit {first.returncode}): {err}", file=sys.stderr)
+        counts["other"] += 1
+        return counts
+    print(f"concurrent writers: reference `pyfold run` {wall:.2f} s", flush=True)
+    for t in range(args.concurrent):
+        t_start = time.monotonic()
+        out = tmp / f"concurrent{t}.h5"
+        mode = "--resume" if rng.uniform() < 0.5 else "plain"
+        delay = float(rng.uniform(0.0, 1.05 * wall))
+        first = pyfold_run(str(toml), "-o", str(out))
+        time.sleep(delay)
+        first_ended = first.poll() is not None
+        second = pyfold_run(str(toml), "-o", str(out), *(["--resume"] if mode == "--resume" else []))
+        err1, err2 = first.communicate()[1], second.communicate()[1]
+        codes = (first.returncode, second.returncode)
+        pids = (first.pid, second.pid)
+        errs = (err1, err2)
+        winners = [k for k in (0, 1) if codes[k] == 0]
+        if len(winners) != 1:
+            outcome, cause = "wrong", f"exit codes {codes}: {err1.strip()[-200:]} | {err2.strip()[-200:]}"
+        else:
+            win = winners[0]
+            lose = 1 - win
+            diff = same_records(ref, out)
+            if diff:
+                outcome, cause = "wrong", diff
+            elif codes[lose] == 2 and f"pid {pids[win]} on host" in errs[lose]:
+                outcome, cause = "refused naming holder", errs[lose].strip().splitlines()[-1][:200]
+            elif codes[lose] == 2:
+                outcome, cause = "refused otherwise", errs[lose].strip().splitlines()[-1][:200]
+            else:
+                outcome, cause = "other", f"loser exit {codes[lose]}: {errs[lose].strip()[-300:]}"
+        counts[outcome] += 1
+        w.writerow([f"concurrent {t}", mode, f"{delay:.3f}", int(first_ended), "", " ".join(map(str, codes)),
+                    outcome, cause, f"{time.monotonic() - t_start:.2f}"])
+        print(f"concurrent {t:3d}: second ({mode}) after {delay:.2f} s"
+              f"{' (first had ended)' if first_ended else ''}: exits {codes}: {outcome}: {cause}", flush=True)
+        for path in (out, out.with_suffix(".xmf")):
+            path.unlink(missing_ok=True)
+    return counts
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tries", type=int, default=40)
@@ -156,6 +272,8 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--checkpoint-every", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "out" / "kill_resume"))
+    ap.add_argument("--concurrent", type=int, default=0,
+                    help="tries of the concurrent-writer case (a second pyfold run / --resume on the destination)")
     args = ap.parse_args(argv)
     command = "python benchmarks/kill_resume.py " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     if "--seed" not in command:
@@ -230,13 +348,18 @@ def main(argv=None) -> int:
                 print(f"try {t:3d}: {len(times)} kill(s) at {', '.join(times)} s (steps {', '.join(steps_at)}): "
                       f"{outcome}{': ' + cause if cause else ''}", flush=True)
                 path.unlink(missing_ok=True)
+            concurrent = concurrent_tries(args, rng, tmp, w) if args.concurrent > 0 else None
     load_after = os.getloadavg()
     print("\ncounts: " + ", ".join(f"{k} {v}" for k, v in counts.items()) + f" (of {args.tries} tries)")
+    if concurrent is not None:
+        print("concurrent writers: " + ", ".join(f"{k} {v}" for k, v in concurrent.items())
+              + f" (of {args.concurrent} tries)")
     print("load average (1, 5, 15 min): before " + " ".join(f"{x:.2f}" for x in load_before)
           + ", after " + " ".join(f"{x:.2f}" for x in load_after) + f" on {os.cpu_count()} cores")
     print(f"table: {table}")
     print(f"reproduce: {command}")
-    return 1 if counts["wrong"] or counts["other"] else 0
+    bad = counts["wrong"] + counts["other"] + (concurrent["wrong"] + concurrent["other"] if concurrent else 0)
+    return 1 if bad else 0
 
 
 if __name__ == "__main__":

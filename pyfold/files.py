@@ -150,7 +150,8 @@ def atomic_output(path: str | Path) -> Iterator[Path]:
     """
     path = Path(path)
     folder = path.parent
-    tmp = folder / f"{TEMP_PREFIX}{os.getpid()}-{next(_serial)}-{path.stem}{path.suffix}"
+    # short whatever the name: any destination name within NAME_MAX has a temporary within it too
+    tmp = folder / f"{TEMP_PREFIX}{os.getpid()}-{next(_serial)}{path.suffix[:16]}"
     try:
         try:
             yield tmp

@@ -13,7 +13,9 @@ Every invocation writes a fresh, timestamped results folder under ``--out``
 (``run-YYYYmmdd-HHMMSS``), assembled in a hidden temporary folder and renamed
 into place only when complete, so an earlier result is never overwritten and
 an interrupted job leaves no half-written folder. ``<out>/latest`` points to
-the newest complete result.
+the newest complete result. ``--out`` is locked for the job's life (``<out>.lock``
+beside it, :mod:`pyfold.destination`): a second job with the same ``--out`` is
+refused (exit 2) naming the holder.
 """
 from __future__ import annotations
 
@@ -87,10 +89,24 @@ def run(args: argparse.Namespace) -> int:
         from pyfold.pipeline import check_closures
 
         closures = check_closures(args.closures, dim)
+    if args.out == "":
+        raise InputError("--out: empty path; name the parent folder of the results (default: out/main)")
     parent = Path(args.out)
     if parent.exists() and not parent.is_dir():
         raise InputError(f"--out: must be a folder (or not exist yet), got the file {parent}")
-    parent.mkdir(parents=True, exist_ok=True)
+    from pyfold.destination import acquire, make_parent
+
+    make_parent(parent, "--out")  # where its lock file goes
+    with acquire(parent, "--out", command=f"pyfold main --out {parent}"):
+        return _run_locked(parent, scene, args.np, args.seeds, closures)
+
+
+def _run_locked(parent: Path, scene: Path, processes: int, n_seeds: int, closures: tuple[str, ...]) -> int:
+    """The job, with its results folder ``parent`` locked."""
+    try:
+        parent.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder {parent}: {exc.strerror or exc}") from None
     stamp = time.strftime("run-%Y%m%d-%H%M%S")
     final = parent / stamp
     suffix = 1
@@ -99,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         final = parent / f"{stamp}-{suffix}"
     work = Path(tempfile.mkdtemp(prefix=".partial-", dir=parent))
     try:
-        _job(work, scene, args.np, args.seeds, closures)
+        _job(work, scene, processes, n_seeds, closures)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise

@@ -10,13 +10,17 @@ Output folder (``--out``, default ``<first run>_report/`` beside the first run,
 as ``pyfold analyse`` defaults to ``RUN_analysis/``): created if missing; a folder
 that already holds report files is refused unless ``--force`` replaces them. The
 files are assembled in a hidden folder and moved in when complete
-(:func:`pyfold.report.write_report`).
+(:func:`pyfold.report.write_report`). The folder is locked for the report's life
+(``DIR.lock`` beside it, :mod:`pyfold.destination`): a second ``pyfold report`` or
+``pyfold main`` with the same ``--out`` is refused (exit 2) naming the holder.
 """
 from __future__ import annotations
 
 import argparse
+import shlex
 from pathlib import Path
 
+from pyfold.errors import InputError
 from pyfold.pipeline import DEFAULT_CLOSURES
 
 
@@ -35,10 +39,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pyfold import report
 
+    from pyfold.destination import acquire, make_parent
+
     paths = [Path(p) for p in args.run_files]
+    if args.out == "":
+        raise InputError("--out: empty path; name the report folder (or leave --out out for <first RUN>_report)")
     out = Path(args.out) if args.out else paths[0].with_name(paths[0].stem + "_report")
-    rep, _ = report.report(paths, out, args.closures, allow_failed=args.allow_failed, force=args.force,
-                           progress=lambda text: print(f"pyfold report: {text}", flush=True))
+    make_parent(out, "--out")  # where its lock file goes (the folder itself is made by the report)
+    with acquire(out, "--out", command="pyfold report ... --out " + shlex.quote(str(out))):
+        rep, _ = report.report(paths, out, args.closures, allow_failed=args.allow_failed, force=args.force,
+                               progress=lambda text: print(f"pyfold report: {text}", flush=True))
     print("\n".join(report.summary_lines(rep)))
     print(f"pyfold report: figures, results.nc and summary in {out}")
     return 0

@@ -15,7 +15,22 @@ the new file is complete (atomic rename).
 
 ``--resume`` continues ``OUT.h5.partial`` (or a failed ``OUT.h5``, whose
 ``status`` is not ``ok``) from its last checkpoint with ``fold_run --resume``,
-then finishes like a run (rename, ``OUT.xmf`` rewritten, summary).
+then finishes like a run (rename, ``OUT.xmf`` rewritten, summary). A file another
+process holds open (a reader's HDF5 lock: an undone ``ds.close()``) is refused
+with exit 2 naming that process, before anything is moved.
+
+One writer per destination (:mod:`pyfold.destination`): before anything is
+written the run takes an exclusive lock on ``OUT.h5.lock`` (pid, host, start
+time and command recorded in it), held until it ends and inherited by
+``fold_run`` / ``mpirun``, so an orphaned ``fold_run`` of a killed pyfold still
+holds it; a second ``pyfold run`` or ``--resume`` of the same ``-o`` is refused
+(exit 2) naming the holder. A failed run removes only a ``.partial`` it created
+itself. Links: a symbolic link at ``OUT.h5``, ``OUT.xmf`` or ``OUT.h5.partial``
+counts as an existing file (refused without ``--force``); with ``--force`` the
+link itself is replaced by a new file, its target is never written;
+``--resume`` refuses a link. The scene file is never an output (also through a
+symbolic or hard link): refused with exit 2 naming both paths. ``-o ""`` and a
+name that, with ``.partial``, exceeds its folder's NAME_MAX are refused.
 
 ``--np`` is bounded by :func:`rank_bound` (``OVERSUBSCRIBE_FACTOR`` ranks per
 usable core; more only with ``--oversubscribe``, never more than
@@ -25,7 +40,10 @@ pyfold ends for any reason (an exception, SIGINT, SIGTERM, SIGHUP: see
 and waited for, and ``OUT.h5.partial`` is kept for ``--resume``.
 
 Exit status: 0 success; 2 bad scene, option or run file (from ``fold_run``
-too); 1 failure; 130 / 143 / 129 interrupted by SIGINT / SIGTERM / SIGHUP. On a
+too), or a destination another process writes; 1 failure; 130 / 143 / 129
+interrupted by SIGINT / SIGTERM / SIGHUP before ``OUT.h5`` was complete and in
+place (after that, the XDMF and summary are finished and the status is the
+run's). On a
 ``fold_run`` failure (exit 1: blow-up, unresolvable overlap, I/O) the file with
 the results up to the last good state and ``status = "failed: ..."`` is kept
 as ``OUT.h5``. A complete run whose ``OUT.xmf`` cannot be written (a full disk)
@@ -51,6 +69,8 @@ from collections import deque
 from pathlib import Path
 
 from pyfold.command_line import command_line
+from pyfold.destination import LOCK_SUFFIX, acquire, check_name_length, lock_path, open_elsewhere, \
+    refuse_input_as_output
 from pyfold.errors import InputError, PyfoldError
 
 #: Environment variable naming the fold_run executable explicitly.
@@ -63,6 +83,8 @@ OVERSUBSCRIBE_FACTOR = 4
 MAX_RANKS = 4096
 #: Seconds a terminated fold_run / mpirun group gets to exit before SIGKILL.
 TERMINATE_GRACE = 3.0
+#: Suffix of the run file while fold_run writes it (``OUT.h5.partial``).
+PARTIAL_SUFFIX = ".partial"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -222,9 +244,11 @@ def _stream(pipe, sink: deque, echo) -> None:
     pipe.close()
 
 
-def _execute(command: list[str], env: dict[str, str], n_steps: int) -> tuple[int, list[str]]:
+def _execute(command: list[str], env: dict[str, str], n_steps: int,
+             pass_fds: tuple[int, ...] = ()) -> tuple[int, list[str]]:
     """Run fold_run in its own session; PROGRESS lines drive a rich progress bar,
-    other lines are shown.
+    other lines are shown. ``pass_fds`` are inherited by it (the destination's lock:
+    held as long as fold_run / mpirun lives, also if pyfold is killed).
 
     Any exception while it runs (KeyboardInterrupt, a signal turned into an
     exception by :mod:`pyfold.cli`) terminates its whole process group (mpirun and
@@ -245,7 +269,7 @@ def _execute(command: list[str], env: dict[str, str], n_steps: int) -> tuple[int
         err_thread = None
         try:
             proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                    bufsize=1, start_new_session=True)
+                                    bufsize=1, start_new_session=True, pass_fds=pass_fds)
             with _LIVE_LOCK:
                 _LIVE.add(proc)
             err_thread = threading.Thread(target=_stream, args=(proc.stderr, tail, lambda s: progress.console.print(
@@ -315,70 +339,133 @@ def _check_output_folder(out: Path) -> None:
     os.unlink(probe)
 
 
-def _plan_output(args: argparse.Namespace) -> tuple[Path, Path, Path, Path | None]:
-    """Check ``-o`` and what lies beside it, before any work.
-
-    Returns ``(out, partial, xmf, resume_from)``; ``resume_from`` is the file
-    ``--resume`` continues (``partial``, or a failed ``out``), None for a new run.
-    """
-    out = Path(args.output) if args.output else Path(Path(args.scene).stem + ".h5")
+def _output_path(args: argparse.Namespace) -> Path:
+    """``-o`` (default: the scene's name with ``.h5``); refused when empty or without a run-file suffix."""
+    if args.output is not None and args.output == "":
+        raise InputError("-o: empty path; name the run file to write (e.g. -o run.h5), or leave -o out for the "
+                         "scene's name with .h5")
+    out = Path(args.output) if args.output is not None else Path(Path(args.scene).stem + ".h5")
     if out.suffix.lower() not in RUN_SUFFIXES:
         raise InputError(f"-o: {out} must end in {', '.join(RUN_SUFFIXES)} (the run writes its XDMF to "
-                         f"{out.with_suffix('.xmf').name} and {out.name}.partial beside it), got "
+                         f"{out.with_suffix('.xmf').name} and {out.name}{PARTIAL_SUFFIX} beside it), got "
                          f"{out.suffix or 'no suffix'!r}")
-    partial = out.with_name(out.name + ".partial")
+    return out
+
+
+def _shown(path: Path) -> str:
+    """``path``, and where it points when it is a symbolic link."""
+    if path.is_symlink():
+        return f"{path} (a symbolic link to {os.readlink(path)})"
+    return str(path)
+
+
+def _plan_output(args: argparse.Namespace, out: Path) -> tuple[Path, Path, Path | None]:
+    """Check what lies at and beside ``out`` (under its lock, before any work).
+
+    A symbolic link at an output name counts as an existing file: refused without
+    ``--force``; with it the link itself is replaced, its target never written.
+    Returns ``(partial, xmf, resume_from)``; ``resume_from`` is the file ``--resume``
+    continues (``partial``, or a failed ``out``), None for a new run.
+    """
+    partial = out.with_name(out.name + PARTIAL_SUFFIX)
     xmf = out.with_suffix(".xmf")
     for path in (out, partial, xmf):
-        if path.exists() and not path.is_file():
+        if path.exists() and not path.is_symlink() and not path.is_file():
             raise InputError(f"-o: {path} exists and is not a file")
-    _check_output_folder(out)
 
     resume_from = None
     if args.resume:
-        if partial.exists():
+        if os.path.lexists(partial):
             resume_from = partial
-            if out.exists() and not args.force:
-                raise InputError(f"-o: {out} exists; resuming {partial.name} would replace it when complete: "
+            if os.path.lexists(out) and not args.force:
+                raise InputError(f"-o: {_shown(out)} exists; resuming {partial.name} would replace it when complete: "
                                  "pass --force to allow that")
-        elif out.exists():
-            status = _status(out)
-            if status is None or status == "ok":
+        elif os.path.lexists(out):
+            status = None if out.is_symlink() else _status(out)
+            if not out.is_symlink() and (status is None or status == "ok"):
                 raise InputError(f"--resume: nothing to resume: {out} is "
                                  + ("complete (status ok)" if status == "ok" else "not a run file with a status")
                                  + f" and there is no {partial.name}")
             resume_from = out  # failed: its XDMF beside it is the run's own
         else:
             raise InputError(f"--resume: nothing to resume: neither {partial} nor a failed {out} exists")
-        if xmf.exists() and not args.force and resume_from is partial and not out.exists():
-            raise InputError(f"-o: {xmf} exists (the run writes its XDMF there); pass --force to replace it")
-        return out, partial, xmf, resume_from
+        if resume_from.is_symlink():
+            raise InputError(f"--resume: {_shown(resume_from)} is a symbolic link; a run continues only a regular "
+                             f"file (never writing through a link): resume the file itself with -o "
+                             f"{os.path.realpath(resume_from)}")
+        if os.path.lexists(xmf) and not args.force and resume_from is partial and not os.path.lexists(out):
+            raise InputError(f"-o: {_shown(xmf)} exists (the run writes its XDMF there); pass --force to replace it")
+        return partial, xmf, resume_from
 
-    if out.exists() and not args.force:
-        raise InputError(f"-o: {out} exists; pass --force to replace it (it stays intact until the new run is complete)")
-    if xmf.exists() and not args.force:
-        raise InputError(f"-o: {xmf} exists (the run writes its XDMF there, beside {out.name}); pass --force to "
-                         "replace it, or choose another -o")
-    if partial.exists() and not args.force:
-        raise InputError(f"-o: {partial} exists: an interrupted (or still running) run of {out.name}; "
-                         f"pass --resume to continue it from its last checkpoint, or --force to start again")
-    return out, partial, xmf, None
+    if os.path.lexists(out) and not args.force:
+        raise InputError(f"-o: {_shown(out)} exists; pass --force to replace it (it stays intact until the new run "
+                         "is complete)")
+    if os.path.lexists(xmf) and not args.force:
+        raise InputError(f"-o: {_shown(xmf)} exists (the run writes its XDMF there, beside {out.name}); pass --force "
+                         "to replace it, or choose another -o")
+    if os.path.lexists(partial) and not args.force:
+        raise InputError(f"-o: {_shown(partial)} exists: an interrupted run of {out.name}; pass --resume to continue "
+                         "it from its last checkpoint, or --force to start again")
+    return partial, xmf, None
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """(device, inode) of ``path`` itself (not of a link's target); None when absent."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _create_new(path: Path) -> tuple[int, int]:
+    """Create ``path`` as a new empty file (never through a link, never an existing
+    file); its identity tells later whether the file there is still this one."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise InputError(f"-o: cannot write {path}: {exc.strerror or exc}") from None
+    try:
+        st = os.fstat(fd)
+    finally:
+        os.close(fd)
+    return st.st_dev, st.st_ino
+
+
+def _unlink_if_ours(path: Path, identity: tuple[int, int] | None) -> None:
+    """Remove ``path`` only if it is still the file this process created."""
+    if identity is not None and _identity(path) == identity:
+        path.unlink(missing_ok=True)
 
 
 def run(args: argparse.Namespace) -> int:
-    from pyfold.scene import load_scene, read_scene_text
-
     check_ranks(args.np, getattr(args, "oversubscribe", False))
     if not hasattr(args, "resume"):
         args.resume = False
-    out, partial, xmf, resume_from = _plan_output(args)
+    out = _output_path(args)
+    _check_output_folder(out)
+    check_name_length(out, (PARTIAL_SUFFIX, LOCK_SUFFIX), "-o")
+    partial = out.with_name(out.name + PARTIAL_SUFFIX)
+    refuse_input_as_output(Path(args.scene), (out, partial, out.with_suffix(".xmf"), lock_path(out)), "-o",
+                           "scene file")
+    argv = getattr(args, "argv", None) or ([args.scene, "-o", str(out), "--np", str(args.np)]
+                                          + (["--force"] if args.force else [])
+                                          + (["--resume"] if args.resume else []))
+    cli = command_line(["pyfold", "run", *argv])
+    with acquire(out, "-o", command=cli) as lock:
+        return _run_locked(args, out, cli, lock.fd)
 
+
+def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | None) -> int:
+    """The run, with the destination ``out`` locked (``lock_fd`` is given to fold_run)."""
+    from pyfold.scene import load_scene, read_scene_text
+
+    partial, xmf, resume_from = _plan_output(args, out)
     resolved = load_scene(args.scene)
     for warning in resolved.warnings:
         print(f"pyfold run: warning: {warning}", file=sys.stderr)
     fold_run = find_fold_run()
     command, env = _launch_command(fold_run, partial, args.np, resume=resume_from is not None)
-    argv = getattr(args, "argv", None) or ([args.scene, "-o", str(out), "--np", str(args.np)]
-                                          + (["--force"] if args.force else []))
     resume_hint = command_line(["pyfold", "run", Path(args.scene), "-o", Path(out), "--resume"])
 
     if resume_from is None:
@@ -386,11 +473,13 @@ def run(args: argparse.Namespace) -> int:
         from pyfold.scene.initial import initial_state
 
         initial = initial_state(resolved)
-        cli = command_line(["pyfold", "run", *argv])
+        if os.path.lexists(partial):  # --force: start again; a link is removed, its target untouched
+            partial.unlink()
+        created = _create_new(partial)
         try:
             write_run_file(partial, resolved, initial, cli)
         except BaseException as exc:
-            partial.unlink(missing_ok=True)  # half-written: nothing to resume
+            _unlink_if_ours(partial, created)  # half-written by this process: nothing to resume
             if isinstance(exc, OSError):
                 raise InputError(f"-o: cannot write {partial}: {exc}") from None
             raise
@@ -406,11 +495,16 @@ def run(args: argparse.Namespace) -> int:
             print(f"pyfold run: warning: {args.scene} differs from the scene {resume_from} was made from; "
                   "--resume continues the run recorded in the file", file=sys.stderr)
         n_steps = int(setup.resolved.get("n_steps", resolved.n_steps))
+        reader = open_elsewhere(resume_from)
+        if reader:
+            raise InputError(f"--resume: {resume_from} is open in {reader}, which holds HDF5's lock on it; the file "
+                             "is not damaged. Close it there (a dataset from pyfold.open_run: ds.close(); "
+                             "an h5py.File: f.close()), then run this command again")
         if resume_from != partial:
             os.replace(resume_from, partial)  # a failed OUT.h5: continued as OUT.h5.partial
         print(f"pyfold run: resuming {partial} from its last checkpoint", file=sys.stderr)
     try:
-        rc, tail = _execute(command, env, n_steps)
+        rc, tail = _execute(command, env, n_steps, pass_fds=(lock_fd,) if lock_fd is not None else ())
     except BaseException:
         if partial.exists():
             print(f"pyfold run: interrupted; the run so far is kept in {partial}; continue it with: {resume_hint}",
@@ -418,18 +512,41 @@ def run(args: argparse.Namespace) -> int:
         raise
 
     if rc == 2:
+        reader = open_elsewhere(partial) if "temporarily unavailable" in _cause(tail) else None
+        if reader:  # opened by a reader after the check above: locked, not damaged
+            raise InputError(f"fold_run could not open {partial}: it is open in {reader}, which holds HDF5's lock "
+                             "on it; the file is not damaged. Close it there (ds.close(), f.close()), then continue "
+                             f"with: {resume_hint}")
         raise InputError(f"fold_run rejected the run file {partial} (kept for inspection):\n{_cause(tail)}")
-    if rc != 0:
-        failed = [ln.strip().split("fold_run: ", 1)[1] for ln in tail if ln.strip().startswith("fold_run: failed:")]
-        _mark_failed(partial, rc, failed[-1] if failed else "")
-    if out.exists() and not args.force:  # appeared while we ran: never overwrite it
-        raise PyfoldError(f"{out} appeared during the run; the results stay in {partial}")
-    os.replace(partial, out)
+    complete = _identity(partial)
+    try:
+        return _finish(args, out, partial, xmf, rc, tail, resolved, resume_hint, renamed=False)
+    except KeyboardInterrupt:
+        if complete is None or _identity(out) != complete:
+            raise  # not yet in place: an interrupted run, OUT.h5.partial kept
+        # OUT.h5 is complete: the signal does not undo that; the few steps left run to their end
+        # (a further signal is ignored by pyfold.cli's handler while this one is handled)
+        print(f"pyfold run: interrupted after {out} was complete; finishing its XDMF and summary", file=sys.stderr)
+        return _finish(args, out, partial, xmf, rc, tail, resolved, resume_hint, renamed=True)
+
+
+def _finish(args: argparse.Namespace, out: Path, partial: Path, xmf: Path, rc: int, tail: list[str], resolved,
+            resume_hint: str, renamed: bool) -> int:
+    """After fold_run: the status of a crash, the rename to ``out`` (unless ``renamed``),
+    the XDMF, and the summary or the failure."""
     from pyfold.runs import run_summary, write_xdmf
 
+    if not renamed:
+        if rc != 0:
+            failed = [ln.strip().split("fold_run: ", 1)[1] for ln in tail
+                      if ln.strip().startswith("fold_run: failed:")]
+            _mark_failed(partial, rc, failed[-1] if failed else "")
+        if os.path.lexists(out) and not args.force:  # appeared while we ran: never overwrite it
+            raise PyfoldError(f"{out} appeared during the run; the results stay in {partial}")
+        os.replace(partial, out)  # a link at OUT.h5 is replaced, its target untouched
     written, no_xdmf = None, None
     try:
-        written = write_xdmf(out, xmf)
+        written = write_xdmf(out, xmf)  # atomic: a link at xmf is replaced, its target untouched
     except PyfoldError as exc:  # e.g. a full disk: the run file is the result and is kept; exit 1 below
         no_xdmf = exc
         print(f"pyfold run: warning: no XDMF written: {exc}", file=sys.stderr)

@@ -4,9 +4,12 @@ Reads /setup/resolved and /initial, appends contract-shaped results (the
 orientation tensor of the initial axes at every record, snapshots equal to the
 initial state), prints PROGRESS lines, and exits with $FAKE_FOLD_RUN_EXIT:
 0 status "ok"; 1 status "failed: ..." after half the records; 2 rejects the file.
+$FAKE_FOLD_RUN_SLEEP seconds (default 0) pass after the first PROGRESS line, before
+the results are written: a run that lasts while another process tries the same file.
 """
 import os
 import sys
+import time
 
 import h5py
 import numpy as np
@@ -31,6 +34,8 @@ a2 = np.einsum("ni,nj->ij", p, p) / len(p)
 snaps = list(range(0, steps[-1] + 1, snap_every)) if snap_every else []
 for s in steps:
     print(f"PROGRESS {s} {n_steps} {s * dt:.6g}", flush=True)
+    if s == steps[0]:
+        time.sleep(float(os.environ.get("FAKE_FOLD_RUN_SLEEP", "0")))
 append_results(path, dim, len(p), n_fam, [s * dt for s in steps], snaps, [s * dt for s in snaps],
                np.repeat(a2[None], len(steps), axis=0), np.repeat(x[None], len(snaps), axis=0),
                np.repeat(p[None], len(snaps), axis=0), [2.0] * len(steps),
