@@ -241,8 +241,11 @@ def acquire(target: Path, option: str, command: str = "") -> DestinationLock:
         if current is None or (current.st_dev, current.st_ino) != (held.st_dev, held.st_ino):
             os.close(fd)  # its holder removed that lock file just before we locked it: lock the new one
             continue
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, (record + "\n").encode(), 0)
+        try:  # the holder's description is for messages only: the flock is the lock
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, (record + "\n").encode(), 0)
+        except OSError:  # e.g. a full disk: the command's own writes report it
+            pass
         return DestinationLock(target, path, fd)
     raise InputError(f"{option}: could not lock {path}: its holders kept replacing it")  # pragma: no cover
 
