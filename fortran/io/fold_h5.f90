@@ -1096,7 +1096,8 @@ contains
       if (stat /= FOLD_OK) errmsg = name//": "//trim(errmsg)
    end subroutine annotate
 
-   !> Chunked dataset whose last Fortran dimension may be unlimited.
+   !> Chunked dataset, checksummed by HDF5's Fletcher32 filter, whose last Fortran
+   !> dimension may be unlimited.
    subroutine create_extendible(loc, name, kind, extents, unlimited, dset, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
@@ -1110,6 +1111,9 @@ contains
       integer(hsize_t) :: dims(size(extents)), maxdims(size(extents)), chunk(size(extents))
       integer :: err, r
       integer(hsize_t), parameter :: target_chunk = 8192  ! elements per chunk, ~64 kB of doubles
+      !> Records per chunk at most: a damaged chunk (its Fletcher32 checksum fails) loses
+      !> no more than these records to a reader that keeps the intact part
+      integer(hsize_t), parameter :: max_records = 64
 
       dset = -1
       r = size(extents)
@@ -1122,18 +1126,23 @@ contains
       end if
       call h5pcreate_f(H5P_DATASET_CREATE_F, dcpl, err)
       if (.not. ok(err, name//": h5pcreate_f failed", stat, errmsg)) return
+      ! Every dataset is chunked, so that HDF5's Fletcher32 filter checksums its data:
+      ! a reader (h5py, this module) gets a read error instead of a flipped value.
+      chunk = max(1_hsize_t, extents)
       if (unlimited) then
          dims(r) = 0
          maxdims(r) = H5S_UNLIMITED_F
-         chunk = max(1_hsize_t, extents)
          ! Whole records per chunk; several records when a record is small.
-         chunk(r) = max(1_hsize_t, target_chunk/max(1_hsize_t, product(chunk(1:r - 1))))
-         if (r == 1) chunk(1) = 512
-         call h5pset_chunk_f(dcpl, r, chunk, err)
-         if (.not. ok(err, name//": cannot set chunking", stat, errmsg)) then
-            call h5pclose_f(dcpl, err)
-            return
-         end if
+         chunk(r) = max(1_hsize_t, min(max_records, target_chunk/max(1_hsize_t, product(chunk(1:r - 1)))))
+      end if
+      call h5pset_chunk_f(dcpl, r, chunk, err)
+      if (ok(err, name//": cannot set chunking", stat, errmsg)) then
+         call h5pset_fletcher32_f(dcpl, err)
+         call check_err(err, name//": cannot set the Fletcher32 checksum filter", stat, errmsg)
+      end if
+      if (stat /= FOLD_OK) then
+         call h5pclose_f(dcpl, err)
+         return
       end if
       call h5screate_simple_f(r, dims, space, err, maxdims)
       if (.not. ok(err, name//": cannot create dataspace", stat, errmsg)) then
