@@ -38,7 +38,7 @@ module fold_h5
    public :: h5_attr_string, h5_attr_int, h5_attr_real, h5_read_attr_int
    public :: h5_make_group, h5_delete
    public :: h5_scale_int, h5_scale_real, h5_var_create, h5_var_append_real, h5_var_append_int
-   public :: h5_var_length, h5_var_truncate
+   public :: h5_var_length, h5_var_truncate, h5_verify
    public :: h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
    public :: h5_put_real_array, h5_put_real_scalar, h5_put_int_scalar
    public :: h5_cause, h5_abandon_file, h5_wedged
@@ -812,6 +812,25 @@ contains
       if (stat /= FOLD_OK) return
       if (rank > 0) length = shape(rank)
    end subroutine h5_var_length
+
+   !> Read a whole numeric dataset, so that HDF5 checks the Fletcher32 checksum of every
+   !> chunk: a chunk that fails it (or data that cannot be read) gives FOLD_INPUT_ERROR
+   !> and a message "name: damaged: ..." naming the dataset.
+   subroutine h5_verify(loc, name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: rank
+      integer(hsize_t) :: shape(7)
+      real(dp), allocatable :: buf(:)
+      call h5_shape(loc, name, rank, shape, stat, errmsg)
+      if (stat == FOLD_OK) call h5_read_real_array(loc, name, shape(1:rank), buf, stat, errmsg)
+      if (stat /= FOLD_OK) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = name//": damaged (its data fails its checksum or cannot be read): "//trim(errmsg)
+      end if
+   end subroutine h5_verify
 
    !> Shrink (or grow) the last dimension of a variable to `length` records.
    subroutine h5_var_truncate(loc, name, length, stat, errmsg)
