@@ -4,11 +4,14 @@ Every dataset of a run file (format_version >= 1.1) carries a checksum:
 
 * the datasets ``pyfold run`` writes in Python (``/setup/*``, ``/setup/resolved/*``,
   ``/initial/*``) have a ``checksum`` attribute, the CRC-32 (:func:`zlib.crc32`) of
-  their raw bytes as stored, then of their ``units`` and ``long_name`` attributes
-  (:func:`content_checksum`, the one place it is computed);
+  their raw bytes as stored, then of their ``units`` and ``long_name`` attributes and
+  their path (:func:`content_checksum`, the one place it is computed);
 * the datasets ``fold_run`` writes at the root (results and dimension scales) are
   chunked with HDF5's Fletcher32 filter: h5py raises ``OSError`` when a chunk does not
-  match its checksum, which :func:`verify_file` turns into the dataset's name;
+  match its checksum, which :func:`verify_file` turns into the dataset's name; every
+  chunk up to the complete entries must be found through the chunk index (a damaged
+  index would read as fill values), and the dataset's name must be one of
+  :data:`RESULT_NAMES` (a damaged link name);
 * ``/checkpoint`` and ``/checkpoint_shadow`` carry their own ``checksum`` dataset,
   verified by ``fold_run --resume`` (fortran/io/fold_output.f90); they are not
   read by :func:`pyfold.runs.open_run`.
@@ -67,6 +70,15 @@ CHECKSUM_SINCE = (1, 1)
 SELF_CHECKED_GROUPS = ("/checkpoint", "/checkpoint_shadow")
 #: Groups whose datasets are written in Python and carry a ``checksum`` attribute.
 PYTHON_GROUPS = ("/setup", "/initial")
+#: Names of the datasets fold_run writes at the root (fortran/io/fold_output.f90: the
+#: dimension scales, SCALAR_VARS, the tensors, STOKES_VARS and stress, LUBRICATION_VARS,
+#: SNAPSHOT_VARS; tests/cli/test_run_damage.py checks this against that file).
+RESULT_NAMES = frozenset((
+    "time", "i", "j", "k", "l", "xyz", "family", "particle", "snapshot",
+    "step", "n_corrections", "contact_iterations", "pairs_left", "capped_steps", "min_gap", "min_gap_over_alpha",
+    "length_drift", "unit_norm_drift", "a2", "a4", "a2_family", "a4_family",
+    "stokes_iterations", "stokes_residual", "rigidity_max", "rigidity_mean", "effective_viscosity", "stress",
+    "lubricated_pairs", "lubrication_correction", "snapshot_time", "x", "p"))
 #: Root attributes a finished run's counts are checked against its datasets with.
 COUNT_ATTRS = {"time": "records_complete", "snapshot": "snapshots_complete"}
 
@@ -147,11 +159,12 @@ def _text_bytes(value) -> bytes:
     return str(value).encode("utf-8")
 
 
-def content_checksum(raw: bytes, units=None, long_name=None) -> int:
-    """CRC-32 of a dataset's raw bytes, then of a NUL and its ``units``, then of a NUL and
-    its ``long_name`` (absent: empty)."""
+def content_checksum(raw: bytes, units=None, long_name=None, name: str = "") -> int:
+    """CRC-32 of a dataset's raw bytes, then of a NUL and its ``units``, a NUL and its
+    ``long_name`` (absent: empty), a NUL and its full path ``name`` (a damaged link name
+    fails it too)."""
     crc = zlib.crc32(raw)
-    for text in (units, long_name):
+    for text in (units, long_name, name):
         crc = zlib.crc32(b"\0" + _text_bytes(text), crc)
     return crc
 
@@ -171,7 +184,7 @@ def dataset_checksum(ds: h5py.Dataset) -> int:
         raw = b"\0".join(_text_bytes(v) for v in np.asarray(ds[()], dtype=object).reshape(-1))
     else:
         raw = _raw(ds).tobytes()
-    return content_checksum(raw, ds.attrs.get("units"), ds.attrs.get("long_name"))
+    return content_checksum(raw, ds.attrs.get("units"), ds.attrs.get("long_name"), ds.name)
 
 
 def seal(ds: h5py.Dataset) -> None:
@@ -245,7 +258,31 @@ def _first_bad_chunk(ds: h5py.Dataset) -> int | None:
     return None
 
 
-def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity) -> None:
+def _missing_chunk(ds: h5py.Dataset, whole: dict[str, int]) -> int | None:
+    """First entry (along axis 0) of a chunk the dataset should have and whose entry in
+    the chunk index is missing or misplaced (HDF5 would read it as fill values): every
+    chunk of a dataset ``fold_run`` wrote is allocated, up to the ``whole`` entries of
+    a growing dimension. None when all are there."""
+    if ds.chunks is None or ds.ndim == 0 or ds.size == 0:
+        return None
+    dim = _growing_dim(ds)
+    extent = list(ds.shape)
+    if dim is not None and dim in whole:
+        extent[0] = min(extent[0], whole[dim])
+    counts = [-(-n // c) for n, c in zip(extent, ds.chunks)]
+    if 0 in counts:
+        return None
+    for index in np.ndindex(*counts):
+        try:  # looked up through the chunk index, as a read does
+            found = len(ds.id.read_direct_chunk(tuple(i * c for i, c in zip(index, ds.chunks)))[1]) > 0
+        except Exception:  # noqa: BLE001 - "chunk storage is not allocated"
+            found = False
+        if not found:
+            return index[0] * ds.chunks[0]
+    return None
+
+
+def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity, whole: dict[str, int]) -> None:
     name = ds.name
     python = name.startswith(tuple(g + "/" for g in PYTHON_GROUPS))
     try:
@@ -254,6 +291,9 @@ def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity) -> No
             report.verified += int(CHECKSUM_ATTR in ds.attrs)
             return
         fletcher = bool(ds.fletcher32)
+        if checksummed and name.count("/") == 1 and name[1:] not in RESULT_NAMES:
+            report.damage.append(Damage(name, "not a dataset fold_run writes (a damaged link name?)"))
+            return
         if checksummed and not fletcher:
             report.damage.append(Damage(name, "no Fletcher32 checksum filter (a checksummed file has one on "
                                               "every result dataset)"))
@@ -264,6 +304,12 @@ def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity) -> No
             first = _first_bad_chunk(ds) if _growing_dim(ds) else None
             report.damage.append(Damage(name, _cause(exc, fletcher), first))
             return
+        if fletcher:
+            first = _missing_chunk(ds, whole)
+            if first is not None:
+                report.damage.append(Damage(name, "a chunk is missing from its chunk index (damaged index: it "
+                                                  "would read as fill values)", first))
+                return
         report.verified += int(fletcher)
     except DamagedRunError as exc:
         report.damage.extend(exc.damage)
@@ -271,7 +317,7 @@ def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity) -> No
         report.damage.append(Damage(name, _cause(exc)))
 
 
-def _walk(group: h5py.Group, checksummed: bool, report: Integrity) -> None:
+def _walk(group: h5py.Group, checksummed: bool, report: Integrity, whole: dict[str, int]) -> None:
     try:
         names = list(group.keys())
     except Exception as exc:  # noqa: BLE001
@@ -287,9 +333,9 @@ def _walk(group: h5py.Group, checksummed: bool, report: Integrity) -> None:
             report.damage.append(Damage(path, _cause(exc)))
             continue
         if isinstance(obj, h5py.Group):
-            _walk(obj, checksummed, report)
+            _walk(obj, checksummed, report, whole)
         elif isinstance(obj, h5py.Dataset):
-            _check_dataset(obj, checksummed, report)
+            _check_dataset(obj, checksummed, report, whole)
 
 
 def _attr_int(f: h5py.File, name: str) -> int | None:
@@ -347,7 +393,15 @@ def verify_file(f: h5py.File, version: str) -> Integrity:
             report.checksummed = True
             report.damage.append(Damage("attribute format_version", f"= {version!r}, a format without checksums, "
                                         "but the datasets carry checksums"))
-    _walk(f, report.checksummed, report)
+    whole = {}
+    for dim, attr in COUNT_ATTRS.items():
+        try:
+            count = _attr_int(f, attr)
+        except Exception:  # noqa: BLE001 - reported by _check_counts
+            count = None
+        if count is not None:
+            whole[dim] = max(count, 0)
+    _walk(f, report.checksummed, report, whole)
     try:
         _check_counts(f, report)
     except Exception as exc:  # noqa: BLE001

@@ -31,7 +31,11 @@
 !>   whole on disk (set after the entry's datasets are appended and flushed; a kill
 !>   can leave the datasets one longer, or their last entry unwritten: readers and
 !>   a resume use only the first `records_complete` / `snapshots_complete`).
-!> Only one process (MPI rank 0) may hold a run_output_t open.
+!> Every result variable and dimension scale is chunked with HDF5's Fletcher32 checksum
+!>   filter (fold_h5 create_extendible); output_resume reads them all back first, so a
+!>   damaged record refuses the resume naming it (see docs/scenes.md#checksums).
+!> Only one process (MPI rank 0) may hold a run_output_t open (the other ranks only
+!>   read /setup and /initial, before it is opened).
 module fold_output
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
