@@ -177,6 +177,22 @@ def _raw(ds: h5py.Dataset) -> np.ndarray:
     return arr
 
 
+#: Values read at a time when a result dataset is verified (blocks of whole entries)
+READ_BLOCK = 1 << 23
+
+
+def _read_all(ds: h5py.Dataset) -> None:
+    """Read every value of a dataset (HDF5 checks each chunk's Fletcher32 checksum), in
+    blocks of whole entries along the first axis of at most READ_BLOCK values."""
+    if ds.ndim == 0 or ds.size == 0:
+        _raw(ds)
+        return
+    per_entry = max(1, ds.size // ds.shape[0])
+    rows = max(1, READ_BLOCK // per_entry)
+    for start in range(0, ds.shape[0], rows):
+        ds[start:start + rows]
+
+
 def dataset_checksum(ds: h5py.Dataset) -> int:
     """:func:`content_checksum` of a dataset as stored in the file (variable-length
     strings: their UTF-8 bytes, NUL-separated)."""
@@ -286,6 +302,11 @@ def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity, whole
     name = ds.name
     python = name.startswith(tuple(g + "/" for g in PYTHON_GROUPS))
     try:
+        limit = 2 * Path(ds.file.filename).stat().st_size + (1 << 20)
+        if ds.size * ds.dtype.itemsize > limit:  # a damaged dataspace: do not allocate it
+            report.damage.append(Damage(name, f"its shape {ds.shape} is larger than the file can hold "
+                                              "(damaged dataspace)"))
+            return
         if python:
             checked_read(ds, required=checksummed)
             report.verified += int(CHECKSUM_ATTR in ds.attrs)
@@ -299,7 +320,7 @@ def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity, whole
                                               "every result dataset)"))
             return
         try:
-            _raw(ds)
+            _read_all(ds)
         except Exception as exc:  # noqa: BLE001
             first = _first_bad_chunk(ds) if _growing_dim(ds) else None
             report.damage.append(Damage(name, _cause(exc, fletcher), first))

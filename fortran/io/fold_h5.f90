@@ -815,18 +815,55 @@ contains
 
    !> Read a whole numeric dataset, so that HDF5 checks the Fletcher32 checksum of every
    !> chunk: a chunk that fails it (or data that cannot be read) gives FOLD_INPUT_ERROR
-   !> and a message "name: damaged: ..." naming the dataset.
+   !> and a message "name: damaged: ..." naming the dataset. Read in blocks of whole
+   !> entries of the last (growing) dimension, at most ~64 MB each.
    subroutine h5_verify(loc, name, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer :: rank
-      integer(hsize_t) :: shape(7)
-      real(dp), allocatable :: buf(:)
+      integer(hsize_t), parameter :: BLOCK_VALUES = 8388608_hsize_t
+      integer :: rank, err
+      integer(hsize_t) :: shape(7), offset(7), count(7), per_entry, rows, first
+      integer(hid_t) :: dset, fspace, mspace
+      real(dp), allocatable, target :: buf(:)
+      type(c_ptr) :: ptr
+
       call h5_shape(loc, name, rank, shape, stat, errmsg)
-      if (stat == FOLD_OK) call h5_read_real_array(loc, name, shape(1:rank), buf, stat, errmsg)
-      if (stat /= FOLD_OK) then
+      if (stat /= FOLD_OK) goto 9
+      if (rank == 0) then
+         call h5_read_real_array(loc, name, [integer(hsize_t) ::], buf, stat, errmsg)
+         goto 9
+      end if
+      if (product(shape(1:rank)) == 0) return
+      per_entry = max(1_hsize_t, product(shape(1:rank - 1)))
+      rows = max(1_hsize_t, min(shape(rank), BLOCK_VALUES/per_entry))
+      allocate (buf(per_entry*rows))
+      if (.not. open_dataset(loc, name, dset, stat, errmsg)) goto 9
+      call h5dget_space_f(dset, fspace, err)
+      if (ok(err, name//": cannot read its dataspace", stat, errmsg)) then
+         first = 0
+         do while (first < shape(rank) .and. stat == FOLD_OK)
+            offset = 0
+            offset(rank) = first
+            count(1:rank) = shape(1:rank)
+            count(rank) = min(rows, shape(rank) - first)
+            call h5sselect_hyperslab_f(fspace, H5S_SELECT_SET_F, offset(1:rank), count(1:rank), err)
+            if (.not. ok(err, name//": cannot select a block", stat, errmsg)) exit
+            call h5screate_simple_f(1, [per_entry*count(rank)], mspace, err)
+            if (.not. ok(err, name//": cannot create the memory dataspace", stat, errmsg)) exit
+            ptr = c_loc(buf)
+            call h5dread_f(dset, H5T_NATIVE_DOUBLE, ptr, err, mspace, fspace)
+            call check_err(err, name//": read failed", stat, errmsg)
+            call h5sclose_f(mspace, err)
+            call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+            first = first + count(rank)
+         end do
+         call h5sclose_f(fspace, err)
+         call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+      end if
+      call close_dataset(dset, name, stat, errmsg)
+9     if (stat /= FOLD_OK) then
          stat = FOLD_INPUT_ERROR
          errmsg = name//": damaged (its data fails its checksum or cannot be read): "//trim(errmsg)
       end if

@@ -321,9 +321,14 @@ contains
 
       !> h5_verify of every result variable and dimension scale present.
       subroutine verify_results()
-         character(len=24), allocatable :: names(:)
+         call verify_list(record_vars(out)); if (stat /= FOLD_OK) return
+         call verify_list(SNAPSHOT_VARS); if (stat /= FOLD_OK) return
+         call verify_list(SCALES)
+      end subroutine verify_results
+
+      subroutine verify_list(names)
+         character(len=*), intent(in) :: names(:)
          integer :: k
-         names = [character(len=24) :: record_vars(out), SNAPSHOT_VARS, SCALES]
          do k = 1, size(names)
             if (.not. h5_exists(out%file, trim(names(k)))) cycle
             call h5_verify(out%file, trim(names(k)), stat, errmsg)
@@ -332,7 +337,7 @@ contains
                return
             end if
          end do
-      end subroutine verify_results
+      end subroutine verify_list
 
       !> Rewrite the copy `name` from the chosen checkpoint unless it holds it already.
       subroutine repair(copy, name)
