@@ -60,6 +60,8 @@ __all__ = [
     "has_checksums",
     "tolerate_damage",
     "tolerating_damage",
+    "refuse",
+    "RESULT_NAMES",
 ]
 
 #: Attribute holding the CRC-32 of a dataset written in Python.

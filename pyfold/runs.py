@@ -93,6 +93,27 @@ def complete_counts(f: h5py.File) -> dict[str, int]:
     return counts
 
 
+def _intact_part(f: h5py.File, damaged: dict[str, Damage]) -> tuple[dict[str, int], list[str], dict]:
+    """What an ``allow_damaged`` reader keeps of an open run file whose damaged objects are
+    ``damaged`` (by name, :func:`pyfold.integrity.verify_file`).
+
+    Returns the whole entries to keep along ``time`` / ``snapshot`` (:func:`complete_counts`,
+    cut at the first damaged chunk of any dataset over that dimension), the root datasets
+    to leave out of the xarray view (wholly lost, and the damaged dimension coordinates
+    ``time`` / ``snapshot``, which xarray would load whole), and for those coordinates
+    their intact prefix with its attributes."""
+    counts = complete_counts(f)
+    for dim in counts:
+        for d in damaged.values():
+            if d.first_bad is not None and d.name in f and _along(f[d.name], dim):
+                counts[dim] = min(counts[dim], d.first_bad)
+    lost = [name for name, d in damaged.items() if name.count("/") == 1 and name in f
+            and (d.first_bad is None or name[1:] in counts)]
+    prefixes = {name[1:]: (f[name][: counts[name[1:]]], dict(f[name].attrs))
+                for name in lost if name[1:] in counts and damaged[name].first_bad is not None}
+    return counts, lost, prefixes
+
+
 def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
     """Open a run file as a labelled :class:`xarray.Dataset`.
 
@@ -101,9 +122,9 @@ def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
     path : path
         A run file written by ``pyfold run`` (complete, failed or still partial).
     allow_damaged : bool, optional
-        (Default: inside :func:`pyfold.integrity.tolerate_damage`, as ``pyfold analyse
-        --allow-damaged`` and ``pyfold report --allow-damaged`` run.) Read the intact part of a damaged file instead of refusing it (see Raises):
-        a damaged dataset over ``time`` (``snapshot``) cuts every variable over that
+        Read the intact part of a damaged file instead of refusing it (see Raises)
+        (default: True inside :func:`pyfold.integrity.tolerate_damage`, as ``pyfold
+        analyse --allow-damaged`` and ``pyfold report --allow-damaged`` run): a damaged dataset over ``time`` (``snapshot``) cuts every variable over that
         dimension to the entries before its first damaged chunk (chunks hold at most 64
         entries); any other damaged dataset is left out. Each is named in a
         :class:`pyfold.errors.DamagedRunWarning`. ``/setup/resolved/dim`` and
@@ -160,15 +181,7 @@ def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
         with h5py.File(path, "r") as f:
             check_format(f, path)
             root_attrs = {k: _attr(v) for k, v in f.attrs.items()}
-            counts = complete_counts(f)
-            for dim in counts:
-                for d in damaged.values():
-                    if d.first_bad is not None and d.name in f and _along(f[d.name], dim):
-                        counts[dim] = min(counts[dim], d.first_bad)
-            lost = [name for name, d in damaged.items() if name.count("/") == 1 and name in f
-                    and (d.first_bad is None or name.lstrip("/") in counts)]
-            prefixes = {name.lstrip("/"): (f[name][: counts[name.lstrip("/")]], dict(f[name].attrs))
-                        for name in lost if name.lstrip("/") in counts and damaged[name].first_bad is not None}
+            counts, lost, prefixes = _intact_part(f, damaged)
             initial = {name: (f["initial"][name][()], dict(f["initial"][name].attrs)) for name in _INITIAL
                        if "initial" in f and name in f["initial"] and f"/initial/{name}" not in damaged}
     except InputError:
