@@ -17,6 +17,10 @@
 !> here are in Fortran order; the *last* Fortran dimension is the one that can
 !> grow (time, snapshot), which is the first one in Python.
 !>
+!> Checksums: every dataset create_extendible makes (all results and dimension scales)
+!> is chunked with HDF5's Fletcher32 filter, so a damaged chunk fails its read (h5py,
+!> h5dread_f) instead of returning flipped values; h5_verify reads a dataset whole.
+!>
 !> netCDF compatibility: coordinate datasets are HDF5 dimension scales
 !> (H5DS, HDF5 high-level library) and every result variable has a scale attached
 !> to each of its dimensions, which is what netCDF-4 and `h5netcdf` read as
