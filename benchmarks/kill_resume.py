@@ -9,7 +9,7 @@ Command (a few minutes on 2 cores; each try costs about one to two runs of the s
 ~3 s each):
     .venv/bin/python benchmarks/kill_resume.py [--tries 40] [--seed 1] [--max-kills 3]
         [--again 0.5] [--n 64] [--steps 3000] [--checkpoint-every 2] [--out out/kill_resume]
-        [--concurrent 0]
+        [--concurrent 0] [--corrupt]
     (a small form: --tries 2 --concurrent 6 --steps 1000, about a minute)
 
 Scene: N fibres (aspect ratio 20, L = 1) in a periodic 5^3 cell, simple shear, Jeffery
@@ -45,6 +45,15 @@ after its start a second `pyfold run` on the same destination, plain or
   * "wrong": no exit 0, both exit 0, or the winner's results differ (must be 0);
   * "other": anything else.
 
+With `--corrupt` (corrupted-record case): each try is killed once; then one byte is
+flipped in a record written before the checkpoint (a random record dataset of
+CORRUPTED, a random whole record with step <= /checkpoint/step, the byte located
+through HDF5's chunk index) and `fold_run RUN --resume` runs to its end. Outcome:
+  * "refused naming it": exit 2 with a message naming the flipped dataset as damaged;
+  * "wrong": exit 0 (the corrupted record passed into an "ok" run: must be 0);
+  * "other": anything else (also a refusal naming something else);
+  * "not corrupted": the kill left no checkpoint or no record before it (nothing to flip).
+
 Outputs: the counts, the load average (before / after), the command to reproduce on
 stdout; one CSV row per try in OUT/kill_resume_seed<seed>.csv (try, kills, kill times
 and the phase reached (last PROGRESS step) at each kill, resume exit codes, outcome,
@@ -70,6 +79,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "micro"))
+sys.path.insert(0, str(ROOT / "tests" / "cli"))
+from _corrupt import data_offset, flip  # noqa: E402
 from test_run_common import random_unit, write_run_file, xi_of  # noqa: E402
 
 #: Datasets an uninterrupted and a resumed run must agree on bit for bit
@@ -77,6 +88,8 @@ COMPARED = ("step", "time", "a2", "a4", "a2_family", "a4_family", "min_gap", "mi
             "contact_iterations", "pairs_left", "capped_steps", "length_drift", "unit_norm_drift", "snapshot",
             "snapshot_time", "x", "p")
 CHECKPOINT = ("step", "time", "x", "p", "v", "omega", "checksum")
+#: Record datasets a --corrupt try flips a byte in
+CORRUPTED = ("time", "step", "a2", "a4", "a2_family", "min_gap", "n_corrections", "unit_norm_drift")
 #: Start-up time of fold_run added to every kill window [s]
 START = 0.15
 ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
@@ -262,6 +275,30 @@ def concurrent_tries(args, rng, tmp: Path, w) -> dict[str, int]:
     return counts
 
 
+def corrupt_record(path: Path, rng: np.random.Generator) -> tuple[str, int] | None:
+    """Flip one byte of a whole record written before the checkpoint of a killed run:
+    ``(dataset, record)``, or None when there is no checkpoint or no such record."""
+    try:
+        with h5py.File(path, "r") as f:
+            if "checkpoint" not in f or "step" not in f["checkpoint"] or "step" not in f:
+                return None
+            ckpt = int(f["checkpoint/step"][()])
+            whole = min(int(f.attrs.get("records_complete", 0)), f["step"].shape[0])
+            steps = f["step"][:whole]
+    except (OSError, KeyError, RuntimeError, ValueError) as exc:
+        print(f"  (not corrupted: {exc})", file=sys.stderr)
+        return None
+    before = np.flatnonzero(steps <= ckpt)
+    if before.size == 0:
+        return None
+    name = str(rng.choice(CORRUPTED))
+    record = int(rng.choice(before))
+    with h5py.File(path, "r") as f:
+        size = f[name].dtype.itemsize * int(np.prod(f[name].shape[1:], dtype=np.int64))
+    flip(path, data_offset(path, "/" + name, record) + int(rng.integers(size)), mask=1 << int(rng.integers(8)))
+    return name, record
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tries", type=int, default=40)
@@ -274,6 +311,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "out" / "kill_resume"))
     ap.add_argument("--concurrent", type=int, default=0,
                     help="tries of the concurrent-writer case (a second pyfold run / --resume on the destination)")
+    ap.add_argument("--corrupt", action="store_true",
+                    help="after the kill, flip a byte in a record before the checkpoint: the resume must refuse")
     args = ap.parse_args(argv)
     command = "python benchmarks/kill_resume.py " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     if "--seed" not in command:
@@ -284,8 +323,10 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    table = out / f"kill_resume_seed{args.seed}.csv"
+    table = out / f"kill_resume{'_corrupt' if args.corrupt else ''}_seed{args.seed}.csv"
     counts = {"resumed bitwise": 0, "refused": 0, "wrong": 0, "other": 0}
+    if args.corrupt:
+        counts = {"refused naming it": 0, "not corrupted": 0, "wrong": 0, "other": 0}
     with tempfile.TemporaryDirectory(prefix="kill_resume_") as tmp:
         tmp = Path(tmp)
         refs = []
@@ -328,13 +369,28 @@ def main(argv=None) -> int:
                     steps_at.append(str(last))
                     if alive and last >= 0:
                         left = 1.0 - last / args.steps
+                    if args.corrupt:
+                        flipped = corrupt_record(path, rng)
+                        run = Running(exe, path, resume=True)
+                        rc = run.wait(timeout=600)
+                        codes.append(str(rc))
+                        break
                     run = Running(exe, path, resume=True)
                     if len(times) < args.max_kills and rng.uniform() < args.again:
                         continue  # this resume is killed too (unless it ends first)
                     rc = run.wait(timeout=600)
                     codes.append(str(rc))
                     break
-                if rc == 0:
+                if args.corrupt:
+                    if flipped is None:
+                        outcome, cause = "not corrupted", f"exit {rc}: " + (run.err.strip().splitlines() or [""])[0]
+                    elif rc == 0:
+                        outcome, cause = "wrong", f"/{flipped[0]} record {flipped[1]} flipped, resume finished"
+                    elif rc == 2 and f"/{flipped[0]}: damaged" in run.err:
+                        outcome, cause = "refused naming it", run.err.strip().splitlines()[0]
+                    else:
+                        outcome, cause = "other", f"/{flipped[0]} record {flipped[1]}: exit {rc}: {run.err.strip()[:300]}"
+                elif rc == 0:
                     diff = same_run(ref, path, args.steps)
                     outcome, cause = ("resumed bitwise", "") if not diff else ("wrong", diff)
                 elif rc == 2 and run.err.startswith("fold_run:"):

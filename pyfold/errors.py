@@ -43,6 +43,15 @@ class PyfoldWarning(UserWarning):
     """Base class of every warning pyfold emits on purpose."""
 
 
+class DamagedRunWarning(PyfoldWarning):
+    """A run file read with ``allow_damaged``: the named damaged datasets are left out
+    or cut (pyfold.runs.open_run)."""
+
+
+class UnverifiedRunWarning(PyfoldWarning):
+    """A run file of a format without checksums (format_version 1.0): read unverified."""
+
+
 class InadmissibleOrientationWarning(PyfoldWarning, RuntimeWarning):
     """A computed ``a2`` left the set of orientation tensors (symmetric, unit
     trace, positive semi-definite) by more than the solver's error allows: the

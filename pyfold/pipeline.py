@@ -165,8 +165,8 @@ def open_checked_run(run_path: Path, allow_failed: bool = False, command: str = 
                 raise InputError(f"{run_path}: /setup is incomplete, missing {', '.join('/setup/' + m for m in missing)}")
             if not isinstance(f.get("initial"), h5py.Group) or "xi" not in f["initial"]:
                 raise InputError(f"{run_path}: no /initial/xi (the particles' Jeffery shape factor the fit needs)")
-    except OSError as exc:
-        raise InputError(f"{run_path}: not a readable HDF5 file: {exc}") from exc
+    except (OSError, RuntimeError, KeyError, ValueError, IndexError, TypeError) as exc:  # damaged metadata
+        raise InputError(f"{run_path}: damaged: cannot read it as a run file: {' '.join(str(exc).split())}") from None
 
     ds = open_run(run_path)
     status = ds.attrs.get("status")

@@ -6,6 +6,9 @@ normalised scene, and ``/setup/resolved``: every number Fortran needs, with
 appends the results at the root. Arrays are ``(n, dim)`` here, ``x(dim, n)`` in
 Fortran. Strings are fixed-length UTF-8 (null-padded), which Fortran HDF5 reads
 without variable-length machinery.
+
+Since format_version 1.1 every dataset written here carries a ``checksum``
+attribute (:mod:`pyfold.integrity`), and :func:`read_setup` verifies the ones it reads.
 """
 from __future__ import annotations
 
@@ -22,6 +25,7 @@ import numpy as np
 
 from pyfold import __version__
 from pyfold.errors import InputError
+from pyfold.integrity import DamagedRunError, checked_read, has_checksums, seal, tolerating_damage
 
 if TYPE_CHECKING:  # only an annotation here: readers of run files need not load the scene schema
     from pyfold.scene import ResolvedScene
@@ -39,7 +43,8 @@ __all__ = [
 ]
 
 FORMAT = "pyfold.run"
-FORMAT_VERSION = "1.0"
+#: 1.1: every dataset carries a checksum (pyfold.integrity); 1.0 files are read unverified.
+FORMAT_VERSION = "1.1"
 
 
 @dataclass(frozen=True)
@@ -112,6 +117,7 @@ def _dataset(group: h5py.Group, name: str, value, units: str, long_name: str) ->
     if units:
         ds.attrs["units"] = fixed_string(units)
     ds.attrs["long_name"] = fixed_string(long_name)
+    seal(ds)
 
 
 def write_run_file(path: str | Path, resolved: ResolvedScene, initial: InitialState, command: str) -> None:
@@ -137,8 +143,8 @@ def write_run_file(path: str | Path, resolved: ResolvedScene, initial: InitialSt
                            ("command", command)):
             f.attrs[key] = fixed_string(value)
         setup = f.create_group("setup")
-        setup.create_dataset("scene_toml", data=fixed_string(resolved.toml))
-        setup.create_dataset("scene_json", data=fixed_string(resolved.scene_json()))
+        seal(setup.create_dataset("scene_toml", data=fixed_string(resolved.toml)))
+        seal(setup.create_dataset("scene_json", data=fixed_string(resolved.scene_json())))
         res = setup.create_group("resolved")
         for name, (value, units, long_name) in resolved.resolved_datasets().items():
             _dataset(res, name, value, units, long_name)
@@ -174,17 +180,58 @@ def check_format(f: h5py.File, path: str | Path) -> str:
     return version
 
 
-def read_setup(path: str | Path) -> RunSetup:
-    """Read ``/setup`` back: the scene verbatim, the normalised scene, the resolved values."""
+def _setup_value(ds: h5py.Dataset, required: bool):
+    """A /setup dataset's value, its checksum verified (strings as ``str`` / list of ``str``)."""
+    value = checked_read(ds, required)
+    if h5py.check_string_dtype(ds.dtype) is not None:
+        value = ds.asstr()[()]
+        value = value.tolist() if isinstance(value, np.ndarray) else str(value)
+    return value
+
+
+class ResolvedValues(dict):
+    """``/setup/resolved`` as read, without the damaged datasets a tolerant reader left
+    out: looking one of those up raises :class:`DamagedRunError` naming it."""
+
+    def __init__(self, values: dict, damaged: dict[str, DamagedRunError]):
+        super().__init__(values)
+        self.damaged = damaged
+
+    def __missing__(self, key):
+        if key in self.damaged:
+            raise self.damaged[key]
+        raise KeyError(key)
+
+
+def read_setup(path: str | Path, allow_damaged: bool | None = None) -> RunSetup:
+    """Read ``/setup`` back: the scene verbatim, the normalised scene, the resolved values.
+
+    Each dataset's checksum is verified (format_version >= 1.1): a damaged one raises
+    :class:`pyfold.integrity.DamagedRunError` (an InputError) naming it, unless
+    ``allow_damaged`` (default: inside :func:`pyfold.integrity.tolerate_damage`): then
+    it is left out (looking it up in ``resolved`` raises that error; a damaged
+    ``scene_toml`` / ``scene_json`` reads as empty)."""
+    tolerant = tolerating_damage() if allow_damaged is None else allow_damaged
+    damaged: dict[str, DamagedRunError] = {}
+
+    def value(ds: h5py.Dataset, key: str, empty=None):
+        try:
+            return _setup_value(ds, required)
+        except DamagedRunError as exc:
+            if not tolerant:
+                raise
+            damaged[key] = exc
+            return empty
+
     with h5py.File(path, "r") as f:
-        check_format(f, path)
+        required = has_checksums(check_format(f, path))
         setup = f["setup"]
         resolved = {}
         for name, ds in setup["resolved"].items():
-            value = ds[()]
-            if h5py.check_string_dtype(ds.dtype) is not None:
-                value = ds.asstr()[()]
-                value = value.tolist() if isinstance(value, np.ndarray) else str(value)
-            resolved[name] = value
-        return RunSetup(scene_toml=setup["scene_toml"].asstr()[()], scene=json.loads(setup["scene_json"].asstr()[()]),
-                        resolved=resolved)
+            v = value(ds, name)
+            if name not in damaged:
+                resolved[name] = v
+        scene_toml = value(setup["scene_toml"], "scene_toml", "")
+        scene_json = value(setup["scene_json"], "scene_json", "")
+        return RunSetup(scene_toml=scene_toml, scene=json.loads(scene_json) if scene_json else {},
+                        resolved=ResolvedValues(resolved, damaged))

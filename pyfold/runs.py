@@ -11,6 +11,7 @@ resolved choices in ``attrs``.
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
@@ -18,8 +19,9 @@ import h5py
 import numpy as np
 import xarray as xr
 
-from pyfold.errors import InputError, PyfoldError
+from pyfold.errors import DamagedRunWarning, InputError, PyfoldError, UnverifiedRunWarning
 from pyfold.files import atomic_output
+from pyfold.integrity import Damage, DamagedRunError, refuse, tolerating_damage, verify_path
 from pyfold.run_file import check_format, read_setup
 
 __all__ = ["open_run", "write_xdmf", "run_summary", "complete_counts", "AXIS_LABELS"]
@@ -92,13 +94,42 @@ def complete_counts(f: h5py.File) -> dict[str, int]:
     return counts
 
 
-def open_run(path: str | Path) -> xr.Dataset:
+def _intact_part(f: h5py.File, damaged: dict[str, Damage]) -> tuple[dict[str, int], list[str], dict]:
+    """What an ``allow_damaged`` reader keeps of an open run file whose damaged objects are
+    ``damaged`` (by name, :func:`pyfold.integrity.verify_file`).
+
+    Returns the whole entries to keep along ``time`` / ``snapshot`` (:func:`complete_counts`,
+    cut at the first damaged chunk of any dataset over that dimension), the root datasets
+    to leave out of the xarray view (wholly lost, and the damaged dimension coordinates
+    ``time`` / ``snapshot``, which xarray would load whole), and for those coordinates
+    their intact prefix with its attributes."""
+    counts = complete_counts(f)
+    for dim in counts:
+        for d in damaged.values():
+            if d.first_bad is not None and d.name in f and _along(f[d.name], dim):
+                counts[dim] = min(counts[dim], d.first_bad)
+    lost = [name for name, d in damaged.items() if name.count("/") == 1 and name in f
+            and (d.first_bad is None or name[1:] in counts)]
+    prefixes = {name[1:]: (f[name][: counts[name[1:]]], dict(f[name].attrs))
+                for name in lost if name[1:] in counts and damaged[name].first_bad is not None}
+    return counts, lost, prefixes
+
+
+def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
     """Open a run file as a labelled :class:`xarray.Dataset`.
 
     Parameters
     ----------
     path : path
         A run file written by ``pyfold run`` (complete, failed or still partial).
+    allow_damaged : bool, optional
+        Read the intact part of a damaged file instead of refusing it (see Raises)
+        (default: True inside :func:`pyfold.integrity.tolerate_damage`, as ``pyfold
+        analyse --allow-damaged`` and ``pyfold report --allow-damaged`` run): a damaged dataset over ``time`` (``snapshot``) cuts every variable over that
+        dimension to the entries before its first damaged chunk (chunks hold at most 64
+        entries); any other damaged dataset is left out. Each is named in a
+        :class:`pyfold.errors.DamagedRunWarning`. ``/setup/resolved/dim`` and
+        ``family_names`` are needed: damage there is refused regardless.
 
     Returns
     -------
@@ -119,37 +150,69 @@ def open_run(path: str | Path) -> xr.Dataset:
         while appending one is cut to ``records_complete`` / ``snapshots_complete``
         (:func:`complete_counts`). ``attrs`` hold the root attributes (``status``,
         ``steps_done``, ``creator``, ...), ``scene`` (normalised scene, a dict as
-        JSON text), ``scene_toml`` (verbatim) and the resolved scalars
-        (``dim``, ``dt``, ``alpha``, ``regime``, ``hydrodynamics_reason``, ...).
+        JSON text), ``scene_toml`` (verbatim), the resolved scalars
+        (``dim``, ``dt``, ``alpha``, ``regime``, ``hydrodynamics_reason``, ...) and
+        ``integrity`` (:meth:`pyfold.integrity.Integrity.summary`: "verified: ...",
+        "no checksums: not verified" for a format 1.0 file, or "damaged: ...").
 
     Raises
     ------
     InputError
-        Not a pyfold run file, or an unknown major ``format_version``.
+        Not a pyfold run file, or an unknown major ``format_version``;
+        :class:`pyfold.integrity.DamagedRunError` (an InputError) when a dataset fails
+        its checksum or a part of the file cannot be read, naming each (every dataset
+        is read and verified first: :func:`pyfold.integrity.verify_file`).
     """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"open_run: no such file: {path}")
+    if allow_damaged is None:
+        allow_damaged = tolerating_damage()
+    report = verify_path(path)
+    if not allow_damaged:
+        refuse(path, report, "refusing to read it (pass --allow-damaged, or open_run(..., allow_damaged=True), "
+                             "to read the intact part)")
+    if not report.checksummed:
+        warnings.warn(UnverifiedRunWarning(f"{path}: format_version 1.0: no checksums: not verified"), stacklevel=2)
+    damaged = {d.name: d for d in report.damage}
+    if damaged:
+        warnings.warn(DamagedRunWarning(f"{path}: {report.summary()}; reading the intact part only (entries before "
+                                        "the first damaged chunk; other damaged datasets left out)"), stacklevel=2)
     try:
         with h5py.File(path, "r") as f:
             check_format(f, path)
             root_attrs = {k: _attr(v) for k, v in f.attrs.items()}
-            counts = complete_counts(f)
+            counts, lost, prefixes = _intact_part(f, damaged)
             initial = {name: (f["initial"][name][()], dict(f["initial"][name].attrs)) for name in _INITIAL
-                       if "initial" in f and name in f["initial"]}
-    except OSError as exc:
-        raise InputError(f"open_run: {path} is not a readable HDF5 file: {exc}") from exc
-    setup = read_setup(path)
+                       if "initial" in f and name in f["initial"] and f"/initial/{name}" not in damaged}
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - damaged metadata raises anything
+        raise DamagedRunError(f"{path}: damaged: cannot read it ({' '.join(str(exc).split())})",
+                              [Damage(str(path), "cannot read")]) from None
+    setup = read_setup(path, allow_damaged=True)
     res = setup.resolved
+    needed = [k for k in ("dim", "family_names") if k not in res]
+    if needed:
+        raise DamagedRunError(f"{path}: damaged: cannot read it without " + ", ".join(
+            "/setup/resolved/" + k for k in needed), [Damage("/setup/resolved/" + k, "damaged") for k in needed])
     dim = int(res["dim"])
     names = list(res["family_names"]) if isinstance(res["family_names"], list) else [res["family_names"]]
 
-    ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False)
+    try:
+        ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False,
+                             drop_variables=[name.lstrip("/") for name in lost] or None)
+    except Exception as exc:  # noqa: BLE001
+        raise DamagedRunError(f"{path}: damaged: cannot read its results ({' '.join(str(exc).split())})",
+                              [Damage(str(path), "cannot read its results")]) from None
     # h5netcdf pads a shorter dataset to its dimension's length with fill values:
     # keep the whole entries only.
     cut = {dim: slice(0, n) for dim, n in counts.items() if dim in ds.dims and ds.sizes[dim] != n}
     if cut:
         ds = ds.isel(cut)
+    for name, (data, attrs) in prefixes.items():
+        ds = ds.assign_coords({name: (name, data, {k: _text(v) for k, v in attrs.items()
+                                                   if k in ("units", "long_name")})})
     labels = list(AXIS_LABELS[:dim])
     relabel = {d: labels for d in ("i", "j", "k", "l", "xyz") if d in ds.dims}
     if "family" in ds.dims:
@@ -183,6 +246,7 @@ def open_run(path: str | Path) -> xr.Dataset:
     attrs = dict(root_attrs)
     attrs["scene"] = json.dumps(setup.scene)
     attrs["scene_toml"] = setup.scene_toml
+    attrs["integrity"] = report.summary()
     for key, value in res.items():
         if isinstance(value, str) or np.ndim(value) == 0:
             attrs[key] = value.item() if hasattr(value, "item") else value

@@ -17,6 +17,10 @@
 !> here are in Fortran order; the *last* Fortran dimension is the one that can
 !> grow (time, snapshot), which is the first one in Python.
 !>
+!> Checksums: every dataset create_extendible makes (all results and dimension scales)
+!> is chunked with HDF5's Fletcher32 filter, so a damaged chunk fails its read (h5py,
+!> h5dread_f) instead of returning flipped values; h5_verify reads a dataset whole.
+!>
 !> netCDF compatibility: coordinate datasets are HDF5 dimension scales
 !> (H5DS, HDF5 high-level library) and every result variable has a scale attached
 !> to each of its dimensions, which is what netCDF-4 and `h5netcdf` read as
@@ -38,7 +42,7 @@ module fold_h5
    public :: h5_attr_string, h5_attr_int, h5_attr_real, h5_read_attr_int
    public :: h5_make_group, h5_delete
    public :: h5_scale_int, h5_scale_real, h5_var_create, h5_var_append_real, h5_var_append_int
-   public :: h5_var_length, h5_var_truncate
+   public :: h5_var_length, h5_var_truncate, h5_verify
    public :: h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
    public :: h5_put_real_array, h5_put_real_scalar, h5_put_int_scalar
    public :: h5_cause, h5_abandon_file, h5_wedged
@@ -813,6 +817,62 @@ contains
       if (rank > 0) length = shape(rank)
    end subroutine h5_var_length
 
+   !> Read a whole numeric dataset, so that HDF5 checks the Fletcher32 checksum of every
+   !> chunk: a chunk that fails it (or data that cannot be read) gives FOLD_INPUT_ERROR
+   !> and a message "name: damaged: ..." naming the dataset. Read in blocks of whole
+   !> entries of the last (growing) dimension, at most ~64 MB each.
+   subroutine h5_verify(loc, name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc
+      character(len=*), intent(in) :: name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hsize_t), parameter :: BLOCK_VALUES = 8388608_hsize_t
+      integer :: rank, err
+      integer(hsize_t) :: shape(7), offset(7), count(7), per_entry, rows, first
+      integer(hid_t) :: dset, fspace, mspace
+      real(dp), allocatable, target :: buf(:)
+      type(c_ptr) :: ptr
+
+      call h5_shape(loc, name, rank, shape, stat, errmsg)
+      if (stat /= FOLD_OK) goto 9
+      if (rank == 0) then
+         call h5_read_real_array(loc, name, [integer(hsize_t) ::], buf, stat, errmsg)
+         goto 9
+      end if
+      if (product(shape(1:rank)) == 0) return
+      per_entry = max(1_hsize_t, product(shape(1:rank - 1)))
+      rows = max(1_hsize_t, min(shape(rank), BLOCK_VALUES/per_entry))
+      allocate (buf(per_entry*rows))
+      if (.not. open_dataset(loc, name, dset, stat, errmsg)) goto 9
+      call h5dget_space_f(dset, fspace, err)
+      if (ok(err, name//": cannot read its dataspace", stat, errmsg)) then
+         first = 0
+         do while (first < shape(rank) .and. stat == FOLD_OK)
+            offset = 0
+            offset(rank) = first
+            count(1:rank) = shape(1:rank)
+            count(rank) = min(rows, shape(rank) - first)
+            call h5sselect_hyperslab_f(fspace, H5S_SELECT_SET_F, offset(1:rank), count(1:rank), err)
+            if (.not. ok(err, name//": cannot select a block", stat, errmsg)) exit
+            call h5screate_simple_f(1, [per_entry*count(rank)], mspace, err)
+            if (.not. ok(err, name//": cannot create the memory dataspace", stat, errmsg)) exit
+            ptr = c_loc(buf)
+            call h5dread_f(dset, H5T_NATIVE_DOUBLE, ptr, err, mspace, fspace)
+            call check_err(err, name//": read failed", stat, errmsg)
+            call h5sclose_f(mspace, err)
+            call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+            first = first + count(rank)
+         end do
+         call h5sclose_f(fspace, err)
+         call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+      end if
+      call close_dataset(dset, name, stat, errmsg)
+9     if (stat /= FOLD_OK) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = name//": damaged (its data fails its checksum or cannot be read): "//trim(errmsg)
+      end if
+   end subroutine h5_verify
+
    !> Shrink (or grow) the last dimension of a variable to `length` records.
    subroutine h5_var_truncate(loc, name, length, stat, errmsg)
       integer(hid_t), intent(in) :: loc
@@ -1096,7 +1156,8 @@ contains
       if (stat /= FOLD_OK) errmsg = name//": "//trim(errmsg)
    end subroutine annotate
 
-   !> Chunked dataset whose last Fortran dimension may be unlimited.
+   !> Chunked dataset, checksummed by HDF5's Fletcher32 filter, whose last Fortran
+   !> dimension may be unlimited.
    subroutine create_extendible(loc, name, kind, extents, unlimited, dset, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
@@ -1110,6 +1171,9 @@ contains
       integer(hsize_t) :: dims(size(extents)), maxdims(size(extents)), chunk(size(extents))
       integer :: err, r
       integer(hsize_t), parameter :: target_chunk = 8192  ! elements per chunk, ~64 kB of doubles
+      !> Records per chunk at most: a damaged chunk (its Fletcher32 checksum fails) loses
+      !> no more than these records to a reader that keeps the intact part
+      integer(hsize_t), parameter :: max_records = 64
 
       dset = -1
       r = size(extents)
@@ -1122,18 +1186,23 @@ contains
       end if
       call h5pcreate_f(H5P_DATASET_CREATE_F, dcpl, err)
       if (.not. ok(err, name//": h5pcreate_f failed", stat, errmsg)) return
+      ! Every dataset is chunked, so that HDF5's Fletcher32 filter checksums its data:
+      ! a reader (h5py, this module) gets a read error instead of a flipped value.
+      chunk = max(1_hsize_t, extents)
       if (unlimited) then
          dims(r) = 0
          maxdims(r) = H5S_UNLIMITED_F
-         chunk = max(1_hsize_t, extents)
          ! Whole records per chunk; several records when a record is small.
-         chunk(r) = max(1_hsize_t, target_chunk/max(1_hsize_t, product(chunk(1:r - 1))))
-         if (r == 1) chunk(1) = 512
-         call h5pset_chunk_f(dcpl, r, chunk, err)
-         if (.not. ok(err, name//": cannot set chunking", stat, errmsg)) then
-            call h5pclose_f(dcpl, err)
-            return
-         end if
+         chunk(r) = max(1_hsize_t, min(max_records, target_chunk/max(1_hsize_t, product(chunk(1:r - 1)))))
+      end if
+      call h5pset_chunk_f(dcpl, r, chunk, err)
+      if (ok(err, name//": cannot set chunking", stat, errmsg)) then
+         call h5pset_fletcher32_f(dcpl, err)
+         call check_err(err, name//": cannot set the Fletcher32 checksum filter", stat, errmsg)
+      end if
+      if (stat /= FOLD_OK) then
+         call h5pclose_f(dcpl, err)
+         return
       end if
       call h5screate_simple_f(r, dims, space, err, maxdims)
       if (.not. ok(err, name//": cannot create dataspace", stat, errmsg)) then

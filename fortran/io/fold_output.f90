@@ -31,7 +31,11 @@
 !>   whole on disk (set after the entry's datasets are appended and flushed; a kill
 !>   can leave the datasets one longer, or their last entry unwritten: readers and
 !>   a resume use only the first `records_complete` / `snapshots_complete`).
-!> Only one process (MPI rank 0) may hold a run_output_t open.
+!> Every result variable and dimension scale is chunked with HDF5's Fletcher32 checksum
+!>   filter (fold_h5 create_extendible); output_resume reads them all back first, so a
+!>   damaged record refuses the resume naming it (see docs/scenes.md#checksums).
+!> Only one process (MPI rank 0) may hold a run_output_t open (the other ranks only
+!>   read /setup and /initial, before it is opened).
 module fold_output
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
@@ -43,7 +47,7 @@ module fold_output
                       h5_exists, h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array, &
                       h5_attr_string, h5_attr_int, h5_read_attr_int, h5_make_group, h5_delete, &
                       h5_scale_int, h5_scale_real, &
-                      h5_var_create, h5_var_append_real, h5_var_append_int, h5_var_length, h5_var_truncate, &
+                      h5_var_create, h5_var_append_real, h5_var_append_int, h5_var_length, h5_var_truncate, h5_verify, &
                       h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
    implicit none
    private
@@ -119,6 +123,8 @@ module fold_output
    !> Time series of Stokes runs with lubrication only
    character(len=*), parameter :: LUBRICATION_VARS(2) = [character(len=24) :: "lubricated_pairs", &
       "lubrication_correction"]
+   !> Dimension scales of fixed length
+   character(len=*), parameter :: SCALES(7) = [character(len=24) :: "i", "j", "k", "l", "xyz", "family", "particle"]
    !> Variables over `snapshot`
    character(len=*), parameter :: SNAPSHOT_VARS(4) = [character(len=24) :: "snapshot", "snapshot_time", "x", "p"]
    !> Root attributes: number of records / snapshots completely written (set after the
@@ -201,6 +207,8 @@ contains
    !> neither is complete the resume is refused (FOLD_INPUT_ERROR, exit 2) with the
    !> cause of each. A `/checkpoint` without `checksum` and without a shadow (written by
    !> a fold_run of before the checksum: not verifiable) is used with a warning on stderr.
+   !> Every result variable is then read whole (h5_verify): a chunk failing its Fletcher32
+   !> checksum refuses the resume (FOLD_INPUT_ERROR) naming the variable.
    subroutine output_resume(out, path, parts, n_families, mpi_ranks, step, time, stat, errmsg, stokes, &
                             v_prev, omega_prev, have_prev, lubrication)
       type(run_output_t), intent(out) :: out
@@ -299,6 +307,9 @@ contains
          end if
       end if
 
+      ! Every result variable is read whole first: a chunk that fails its Fletcher32
+      ! checksum (a damaged record before the checkpoint) refuses the resume, naming it.
+      call verify_results(); if (stat /= FOLD_OK) return
       ! Records are in step order: keep the complete ones up to the checkpoint.
       call keep_upto(record_vars(out), "step", RECORDS_COMPLETE, keep, stat, errmsg); if (stat /= FOLD_OK) return
       out%n_records = keep
@@ -307,6 +318,26 @@ contains
       call run_attributes(out, mpi_ranks, stat, errmsg)
 
    contains
+
+      !> h5_verify of every result variable and dimension scale present.
+      subroutine verify_results()
+         call verify_list(record_vars(out)); if (stat /= FOLD_OK) return
+         call verify_list(SNAPSHOT_VARS); if (stat /= FOLD_OK) return
+         call verify_list(SCALES)
+      end subroutine verify_results
+
+      subroutine verify_list(names)
+         character(len=*), intent(in) :: names(:)
+         integer :: k
+         do k = 1, size(names)
+            if (.not. h5_exists(out%file, trim(names(k)))) cycle
+            call h5_verify(out%file, trim(names(k)), stat, errmsg)
+            if (stat /= FOLD_OK) then
+               errmsg = "/"//trim(errmsg)//"; cannot resume from it"
+               return
+            end if
+         end do
+      end subroutine verify_list
 
       !> Rewrite the copy `name` from the chosen checkpoint unless it holds it already.
       subroutine repair(copy, name)

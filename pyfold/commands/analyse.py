@@ -3,8 +3,9 @@
 Everything is checked before the fit starts (exit status 2, the message names the
 cause): the closure names; the run file (a pyfold run with ``/setup`` and
 ``/initial``, at least two records, root ``status = "ok"`` unless
-``--allow-failed``, every ``a2`` record an orientation tensor, a finite ``a4``);
-and that ``--out`` can be created and written.
+``--allow-failed``, every ``a2`` record an orientation tensor, a finite ``a4``,
+every dataset matching its checksum unless ``--allow-damaged``: see
+:func:`pyfold.runs.open_run`); and that ``--out`` can be created and written.
 
 The fits are :func:`pyfold.pipeline.fit_ci_per_closure` (fixed-step RK4 on padded
 record counts, :mod:`pyfold.fast_fit`, one closure per core at a time): their programs
@@ -28,9 +29,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--allow-failed", action="store_true",
                         help="fit a run whose status is not \"ok\" (a blown-up or killed run): only the records "
                              "up to its last good state are used, with a warning")
+    parser.add_argument("--allow-damaged", action="store_true",
+                        help="analyse the intact part of a run file whose checksums fail (refused by default, "
+                             "exit 2 naming the damaged datasets): records from the first damaged chunk on and "
+                             "other damaged datasets are left out, with a warning naming them")
 
 
 def run(args: argparse.Namespace) -> int:
+    from pyfold.integrity import tolerate_damage
+
+    with tolerate_damage(getattr(args, "allow_damaged", False)):
+        return _analyse(args)
+
+
+def _analyse(args: argparse.Namespace) -> int:
     from pyfold import pipeline
 
     run_path = Path(args.run_file)

@@ -3,7 +3,8 @@
 The runs must be one scene apart from the seed (compared on the scene and resolved
 values stored in each run's ``/setup``); each is checked as ``pyfold analyse``
 checks it (:func:`pyfold.pipeline.open_checked_run`: status ``"ok"`` unless
-``--allow-failed``, records that are orientation tensors, ...). Everything is
+``--allow-failed``, records that are orientation tensors, every dataset matching its
+checksum unless ``--allow-damaged``, ...). Everything is
 checked before any analysis, exit status 2 naming the file and the cause.
 
 Output folder (``--out``, default ``<first run>_report/`` beside the first run,
@@ -34,9 +35,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--allow-failed", action="store_true",
                         help="use runs whose status is not \"ok\" up to their last good state, with a warning")
     parser.add_argument("--force", action="store_true", help="replace the report files already in --out")
+    parser.add_argument("--allow-damaged", action="store_true",
+                        help="use the intact part of run files whose checksums fail (refused by default, exit 2 "
+                             "naming the damaged datasets), with a warning naming them")
 
 
 def run(args: argparse.Namespace) -> int:
+    from pyfold.integrity import tolerate_damage
+
+    with tolerate_damage(getattr(args, "allow_damaged", False)):
+        return _report(args)
+
+
+def _report(args: argparse.Namespace) -> int:
     from pyfold import report
 
     from pyfold.destination import acquire, make_parent

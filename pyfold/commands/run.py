@@ -15,7 +15,9 @@ the new file is complete (atomic rename).
 
 ``--resume`` continues ``OUT.h5.partial`` (or a failed ``OUT.h5``, whose
 ``status`` is not ``ok``) from its last checkpoint with ``fold_run --resume``,
-then finishes like a run (rename, ``OUT.xmf`` rewritten, summary). A file another
+then finishes like a run (rename, ``OUT.xmf`` rewritten, summary). The file is
+verified first (:func:`pyfold.integrity.verify_path`): a dataset that fails its
+checksum is refused with exit 2 naming it. A file another
 process holds open (a reader's HDF5 lock: an undone ``ds.close()``) is refused
 with exit 2 naming that process, before anything is moved.
 
@@ -485,8 +487,13 @@ def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | No
             raise
         n_steps = resolved.n_steps
     else:
+        from pyfold.integrity import refuse, verify_path
         from pyfold.run_file import read_setup
 
+        # Every dataset is verified before fold_run continues the file: it reads back only
+        # /setup, /initial and the checkpoint, and would carry a damaged record into an "ok" run.
+        refuse(resume_from, verify_path(resume_from), "refusing to resume from it (continue from an intact copy, "
+               "or start again with --force)")
         try:
             setup = read_setup(resume_from)
         except (OSError, KeyError) as exc:

@@ -13,6 +13,7 @@ import pytest
 
 from conftest import base_scene, write_scene
 from pyfold.cli import main
+from pyfold.integrity import seal
 
 
 @pytest.fixture
@@ -105,6 +106,8 @@ def test_resume_continues_to_the_uninterrupted_result(tmp_path, capsys, monkeypa
         f["/setup/resolved/t_end"][()] = 0.4
         del f["/setup/scene_toml"]
         f["/setup"].create_dataset("scene_toml", data=long_scene.read_text())
+        for name in ("/setup/resolved/t_end", "/setup/scene_toml"):  # edited on purpose: checksums renewed
+            seal(f[name])
         assert int(f["/checkpoint/step"][()]) == 20
         if left_as == "failed":
             f.attrs["status"] = "failed: step 20, t = 0.2: killed"

@@ -13,7 +13,7 @@ import pytest
 import pyfold
 from _fake_results import append_results
 from pyfold.errors import InputError
-from pyfold.run_file import fixed_string, read_setup, write_run_file
+from pyfold.run_file import FORMAT_VERSION, fixed_string, read_setup, write_run_file
 from pyfold.runs import write_xdmf
 from pyfold.scene import load_scene
 from pyfold.scene.initial import initial_state
@@ -59,7 +59,7 @@ def test_resolved_datasets_carry_units(run_file):
         assert res["alpha"].attrs["units"] == b"m" and res["dt"].attrs["units"] == b"s"
         assert res["viscosity"].attrs["units"] == b"Pa s"
         assert f["initial/x"].shape == (42, 2) and f["initial/x"].attrs["units"] == b"m"
-        assert f.attrs["format"] == b"pyfold.run" and f.attrs["format_version"] == b"1.0"
+        assert f.attrs["format"] == b"pyfold.run" and f.attrs["format_version"] == FORMAT_VERSION.encode()
         assert f.attrs["creator"].startswith(b"pyfold ")
 
 
