@@ -306,7 +306,10 @@ def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
         whole = complete_counts(f)["snapshot"]
         if "x" in f and "p" in f and f["x"].ndim == 3 and whole > 0:
             full_x, full_p = (tuple(int(s) for s in f[name].shape) for name in ("x", "p"))
-            times = f["snapshot_time"][()] if "snapshot_time" in f else np.arange(full_x[0], dtype=float)
+            try:
+                times = f["snapshot_time"][()] if "snapshot_time" in f else np.arange(full_x[0], dtype=float)
+            except OSError as exc:  # a chunk that fails its checksum: a message naming it, not a traceback
+                raise PyfoldError(f"{path}: /snapshot_time is damaged (cannot be read: {exc}); no XDMF written") from None
             frames = [(float(times[k]), _slab(h5name, "/x", k, full_x), _slab(h5name, "/p", k, full_p))
                       for k in range(whole)]
         else:

@@ -255,3 +255,17 @@ def test_random_flips_change_nothing_read_or_are_refused(finished, tmp_path):
         outcomes["same"] += 1
     # the flips in the data of what open_run reads are refused: not all outcomes are "same"
     assert outcomes["refused"] >= 10, outcomes
+
+
+def test_xdmf_of_a_damaged_snapshot_time_is_a_message_and_no_file(finished, tmp_path):
+    """write_xdmf reads /snapshot_time: a chunk failing its Fletcher32 checksum is named, no .xmf is left."""
+    from pyfold.errors import PyfoldError
+    from pyfold.runs import write_xdmf
+
+    _, src = finished
+    path = tmp_path / "run.h5"
+    shutil.copy(src, path)
+    flip(path, data_offset(path, "/snapshot_time", 0) + 3)
+    with pytest.raises(PyfoldError, match="/snapshot_time is damaged"):
+        write_xdmf(path, tmp_path / "run.xmf")
+    assert not list(tmp_path.glob("*.xmf")) and not list(tmp_path.glob(".pyfold-tmp-*"))
