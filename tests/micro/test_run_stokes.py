@@ -109,8 +109,11 @@ def test_open_run_gives_the_wall_shear_stress_only_for_a_cell_with_walls(sphere_
     assert "wall_shear_stress" not in ds
     walled = tmp_path / "walled.h5"
     shutil.copy(path, walled)
+    from pyfold.integrity import seal
+
     with h5py.File(walled, "a") as f:
         f["/setup/resolved/walls"][()] = 1
+        seal(f["/setup/resolved/walls"])  # an intended edit: its checksum renewed
     got = pyfold.open_run(walled)
     assert got["wall_shear_stress"].dims == ("time",) and got["wall_shear_stress"].attrs["units"] == "Pa"
     np.testing.assert_array_equal(got["wall_shear_stress"].values, ds["stress"].sel(i="x", j="y").values)
