@@ -8,6 +8,7 @@ import os
 import re
 import signal
 import subprocess
+import threading
 import sys
 import time
 from pathlib import Path
@@ -177,14 +178,25 @@ def _dense_scene(tmp_path: Path) -> Path:
 def test_placement_shows_progress_and_stops_on_ctrl_c(tmp_path, fake_fold_run):
     out = tmp_path / "dense.h5"
     proc = subprocess.Popen([sys.executable, "-m", "pyfold.cli", "run", str(_dense_scene(tmp_path)), "-o", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    chunks: list[bytes] = []
+    reader = threading.Thread(target=lambda: chunks.extend(iter(lambda: os.read(proc.stderr.fileno(), 4096), b"")),
+                              daemon=True)
+    reader.start()
     try:
-        time.sleep(6.0)  # imports and validation (~2-4 s), then at least a second of placement
+        # imports and validation take seconds, more on a loaded machine: interrupt once placement
+        # has reported progress (it runs for far longer than this wait), not after a fixed delay
+        deadline = time.monotonic() + 120.0
+        while b"volume fraction reached" not in b"".join(chunks) and time.monotonic() < deadline:
+            assert proc.poll() is None, b"".join(chunks).decode(errors="replace")
+            time.sleep(0.05)
         assert proc.poll() is None
         sent = time.monotonic()
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=10)
+        proc.wait(timeout=10)
         took = time.monotonic() - sent
+        reader.join(timeout=10)
+        err = b"".join(chunks).decode(errors="replace")
     finally:
         if proc.poll() is None:
             proc.kill()
