@@ -34,7 +34,8 @@ resume runs to its end. Outcome of a try:
     defect to look at.
 
 Concurrent writers (`--concurrent N`, N tries; `--tries 0 --concurrent N` runs only
-these): `pyfold run SCENE -o TRY.h5` with the same scene as a TOML file, and at a
+these): `pyfold run SCENE -o TRY.h5`, SCENE the tries' fibres in their cell as a scene
+(pyfold.scene.sheared_fibres: beta 20, N fibres in 5^3, dt 0.01), and at a
 time drawn uniformly over [0, 1.05 x the wall time of a reference `pyfold run`]
 after its start a second `pyfold run` on the same destination, plain or
 `--resume` (even odds). Outcome of a try:
@@ -76,6 +77,8 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
+from pyfold.scene.sheared_fibres import sheared_fibres
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "micro"))
@@ -173,32 +176,6 @@ def same_run(ref: Path, path: Path, steps: int) -> str:
     return ""
 
 
-CONCURRENT_SCENE = """title = "kill_resume: concurrent writers"
-[cell]
-dim = 3
-size = [5.0, 5.0, 5.0]
-[flow]
-type = "simple_shear"
-rate = 1.0
-[[particles]]
-name = "fibres"
-shape = "fibre"
-length = 1.0
-radius = 0.025
-count = {n}
-[model]
-alpha = 0.005
-[numerics]
-dt = 0.01
-t_end = {t_end}
-seed = 7
-[output]
-interval = 0.01
-snapshot_interval = 0.07
-checkpoint_interval = {checkpoint}
-"""
-
-
 def pyfold_run(*args: str) -> subprocess.Popen:
     """`pyfold run ...` as a child process (stdout discarded, stderr kept)."""
     return subprocess.Popen([sys.executable, "-m", "pyfold.cli", "run", *args], stdout=subprocess.DEVNULL,
@@ -225,8 +202,9 @@ def concurrent_tries(args, rng, tmp: Path, w) -> dict[str, int]:
     """`--concurrent` tries: a second `pyfold run` / `--resume` on a destination being written."""
     counts = {"refused naming holder": 0, "refused otherwise": 0, "wrong": 0, "other": 0}
     toml = tmp / "concurrent.toml"
-    toml.write_text(CONCURRENT_SCENE.format(n=args.n, t_end=args.steps * 0.01,
-                                            checkpoint=args.checkpoint_every * 0.01))
+    # the tries' fibres (beta 20, dt 0.01) in the same 5^3 cell, as a scene for `pyfold run`
+    toml.write_text(sheared_fibres(20.0, args.n / 125.0, seed=7, t_end=args.steps * 0.01, dt=0.01,
+                                   min_side=5.0, title="kill_resume: concurrent writers").toml)
     ref = tmp / "concurrent_ref.h5"
     t0 = time.monotonic()
     first = pyfold_run(str(toml), "-o", str(ref))
