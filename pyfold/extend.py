@@ -92,8 +92,9 @@ class Extension:
         return self.t_end > self.recorded_t_end
 
 
-def plan(run_path: Path, resolved: ResolvedScene, scene_path: Path) -> Extension:
-    """Compare the scene recorded in ``run_path`` with ``resolved`` (read from ``scene_path``).
+def plan(run_path: Path, resolved: ResolvedScene, scene_path: Path, partial: bool = False) -> Extension:
+    """Compare the scene recorded in ``run_path`` with ``resolved`` (read from ``scene_path``);
+    ``partial``: ``run_path`` is the file of an unfinished ``pyfold run`` (``OUT.h5.partial``).
 
     Returns the :class:`Extension` (``extends`` False: the same run, a plain resume).
 
@@ -139,7 +140,9 @@ def plan(run_path: Path, resolved: ResolvedScene, scene_path: Path) -> Extension
             f"{run_path} (t_end = {recorded_t_end:g}, {recorded_steps} steps); a run can only be extended: give a "
             f"numerics.t_end > {recorded_t_end:g}")
     extension = Extension(recorded_t_end, float(resolved.t_end), dataclasses.replace(resolved, **every))
-    if _status(run_path) == "ok":
+    if _status(run_path) == "ok" and (extension.extends or not partial):
+        # (a partial file with status ok: fold_run finished, the rename did not happen; a
+        # plain resume completes it)
         _check_complete(run_path, scene_path, extension, recorded_steps, every)
     return extension
 

@@ -566,7 +566,7 @@ def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | No
                "or start again with --force)")
         try:
             setup = read_setup(resume_from)
-            extension = plan_extension(resume_from, resolved, Path(args.scene))
+            extension = plan_extension(resume_from, resolved, Path(args.scene), partial=resume_from == partial)
         except (OSError, KeyError) as exc:
             raise InputError(f"--resume: {resume_from} is not a readable run file: {exc}") from None
         n_steps = extension.resolved.n_steps if extension.extends else int(setup.resolved.get("n_steps",
