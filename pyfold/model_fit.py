@@ -124,7 +124,11 @@ def describe(fit: ModelFit) -> str:
     parts = []
     for name in fit.fitted:
         mark = " (on its bound)" if fit.at_bound.get(name) else ""
-        parts.append(f"{name} = {fit.values[name]:.4g} ± {fit.stderr.get(name, float('nan')):.2g}{mark}")
+        err = fit.stderr.get(name, float("nan"))
+        # a parameter the records do not constrain (e.g. iARD's C_M once C_I sits on 0)
+        # has no finite linearised error
+        error = f"± {err:.2g}" if np.isfinite(err) else "(not determined by the records)"
+        parts.append(f"{name} = {fit.values[name]:.4g} {error}{mark}")
     fixed = [f"{k} = {v:.4g}" for k, v in fit.values.items() if k not in fit.fitted]
     status = "" if fit.success else f"  FIT FAILED: {fit.message}"
     return (f"{fit.model} / {fit.closure}: " + ", ".join(parts) + (f"; fixed {', '.join(fixed)}" if fixed else "")

@@ -102,3 +102,16 @@ def test_bad_model_options_are_refused(run_file, tmp_path, capsys, argv, key):
     assert main(["analyse", str(run_file), *argv]) == 2
     err = capsys.readouterr().err
     assert key in err and "Traceback" not in err
+
+
+def test_an_undetermined_parameter_is_said_so():
+    """iARD's C_M has no effect once C_I sits on 0: its linearised error is not finite,
+    and the line says the records do not determine it instead of printing ± nan."""
+    from pyfold.model_fit import ModelFit, describe
+
+    fit = ModelFit(model="iard", closure="ibof", values={"ci": 0.0, "cm": 0.5, "xi": 0.97}, fitted=("ci", "cm"),
+                   stderr={"ci": 1e-5, "cm": float("nan")}, at_bound={"ci": True, "cm": False}, residual_rms=0.01,
+                   success=True, message="")
+    line = describe(fit)
+    assert "ci = 0 ± 1e-05 (on its bound)" in line and "cm = 0.5 (not determined by the records)" in line
+    assert "nan" not in line
