@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING
 import h5py
 import numpy as np
 
-from pyfold.errors import InputError
+from pyfold.errors import InputError, PyfoldError
 
 if TYPE_CHECKING:
     from pyfold.scene import ResolvedScene
@@ -191,7 +191,10 @@ def rewrite_setup(path: Path, resolved: ResolvedScene) -> None:
     """Replace ``/setup`` of ``path`` by that of ``resolved`` (sealed) and set ``status = running``."""
     from pyfold.run_file import fixed_string, write_setup
 
-    with h5py.File(path, "a") as f:
-        del f["setup"]
-        write_setup(f, resolved)
-        f.attrs["status"] = fixed_string("running")
+    try:
+        with h5py.File(path, "a") as f:
+            f.attrs["status"] = fixed_string("running")  # first: a file cut short here is no finished run
+            del f["setup"]
+            write_setup(f, resolved)
+    except OSError as exc:
+        raise PyfoldError(f"cannot write the new /setup into {path} ({exc}); the run so far is kept there") from None

@@ -60,14 +60,12 @@ def run(args: argparse.Namespace) -> int:
     from pyfold.models import FolgarTucker
     from pyfold.moulding_export import check_export_path, document, write_document
 
-    if not (math.isfinite(args.a11) and 0.34 < args.a11 < 0.99):
-        raise InputError(f"--a11: must lie in (0.34, 0.99) (as in Tucker's FitCI), got {args.a11!r}")
     xi = shape_factor(args.beta, args.xi)
     closure = args.closure.strip().lower()
     if closure not in available(3):
         raise InputError(f"--closure: {args.closure!r} is not a 3-D closure; allowed: {', '.join(available(3))}")
     export = check_export_path(args.export) if args.export else None
-    try:
+    try:  # it checks the range of A11 (the one bound, in pyfold.fit)
         ci = fit_ci_to_steady_a11(args.a11, closure, xi)
     except InputError as exc:
         raise InputError(f"--a11: {exc}") from None

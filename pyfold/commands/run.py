@@ -82,6 +82,7 @@ from pyfold.command_line import command_line
 from pyfold.destination import LOCK_SUFFIX, acquire, check_name_length, lock_path, open_elsewhere, \
     refuse_input_as_output
 from pyfold.errors import InputError, PyfoldError
+from pyfold.progress import DEFAULT_INTERVAL, INTERVAL_ENV
 
 #: Environment variable naming the fold_run executable explicitly.
 FOLD_RUN_ENV = "PYFOLD_FOLD_RUN"
@@ -116,8 +117,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "to the new end")
     parser.add_argument("--progress-every", type=float, default=None, metavar="SECONDS",
                         help="when stderr is not a terminal (a log file, a batch job), a plain progress line "
-                             "(step, strain, ETA, load) every SECONDS (default: $PYFOLD_PROGRESS_EVERY or "
-                             "30; a progress bar on a terminal)")
+                             f"(step, strain, ETA, load) every SECONDS (default: ${INTERVAL_ENV} or "
+                             f"{DEFAULT_INTERVAL:g}; a progress bar on a terminal)")
 
 
 def usable_cores() -> int:
