@@ -185,3 +185,43 @@ def test_setup_checksums_hold_after_an_extension(tmp_path, capsys, real_fold_run
         assert float(f["/setup/resolved/t_end"][()]) == 0.3
         f["/setup/resolved/t_end"][()] = 0.5  # not sealed again: damage
     assert verify_path(out).damage
+
+
+def test_extending_a_run_killed_by_a_signal_equals_a_run_made_in_one_go(tmp_path, capsys, real_fold_run):
+    """`pyfold run` of t_end = 100 stopped by SIGTERM part-way (exit 143, OUT.h5.partial kept
+    with status running), then `--resume` with t_end = 120: the file equals a run of 120
+    made in one go. Checkpoints every 50 steps, records every 5: a checkpoint is always on
+    a record, so no record sums a partial interval."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    output = {"interval": 0.05, "snapshot_interval": 10.0, "checkpoint_interval": 0.5}
+    mid, long = _scene(tmp_path, 100.0, output=output), _scene(tmp_path, 120.0, output=output)
+    full, out = tmp_path / "full.h5", tmp_path / "out.h5"
+    partial = tmp_path / "out.h5.partial"
+    proc = subprocess.Popen([sys.executable, "-m", "pyfold.cli", "run", str(mid), "-o", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not partial.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(3.0)  # some checkpoints written, far from the 10000 steps
+        os.kill(proc.pid, signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    if proc.returncode == 0:
+        pytest.skip("the run finished before the signal (a very fast machine): nothing was killed")
+    assert proc.returncode == 143, err
+    with h5py.File(partial) as f:
+        assert f.attrs["status"] == "running"
+        assert 0 < int(f["/checkpoint/step"][()]) < 10000
+    assert main(["run", str(long), "-o", str(out), "--resume"]) == 0, capsys.readouterr().err
+    assert "extending" in capsys.readouterr().err
+    assert main(["run", str(long), "-o", str(full)]) == 0, capsys.readouterr().err
+    _assert_bitwise_equal(full, out)
