@@ -15,7 +15,8 @@ Fitted parameters (:data:`MODEL_FITS`; ``--params`` names others):
   from one flow the five ``b`` are not separately determined (their fit errors say so
   when ``--params b1,b2,b3,b4,b5,kappa`` is asked for);
 * ``iard``: ``C_I`` and ``C_M`` (Tseng, Chang & Hsu 2016);
-* ``mrd``: ``C_I``, ``D2``, ``D3`` with ``D1 = 1`` (the scale of ``D`` is ``C_I``'s).
+* ``mrd``: ``C_I``, ``D2``, ``D3`` with ``D1 = 1`` (the scale of ``D`` is ``C_I``'s); in 2-D
+  ``C_I``, ``D2`` (:data:`PLANAR_PARAMS`).
 
 ``--export FILE.json`` or ``FILE.toml`` writes them in the form moulding codes take
 (:func:`pyfold.moulding_export.write_export`): per model and closure, each
@@ -41,6 +42,8 @@ MODEL_FITS: dict[str, tuple[str, tuple[str, ...], dict[str, float]]] = {
     "iard": ("IARD", ("ci", "cm"), {"ci": 1e-3, "cm": 0.5}),
     "mrd": ("MRD", ("ci", "d2", "d3"), {"ci": 1e-3, "d1": 1.0, "d2": 0.8, "d3": 0.15}),
 }
+#: Default fitted parameters that differ in 2-D (planar MRD has ``diag(D1, D2)`` only).
+PLANAR_PARAMS: dict[str, tuple[str, ...]] = {"mrd": ("ci", "d2")}
 #: Closure of the model fits when ``--closures`` is left at its default.
 DEFAULT_MODEL_CLOSURE = "ibof"
 
@@ -110,6 +113,8 @@ def fit_model(ds, model: str, closure: str, params: tuple[str, ...] | None = Non
     fields = dict(start)
     fields["xi"] = float(ds.attrs["xi"])
     instance = getattr(models, cls_name)(**fields, closure=closure if closure != "exact" else "ibof", dim=dim)
+    if dim == 2:
+        default_params = PLANAR_PARAMS.get(model, default_params)
     fitted = tuple(params or default_params)
     result = fit_parameters(ds, instance, params=fitted, closure=closure)
     values = {name: float(np.asarray(getattr(result.model, name))) for name in fields}
