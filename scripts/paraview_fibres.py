@@ -46,6 +46,8 @@ RESOLUTION = 24
 FIBRE, SPHERE, SPHEROID = 1, 2, 3
 #: Picture size of ``--png`` [pixels].
 IMAGE_SIZE = (1280, 1024)
+#: The command that gives ParaView a virtual X display of that size (Debian package xvfb).
+XVFB_RUN = f'xvfb-run -a -s "-screen 0 {IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}x24"'
 
 
 def cell_lengths(xmf: str) -> list[float] | None:
@@ -174,8 +176,14 @@ def _render(glyphs: dict, source, box: list[float] | None, t: float, color_by: s
 
 
 def main(argv: list[str]) -> int:
-    """Command line: exit 0 when drawn, 2 on a bad argument or file (a message, no traceback)."""
+    """Command line: exit 0 when drawn, 2 on a bad argument or file, 1 when ``--png`` has no
+    X display to render on (a message, no traceback)."""
     args = _parser().parse_args(argv)
+    if args.png and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+        # ParaView's X build would crash (SIGSEGV) on the first render: say what to do instead
+        print(f"paraview_fibres: --png needs an X display and DISPLAY is not set; run it under Xvfb: {XVFB_RUN} "
+              "pvpython scripts/paraview_fibres.py ...", file=sys.stderr)
+        return 1
     from paraview.simple import GetActiveSource, OpenDataFile
 
     if args.xmf is None:

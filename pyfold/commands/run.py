@@ -398,7 +398,8 @@ def _plan_output(args: argparse.Namespace, out: Path) -> tuple[Path, Path, Path 
                              f"{os.path.realpath(resume_from)}")
         for view in (xmf, xdmf_data_path(xmf)):
             if os.path.lexists(view) and not args.force and resume_from is partial and not os.path.lexists(out):
-                raise InputError(f"-o: {_shown(view)} exists (the run writes its XDMF there); pass --force to replace it")
+                raise InputError(f"-o: {_shown(view)} exists (the run writes its XDMF there); pass --force to "
+                                 "replace it")
         return partial, xmf, resume_from
 
     if os.path.lexists(out) and not args.force:

@@ -264,6 +264,19 @@ def test_png_refuses_unknown_arrays_and_times_naming_what_exists(loaded, display
     assert not png.exists()
 
 
+def test_png_without_an_x_display_fails_naming_xvfb_run_instead_of_crashing(loaded, tmp_path):
+    import paraview_fibres
+
+    run, _ = loaded
+    png = tmp_path / "none.png"
+    env = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
+    proc = subprocess.run([_tool("pvpython", "paraview"), str(SCRIPT), str(run.with_suffix(".xmf")), "--png", str(png)],
+                          capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "DISPLAY is not set" in proc.stderr and paraview_fibres.XVFB_RUN in proc.stderr
+    assert not png.exists()
+
+
 def test_frame_time_picks_the_nearest_frame_within_half_an_interval():
     import paraview_fibres
 
