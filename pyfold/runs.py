@@ -300,8 +300,8 @@ def _write_xdmf_data(tmp: Path, source: str, frames: list[tuple[float, str, int 
         out["glyph_scale"].attrs["long_name"] = ("glyph size along p and across it (length, 2 radius, 2 radius): "
                                                  "a unit glyph along x scaled by components")
         out["glyph_scale"].attrs["units"] = "m"
-        for name in _XDMF_SCALARS:
-            out[name] = initial[name]
+        for name, (number, precision) in _XDMF_SCALARS.items():  # stored as the XDMF declares them
+            out[name] = np.asarray(initial[name], dtype=f"{'i' if number == 'Int' else 'f'}{precision}")
 
 
 def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
