@@ -83,6 +83,7 @@ from pyfold.destination import LOCK_SUFFIX, acquire, check_name_length, lock_pat
     refuse_input_as_output
 from pyfold.errors import InputError, PyfoldError
 from pyfold.progress import DEFAULT_INTERVAL, INTERVAL_ENV
+from pyfold.xdmf_files import xdmf_data_path
 
 #: Environment variable naming the fold_run executable explicitly.
 FOLD_RUN_ENV = "PYFOLD_FOLD_RUN"
@@ -432,7 +433,7 @@ def _plan_output(args: argparse.Namespace, out: Path) -> tuple[Path, Path, Path 
     """
     partial = out.with_name(out.name + PARTIAL_SUFFIX)
     xmf = out.with_suffix(".xmf")
-    for path in (out, partial, xmf):
+    for path in (out, partial, xmf, xdmf_data_path(xmf)):
         if path.exists() and not path.is_symlink() and not path.is_file():
             raise InputError(f"-o: {path} exists and is not a file")
 
@@ -457,16 +458,19 @@ def _plan_output(args: argparse.Namespace, out: Path) -> tuple[Path, Path, Path 
             raise InputError(f"--resume: {_shown(resume_from)} is a symbolic link; a run continues only a regular "
                              f"file (never writing through a link): resume the file itself with -o "
                              f"{os.path.realpath(resume_from)}")
-        if os.path.lexists(xmf) and not args.force and resume_from is partial and not os.path.lexists(out):
-            raise InputError(f"-o: {_shown(xmf)} exists (the run writes its XDMF there); pass --force to replace it")
+        for view in (xmf, xdmf_data_path(xmf)):
+            if os.path.lexists(view) and not args.force and resume_from is partial and not os.path.lexists(out):
+                raise InputError(f"-o: {_shown(view)} exists (the run writes its XDMF there); pass --force to "
+                                 "replace it")
         return partial, xmf, resume_from
 
     if os.path.lexists(out) and not args.force:
         raise InputError(f"-o: {_shown(out)} exists; pass --force to replace it (it stays intact until the new run "
                          "is complete)")
-    if os.path.lexists(xmf) and not args.force:
-        raise InputError(f"-o: {_shown(xmf)} exists (the run writes its XDMF there, beside {out.name}); pass --force "
-                         "to replace it, or choose another -o")
+    for view in (xmf, xdmf_data_path(xmf)):
+        if os.path.lexists(view) and not args.force:
+            raise InputError(f"-o: {_shown(view)} exists (the run writes its XDMF there, beside {out.name}); pass "
+                             "--force to replace it, or choose another -o")
     if os.path.lexists(partial) and not args.force:
         raise InputError(f"-o: {_shown(partial)} exists: an interrupted run of {out.name}; pass --resume to continue "
                          "it from its last checkpoint, or --force to start again")
@@ -515,8 +519,9 @@ def run(args: argparse.Namespace) -> int:
     created = _check_output_folder(out)
     try:
         partial = out.with_name(out.name + PARTIAL_SUFFIX)
-        refuse_input_as_output(Path(args.scene), (out, partial, out.with_suffix(".xmf"), lock_path(out)), "-o",
-                               "scene file")
+        refuse_input_as_output(Path(args.scene), (out, partial, out.with_suffix(".xmf"),
+                                                  xdmf_data_path(out.with_suffix(".xmf")), lock_path(out)),
+                               "-o", "scene file")
         argv = getattr(args, "argv", None) or ([args.scene, "-o", str(out), "--np", str(args.np)]
                                               + (["--force"] if args.force else [])
                                               + (["--resume"] if args.resume else []))
