@@ -51,6 +51,15 @@ def _run(tmp_path, setup_only, status="ok", steps_done=20, a2=None) -> Path:
     return path
 
 
+@pytest.fixture(autouse=True)
+def short_runs_allowed(monkeypatch):
+    """These runs (strain 0.2) are shorter than the one Jeffery period a C_I estimate needs;
+    that refusal is tested in test_analyse_applicability.py, here the other checks are."""
+    from pyfold import provenance
+
+    monkeypatch.setattr(provenance, "MIN_FIT_PERIODS", 0.0)
+
+
 @pytest.fixture
 def no_fit(monkeypatch):
     """Any fit that starts raises FitStarted, recording the dataset it was given."""
