@@ -34,18 +34,17 @@ def closure_colour(name: str) -> str:
     the default closures first (:data:`pyfold.pipeline.DEFAULT_CLOSURES`), then the other
     registered ones alphabetically, on matplotlib's 20-colour qualitative map."""
     from matplotlib import colormaps
+    from matplotlib.colors import to_hex
 
     from pyfold.closures import CLOSURES
     from pyfold.pipeline import DEFAULT_CLOSURES
 
     if name == "exact":
-        return EXACT_COLOUR
+        return to_hex(EXACT_COLOUR)
     order = [c for c in DEFAULT_CLOSURES if c != "exact"]
     order += sorted(c for c in CLOSURES if c not in order)
     k = order.index(name) if name in order else len(order)
     palette = colormaps["tab10"].colors + colormaps["tab20b"].colors
-    from matplotlib.colors import to_hex
-
     return to_hex(palette[k % len(palette)])
 
 
