@@ -546,6 +546,7 @@ _DESCRIPTIONS: dict[str, tuple[str, str]] = {
     "j": ("second index of a2", ""),
     "k": ("third index of a4", ""),
     "l": ("fourth index of a4", ""),
+    "component": ("component (i, j) of the error (f(a2) - a4):D", ""),
     "success": ("fit converged on an admissible trajectory (1) or not (0)", "1"),
     "admissible": ("fitted a2 stays in the orientation tensors (1) or leaves them (0; the C_I is then NaN)", "1"),
     "mean_error_full": ("time mean of ||f(a2) - a4||_F / ||a4||_F", "1"),

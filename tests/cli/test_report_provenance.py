@@ -110,3 +110,14 @@ def test_a_stokes_run_is_named_with_its_grid(tmp_path):
     assert p.hydrodynamics == "stokes" and p.model.startswith("fluid-coupled Stokes")
     assert f"Stokes grid {' x '.join(str(int(g)) for g in grid)}" in p.resolution
     assert f"{2 * radius / float(np.max(cell / grid)):.3g} grid cells per diameter" in p.resolution
+
+
+def test_analyse_results_are_described_and_name_the_model(folder, tmp_path):
+    out = tmp_path / "analysis"
+    assert main(["analyse", str(folder / "run.h5"), "--closures", "exact,ibof", "--out", str(out)]) == 0
+    with xr.open_dataset(out / "results.nc") as ds:
+        undescribed = [n for n, v in ds.variables.items() if "long_name" not in v.attrs or "units" not in v.attrs]
+        assert not undescribed
+        assert ds.attrs["recommended_ci"] == "ci_recommended" and "ci" not in ds.variables
+        assert ds.attrs["physics_model"].startswith("Jeffery kinematics + contacts")
+        assert ds.attrs["strain_end"] == pytest.approx(T_END)
