@@ -924,7 +924,10 @@ def interpretation(rep: Report) -> list[str]:
 
 def flagged_fit_lines(rep: Report) -> list[str]:
     """Per-seed trajectory fits on a bound (excluded from the mean) or outside the other
-    seeds' prediction interval (kept), one line per closure with any."""
+    seeds' prediction interval (kept), one line per closure with any; and rate regressions
+    whose seeds disagree beyond their within-run errors (:func:`pyfold.seed_checks.consistency`)."""
+    from pyfold.seed_checks import consistency
+
     seeds = [r.seed for r in rep.runs]
     lines = []
     for c, flags in rep.fit_flags.items():
@@ -932,6 +935,13 @@ def flagged_fit_lines(rep: Report) -> list[str]:
         if notes:
             values = ", ".join(f"{v:.3g}" for v in flags.values)
             lines.append(f"{c}: per-seed fits {values}; " + "; ".join(notes))
+    for c in rep.closures:
+        test = consistency([r.ci[c] for r in rep.runs], [r.ci_stderr[c] for r in rep.runs])
+        if test.disagree:
+            values = ", ".join(f"{r.ci[c]:+.2e} ± {r.ci_stderr[c]:.1e}" for r in rep.runs)
+            lines.append(f"{c} (rate regression): the seeds disagree beyond their within-run errors (chi2 = "
+                         f"{test.chi2:.3g} for {test.dof} degrees of freedom, p = {test.p:.2g}): {values}; the error "
+                         "quoted is the larger, across-seed one")
     return lines
 
 
@@ -992,7 +1002,7 @@ def summary_lines(rep: Report) -> list[str]:
         lines.append(f"  {label:<10} {fitted}   {e.mean:+11.3e} {_fmt(e.error, '9.1e')}")
     flagged = flagged_fit_lines(rep)
     if flagged:
-        lines.append("  flagged per-seed fits (a value on its bound is a bound, not a measurement):")
+        lines.append("  flagged per-seed values (a fit on its bound is a bound, not a measurement):")
         lines += [f"    {x}" for x in flagged]
     if "exact" in rep.closures:
         lines.append("  * exact: the runs' own a4 (closure-free; no trajectory fit: that a4 exists only along the "
@@ -1095,7 +1105,7 @@ def summary_markdown(rep: Report, extra: Sequence[str] = ()) -> str:
         md.append(f"| correlation {k} at φβ = {rep.phi_beta:.3g} | {v:.3e} | | | | | |")
     flagged = flagged_fit_lines(rep)
     if flagged:
-        md += ["", "Flagged per-seed fits (a value on its bound is a bound, not a measurement):", ""]
+        md += ["", "Flagged per-seed values (a fit on its bound is a bound, not a measurement):", ""]
         md += [f"* {x}" for x in flagged]
     md += [""] + [f"* {line}" for line in interpretation(rep)]
     if rep.judged:

@@ -133,3 +133,32 @@ def equivalence(mean_a: float, differences: Sequence[float] | None = None, stder
     relative = mean / mean_a if mean_a else math.nan
     return Equivalence(difference=mean, low=low, high=high, relative=relative, d_z=d_z, margin=margin,
                        verdict=verdict)
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """Whether per-seed values agree within their own standard errors."""
+
+    chi2: float  # sum ((x_k - weighted mean) / se_k)^2
+    dof: int
+    p: float
+
+    @property
+    def disagree(self) -> bool:
+        return math.isfinite(self.p) and self.p < 0.05
+
+
+def consistency(values: Sequence[float], stderrs: Sequence[float]) -> Consistency:
+    """Chi-square test of per-seed values ``x_k +- se_k`` against one common value (their
+    inverse-variance weighted mean), ``n - 1`` degrees of freedom; NaN for fewer than two
+    seeds or a standard error that is not positive and finite."""
+    from scipy import stats
+
+    x = np.asarray(values, dtype=float)
+    se = np.asarray(stderrs, dtype=float)
+    if x.size < 2 or not np.all(np.isfinite(se) & (se > 0.0)) or not np.all(np.isfinite(x)):
+        return Consistency(math.nan, max(x.size - 1, 0), math.nan)
+    w = 1.0 / se**2
+    mean = float(np.sum(w * x) / np.sum(w))
+    chi2 = float(np.sum(((x - mean) / se) ** 2))
+    return Consistency(chi2, x.size - 1, float(stats.chi2.sf(chi2, x.size - 1)))

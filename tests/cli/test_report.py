@@ -37,13 +37,15 @@ def _run(folder, name, **kw):
     return out
 
 
-@pytest.fixture(autouse=True)
-def short_runs_allowed(monkeypatch):
+@pytest.fixture(autouse=True, scope="module")
+def short_runs_allowed():
     """These runs (strain 10) are shorter than the one Jeffery period (52) a C_I estimate
     needs; the refusal is tested in test_report_provenance.py, here the other checks are."""
     from pyfold import provenance
 
-    monkeypatch.setattr(provenance, "MIN_FIT_PERIODS", 0.0)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(provenance, "MIN_FIT_PERIODS", 0.0)
+        yield
 
 
 @pytest.fixture(scope="module")

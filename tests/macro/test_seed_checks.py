@@ -65,3 +65,17 @@ def test_tost_interval_and_verdicts():
     # one run: normal quantile with the given standard error
     one = equivalence(0.2, mean_difference=1e-3, stderr=1e-3)
     assert one.low == pytest.approx(1e-3 - stats.norm.ppf(0.95) * 1e-3, rel=1e-12) and one.verdict == "equivalent"
+
+
+def test_consistency_is_a_chi_square_about_the_weighted_mean():
+    from pyfold.seed_checks import consistency
+
+    x, se = [1.0, 2.0, 3.0], [1.0, 1.0, 2.0]
+    w = np.array([1.0, 1.0, 0.25])
+    mean = float(np.sum(w * x) / np.sum(w))
+    chi2 = float(np.sum(w * (np.array(x) - mean) ** 2))
+    got = consistency(x, se)
+    assert got.chi2 == pytest.approx(chi2, rel=1e-12) and got.dof == 2
+    assert got.p == pytest.approx(stats.chi2.sf(chi2, 2), rel=1e-12) and not got.disagree
+    assert consistency([0.0, 10.0], [1.0, 1.0]).disagree  # 7 standard errors apart
+    assert math.isnan(consistency([1.0], [0.1]).p)
