@@ -103,6 +103,8 @@ def provenance_of(run_path: Path, t: np.ndarray, L: np.ndarray, xi: float) -> Pr
     reason = _text(res.get("hydrodynamics_reason", ""))
     contacts = _COLLISIONS.get(int(np.asarray(res.get("collisions", 2))), "contacts")
     lubrication = " + lubrication" if int(np.asarray(res.get("lubrication", 0))) else ""
+    # "X + contacts (...)" or "X, no contacts"
+    joined = f", {contacts}" if contacts == _COLLISIONS[0] else f" + {contacts}"
     counts = np.atleast_1d(res.get("family_count", [0]))
     dt = float(np.asarray(res.get("dt", math.nan)))
     dim = int(np.asarray(res.get("dim", 3)))
@@ -112,10 +114,10 @@ def provenance_of(run_path: Path, t: np.ndarray, L: np.ndarray, xi: float) -> Pr
         cell = np.asarray(res.get("cell_lengths", [math.nan] * 3), dtype=float)[:dim]
         radius = float(np.min(np.atleast_1d(res.get("family_radius", [math.nan]))))
         h = float(np.max(cell / np.asarray(grid, dtype=float))) if grid else math.nan
-        model = f"fluid-coupled Stokes (hydrodynamic interactions resolved on a grid) + {contacts}{lubrication}"
+        model = f"fluid-coupled Stokes (hydrodynamic interactions resolved on a grid){joined}{lubrication}"
         parts.insert(0, f"Stokes grid {' x '.join(map(str, grid))}, {2.0 * radius / h:.3g} grid cells per diameter")
     else:
-        model = f"Jeffery kinematics + {contacts}{lubrication}, no hydrodynamic interactions"
+        model = f"Jeffery kinematics{joined}{lubrication}, no hydrodynamic interactions"
     t = np.asarray(t, dtype=float)
     return Provenance(hydrodynamics="stokes" if hydro == 1 else "jeffery", model=model, resolution=", ".join(parts),
                       strain=(float(t[0]) * gamma_dot, float(t[-1]) * gamma_dot),

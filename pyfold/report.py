@@ -164,7 +164,7 @@ class RunAnalysis:
     seed: int
     t: np.ndarray  # record times [s]
     a2: np.ndarray  # (nt, d, d)
-    onset_time: float  # start of the stationary part (MSER-5) [s]
+    onset_time: float  # start of the stationary part (MSER-5, not inside the first Jeffery period; NaN: none) [s]
     stationary: bool
     steady_message: str
     window: tuple[float, float]  # times used by the estimators [s]
@@ -246,7 +246,13 @@ def analyse_run(path: Path, ds: xr.Dataset, seed: int, closures: Sequence[str], 
     t_period = jeffery_period_strain(xi) / shear_rate_of(L)
     steady, window, onset = stationary_window(t_all, a2_all, float(t_all[0]) + t_period)
     message = steady.message
-    if onset > float(steady.onset_time):
+    stationary = bool(steady.stationary)
+    if float(t_all[0]) + t_period > float(t_all[-1]):
+        message = (f"the run ends inside the first Jeffery period ({t_period:.4g} s), before the orbits have flipped "
+                   f"once: no steady state can be judged (MSER-5 alone would put an onset at t = "
+                   f"{steady.onset_time:.4g} s); the estimators use its second half. " + message)
+        onset, stationary = math.nan, False
+    elif onset > float(steady.onset_time):
         message = (f"MSER-5 onset at t = {steady.onset_time:.4g} s lies inside the first Jeffery period "
                    f"({t_period:.4g} s), before the orbits have flipped once: moved to t = {onset:.4g} s. " + message)
     idx, _ = _thin_pad(len(t_all))
@@ -265,7 +271,7 @@ def analyse_run(path: Path, ds: xr.Dataset, seed: int, closures: Sequence[str], 
     slope, slope_se = np.asarray(steady.drift_slope), np.asarray(steady.drift_stderr)
     drift = {f"a_{labels[i]}{labels[i]}": (float(slope[i, i]), float(slope_se[i, i])) for i in range(d)}
     return RunAnalysis(path=path, seed=seed, t=t_all, a2=a2_all, onset_time=onset,
-                       stationary=bool(steady.stationary), steady_message=message, window=window, ci=ci,
+                       stationary=stationary, steady_message=message, window=window, ci=ci,
                        ci_stderr=ci_se, error_t=t, error_contracted={}, error_mean={}, error_stderr={}, drift=drift,
                        thinned=(a2, a4))
 
@@ -753,7 +759,8 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
             "ci_rate_regression_seed_stderr": (("seed", "closure"), per_seed("ci_stderr", closures),
                                                one("within-run standard error of ci_rate_regression_seed (blocking)")),
             "onset_time": ("seed", [r.onset_time for r in rep.runs],
-                           one("start of the stationary part (MSER-5, not before one Jeffery period)", "s")),
+                           one("start of the stationary part (MSER-5, not before one Jeffery period; NaN: the run "
+                               "ends inside the first period)", "s")),
             "stationary": ("seed", np.array([r.stationary for r in rep.runs], dtype=np.int8),
                            one("stationary part found and not drifting (1) or not (0)")),
             "steady_message": ("seed", [r.steady_message for r in rep.runs],
@@ -975,7 +982,7 @@ def summary_lines(rep: Report) -> list[str]:
         verdict = "stationary" if r.stationary else "NOT judged stationary"
         drift = ", ".join(f"{k} {v / g:+.1e} ± {se / g:.0e}" for k, (v, se) in r.drift.items())
         msg = r.steady_message if len(r.steady_message) <= 160 else r.steady_message[:157] + "..."
-        lines.append(f"  seed {r.seed}: onset strain {r.onset_time * g:.4g}, {verdict}; window strain "
+        lines.append(f"  seed {r.seed}: onset strain {_fmt(r.onset_time * g, '.4g')}, {verdict}; window strain "
                      f"{r.window[0] * g:.4g}-{r.window[1] * g:.4g}; drift per unit strain over its last half: {drift}")
         if not r.stationary:
             lines.append(f"    ({msg})")
@@ -1083,7 +1090,7 @@ def summary_markdown(rep: Report, extra: Sequence[str] = ()) -> str:
     md += [f"**{w}**" for w in rep.warnings] + ([""] if rep.warnings else [])
     md += ["## Steady state", "", "| seed | onset strain | stationary | window (strain) | message |", "|---|---|---|---|---|"]
     for r in rep.runs:
-        md.append(f"| {r.seed} | {r.onset_time * g:.4g} | {'yes' if r.stationary else 'no'} | "
+        md.append(f"| {r.seed} | {_fmt(r.onset_time * g, '.4g')} | {'yes' if r.stationary else 'no'} | "
                   f"{r.window[0] * g:.4g}–{r.window[1] * g:.4g} | {r.steady_message.replace('|', '/')} |")
     f0, f1 = rep.fit_window
     md += ["", "## C_I per closure", "",
@@ -1164,7 +1171,8 @@ def write_report(rep: Report, out: Path, extra_summary: Sequence[str] = ()) -> l
         dns = {r.seed: (r.t * g, r.a2) for r in rep.runs}
         where = provenance_words(rep)
         plotting.plot_report_a2(dns, rep.prediction_t * g, rep.prediction, rep.prediction_ci,
-                                [r.window[0] * g for r in rep.runs], work / "a2_dns_vs_fitted_ft.png",
+                                [r.onset_time * g for r in rep.runs if math.isfinite(r.onset_time)],
+                                work / "a2_dns_vs_fitted_ft.png",
                                 fit_window=(rep.fit_window[0] * g, rep.fit_window[1] * g), provenance=where,
                                 notes=departure_note(rep))
         errors_t = {c: [(r.error_t * g, r.error_contracted[c]) for r in rep.runs] for c in rep.judged}
