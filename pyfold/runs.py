@@ -151,7 +151,10 @@ def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
         (:func:`complete_counts`). ``attrs`` hold the root attributes (``status``,
         ``steps_done``, ``creator``, ...), ``scene`` (normalised scene, a dict as
         JSON text), ``scene_toml`` (verbatim), the resolved scalars
-        (``dim``, ``dt``, ``alpha``, ``regime``, ``hydrodynamics_reason``, ...) and
+        (``dim``, ``dt``, ``alpha``, ``regime``, ``hydrodynamics_reason``, ...),
+        ``velocity_gradient`` (the imposed ``G_ij`` [1/s], ``dim**2`` values row-major:
+        the default ``L`` of :func:`pyfold.fit.fit_parameters`), ``xi`` (the Jeffery shape
+        factor, when all particles share one) and
         ``integrity`` (:meth:`pyfold.integrity.Integrity.summary`: "verified: ...",
         "no checksums: not verified" for a format 1.0 file, or "damaged: ...").
 
@@ -250,8 +253,25 @@ def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
     for key, value in res.items():
         if isinstance(value, str) or np.ndim(value) == 0:
             attrs[key] = value.item() if hasattr(value, "item") else value
+    attrs.update(_model_attrs(res, dim))
     ds.attrs = attrs
     return ds
+
+
+def _model_attrs(res, dim: int) -> dict[str, object]:
+    """What an orientation model needs from a run, as attributes: ``velocity_gradient``
+    (``G_ij = du_i/dx_j`` [1/s] of the ``dim`` x ``dim`` block, flattened row-major:
+    ``dim**2`` values, which :func:`pyfold.fit.fit_parameters` takes as its default ``L``)
+    and ``xi`` (the Jeffery shape factor, when every family has the same one)."""
+    out: dict[str, object] = {}
+    if "velocity_gradient" in res:
+        grad = np.asarray(res["velocity_gradient"], dtype=np.float64).reshape(3, 3)[:dim, :dim]
+        out["velocity_gradient"] = np.ascontiguousarray(grad).reshape(-1)
+    if "family_xi" in res:
+        xi = np.atleast_1d(np.asarray(res["family_xi"], dtype=np.float64))
+        if xi.size and np.all(xi == xi[0]):
+            out["xi"] = float(xi[0])
+    return out
 
 
 def _hdf_item(h5name: str, dataset: str, dims: tuple[int, ...], number: str, precision: int,

@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pyfold import model_fit
 from pyfold.files import atomic_output, regular_file
 from pyfold.pipeline import DEFAULT_CLOSURES
 
@@ -42,12 +43,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="analyse the intact part of a run file whose checksums fail (refused by default, "
                              "exit 2 naming the damaged datasets): records from the first damaged chunk on and "
                              "other damaged datasets are left out, with a warning naming them")
+    model_fit.add_arguments(parser)  # --model, --params, --export: orientation models for moulding codes
 
 
 def run(args: argparse.Namespace) -> int:
     from pyfold.integrity import tolerate_damage
 
     with tolerate_damage(getattr(args, "allow_damaged", False)):
+        if getattr(args, "model", None) is not None:
+            return model_fit.run(args, default_closures=",".join(DEFAULT_CLOSURES))
         return _analyse(args)
 
 

@@ -172,6 +172,18 @@ class _Jobs:
         self.logs = logs
         self.running: dict[str, tuple[subprocess.Popen, object, Path, float]] = {}
         self.done: dict[str, tuple[int, float]] = {}
+        self.last_report = time.monotonic()
+
+    def report_progress(self) -> None:
+        """Every progress interval (pyfold.progress), one line per running seed: its step,
+        strain and ETA, from the plain progress lines its `pyfold run` writes to its log."""
+        from pyfold.progress import default_interval, describe, latest_in_log
+
+        if time.monotonic() - self.last_report < default_interval():
+            return
+        self.last_report = time.monotonic()
+        for name, (_, _, log_path, _) in self.running.items():
+            print(f"pyfold main:   {describe(name, latest_in_log(log_path))}", flush=True)
 
     def start(self, name: str, scene: Path, out: Path) -> None:
         """Start `pyfold run` of ``scene`` with one rank (fold_run and the placement are
@@ -199,6 +211,7 @@ class _Jobs:
                         raise PyfoldError(f"`pyfold run` for {name} failed (exit {proc.returncode}):\n  "
                                           + "\n  ".join(tail))
                     return name
+            self.report_progress()
             time.sleep(0.2)
 
     def run_all(self, jobs: list[tuple[str, Path, Path]], say) -> None:
