@@ -51,7 +51,10 @@ def run(args: argparse.Namespace) -> int:
 
     with tolerate_damage(getattr(args, "allow_damaged", False)):
         if getattr(args, "model", None) is not None:
-            return model_fit.run(args, default_closures=",".join(DEFAULT_CLOSURES))
+            default = ",".join(DEFAULT_CLOSURES)
+            if args.closures is None:  # left at its default: the model fit's own default closure
+                args.closures = default
+            return model_fit.run(args, default_closures=default)
         return _analyse(args)
 
 
