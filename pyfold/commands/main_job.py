@@ -1,13 +1,16 @@
 """``pyfold main``: the bundled default job of the README.
 
 The default scene is simulated for several seeds (the scene's seed, seed + 1, ...),
-``--np`` runs at a time as separate processes, then :mod:`pyfold.report` measures,
-on the stationary part of every run, C_I per closure (rate regression with the
-closure's a4) and closure-free (with the runs' own a4), each with its ensemble
-error, beside the published correlations at the scene's phi beta, whether and
-when the steady state was reached, and the closures ranked by their a4:D error
-with paired significance tests (the same report as ``pyfold report`` on the run
-files). The small Stokes scene runs while the report is computed.
+``--np`` runs at a time as separate processes, then :mod:`pyfold.report` measures
+C_I per closure by trajectory fit (the recommended value; fits on a bound flagged and
+excluded) and by rate regression over the stationary part of every run, closure-free
+(with the runs' own a4), each with its ensemble error, beside the published
+correlations at the scene's phi beta, whether and when the steady state was reached,
+and the closures ranked by their a4:D error with paired significance tests, effect
+sizes and equivalence verdicts (the same report as ``pyfold report`` on the run
+files), every output naming the physics model, resolution and strain range. A scene
+shorter than one Jeffery period is reported with that warning in every output. The
+small Stokes scene runs while the report is computed.
 
 Every invocation writes a fresh, timestamped results folder under ``--out``
 (``run-YYYYmmdd-HHMMSS``), assembled in a hidden temporary folder and renamed
@@ -268,7 +271,9 @@ def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tupl
             say(f"2/3 small Stokes scene {STOKES_SCENE.name} (fibres coupled through the fluid), beside step 3")
             jobs.start("Stokes scene", STOKES_SCENE, outdir / "stokes_run.h5")
         say("3/3 report: steady state, C_I per closure, closure errors and ranking, Folgar-Tucker per closure")
-        rep = report.build_report(runs, closures, progress=lambda t: say(f"  {t}"))
+        # the simulations are done: a run shorter than the estimators need is reported with the
+        # warning in every output rather than thrown away
+        rep = report.build_report(runs, closures, progress=lambda t: say(f"  {t}"), force=True)
         extra = []
         if stokes:
             while jobs.running:

@@ -100,7 +100,8 @@ def test_extending_a_killed_run_equals_a_run_made_in_one_go(tmp_path, capsys, re
         write_setup(f, load_scene(mid))
         f.attrs["status"] = fixed_string("running")
     out.rename(tmp_path / "out.h5.partial")
-    (tmp_path / "out.xmf").unlink()
+    (tmp_path / "out.xmf").unlink()  # a killed run has written no XDMF yet
+    (tmp_path / "out.xmf.h5").unlink()
     assert main(["run", str(long), "-o", str(out), "--resume"]) == 0, capsys.readouterr().err
     assert "extending" in capsys.readouterr().err
     _assert_bitwise_equal(full, out)
