@@ -54,8 +54,8 @@ def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
                 print(f"pyfold sweep: {folder.name}: not resumable, starting again", file=sys.stderr, flush=True)
                 entry["from"] = "start (not resumable)"
                 rc = cli_main(argv + ["--force"])
-        else:
-            rc = cli_main(argv)
+        else:  # --force: only a stale run.xmf can be here (its run.h5 was removed); the lock guards the rest
+            rc = cli_main(argv + ["--force"])
     finally:
         entry.update(end=time.time(), rc=rc, state=store.run_state(folder).state)
         entry["wall_s"] = entry["end"] - start

@@ -47,6 +47,7 @@ seeds = {list(seeds)}
 [arguments]
 "numerics.t_end" = {t_end!r}
 "output.checkpoint_interval" = {t_end / 10!r}
+"output.snapshot_interval" = {t_end!r}
 
 [axes]
 "particles[0].count" = {list(counts)}
