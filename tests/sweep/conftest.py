@@ -70,6 +70,8 @@ def fake_fold_run(tmp_path, monkeypatch):
 def slurm():
     """A running single-node Slurm (scripts/slurm_local start); the environment for its commands.
     Skipped, saying why, only where its packages cannot be installed."""
+    was_running = subprocess.run(["bash", str(SLURM_LOCAL), "status"], capture_output=True, text=True,
+                                 timeout=60).returncode == 0
     proc = subprocess.run(["bash", str(SLURM_LOCAL), "start"], capture_output=True, text=True, timeout=900)
     if proc.returncode == SLURM_UNAVAILABLE:
         pytest.skip(f"Slurm cannot be installed on this machine: {proc.stderr.strip()}")
@@ -77,6 +79,8 @@ def slurm():
     conf = proc.stdout.strip().split("=", 1)[1]
     env = dict(os.environ, SLURM_CONF=conf)
     yield env
+    if not was_running:  # leave the machine as found
+        subprocess.run(["bash", str(SLURM_LOCAL), "stop"], capture_output=True, text=True, timeout=120)
 
 
 def wait_for(predicate, timeout: float, what: str, step: float = 0.2):
