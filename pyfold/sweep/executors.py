@@ -54,6 +54,14 @@ def states_of(root: Path, run_ids: list[str]) -> dict[str, store.RunState]:
     return {rid: store.run_state(store.run_folder(root, rid)) for rid in run_ids}
 
 
+def bring_build_up_to_date() -> None:
+    """Locate fold_run once here (importing pyfold's extension modules, which brings an editable
+    build up to date) before workers start, so that they do not all rebuild it at once."""
+    from pyfold.commands.run import find_fold_run
+
+    find_fold_run()
+
+
 def worker_command(folder: Path, ranks: int, executor: str) -> list[str]:
     """The command that completes one run (the python running pyfold now)."""
     return [sys.executable, "-m", "pyfold.sweep.worker", str(folder), "--np", str(ranks), "--executor", executor]
@@ -74,6 +82,7 @@ class LocalExecutor:
 
     def execute(self, root: Path, run_ids: list[str], resources: Resources, progress: Progress) -> Outcome:
         slots = self.slots(resources.np)
+        bring_build_up_to_date()
         current = {rid: s.state for rid, s in states_of(root, run_ids).items()}
         todo = [rid for rid in run_ids if current[rid] in ("queued", "interrupted")]
         live: dict[str, subprocess.Popen] = {}

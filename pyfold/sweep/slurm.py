@@ -28,7 +28,7 @@ from pathlib import Path
 
 from pyfold.errors import InputError, PyfoldError
 from pyfold.sweep import store
-from pyfold.sweep.executors import Outcome, states_of, worker_command
+from pyfold.sweep.executors import Outcome, bring_build_up_to_date, states_of, worker_command
 from pyfold.sweep.progress import Progress
 from pyfold.sweep.spec import Resources
 
@@ -133,6 +133,7 @@ def job_script(root: Path, list_file: Path, ranks: int) -> str:
 
 def submit(root: Path, run_ids: list[str], resources: Resources, name: str) -> str:
     """Submit ``run_ids`` as one job array; returns its job id (recorded in ``jobs.json``)."""
+    bring_build_up_to_date()
     folder = root / SLURM
     folder.mkdir(exist_ok=True)
     jobs = read_jobs(root)
