@@ -6,7 +6,7 @@ Brings the run in ``RUN_FOLDER`` (:mod:`pyfold.sweep.store`) to completion with
 it was ``interrupted`` (cancelled, timed out, killed), and a fresh ``pyfold run
 --force`` when it was interrupted before its first checkpoint (``--resume`` refuses
 that file with exit 2); ``pyfold run`` when ``queued``. Each attempt is appended to
-``attempts.jsonl`` (start, end, exit status, host, Slurm job). The exit status is
+``attempts.jsonl`` (start, end, wall and CPU seconds, exit status, host, Slurm job). The exit status is
 ``pyfold run``'s. Signals (``scancel``, a time limit) reach ``pyfold run``, which stops
 fold_run and keeps the partial file for the next attempt.
 """
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import socket
 import sys
 import time
@@ -27,6 +28,12 @@ def slurm_job() -> str:
     job = os.environ.get("SLURM_ARRAY_JOB_ID") or os.environ.get("SLURM_JOB_ID") or ""
     task = os.environ.get("SLURM_ARRAY_TASK_ID")
     return f"{job}_{task}" if job and task is not None else job
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and its finished children (fold_run, mpirun) [s]."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
@@ -43,6 +50,7 @@ def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
     argv = ["run", str(folder / store.SCENE), "-o", str(folder / store.RUN_FILE), "--np", str(ranks),
             "--oversubscribe"]
     start = time.time()
+    cpu0 = _cpu_seconds()
     entry = {"start": start, "executor": executor, "host": socket.gethostname(), "job": slurm_job(),
              "np": ranks, "from": state.state}
     rc = 1
@@ -59,6 +67,7 @@ def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
     finally:
         entry.update(end=time.time(), rc=rc, state=store.run_state(folder).state)
         entry["wall_s"] = entry["end"] - start
+        entry["cpu_s"] = _cpu_seconds() - cpu0
         try:
             store.record_attempt(folder, entry)
         except OSError:  # pragma: no cover - the run's own result is what counts
