@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import xarray as xr
 
-from conftest import EXAMPLE, no_traceback, pyfold, write_sweep
+from _sweep_helpers import EXAMPLE, fake_fold_run, no_traceback, pyfold, write_sweep  # fake_fold_run: a fixture
 from pyfold.sweep import store
 
 

@@ -20,7 +20,8 @@ import h5py
 import numpy as np
 import xarray as xr
 
-from conftest import EXAMPLE_SCENE, example_sweep, no_traceback, pyfold, wait_for, write_sweep
+from _sweep_helpers import (EXAMPLE_SCENE, example_sweep, no_traceback, pyfold, slurm,  # slurm: a fixture
+                            wait_for, write_sweep)
 from pyfold.sweep import slurm as slurm_executor
 from pyfold.sweep import store
 from pyfold.sweep.gather import COST_VARIABLES

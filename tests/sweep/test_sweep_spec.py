@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import EXAMPLE, EXAMPLE_SCENE, no_traceback, pyfold, write_sweep
+from _sweep_helpers import EXAMPLE, EXAMPLE_SCENE, no_traceback, pyfold, write_sweep
 from pyfold.errors import InputError
 from pyfold.sweep.plan import plan, set_key
 from pyfold.sweep.spec import read_sweep

@@ -1,5 +1,7 @@
-"""Shared helpers of the sweep tests: the pyfold command, the bundled sweep, a stand-in
-fold_run, and a single-node Slurm started by scripts/slurm_local."""
+"""Helpers of the sweep tests: the pyfold command, the bundled sweep, sweep files, polling,
+and the fixtures (imported by the test modules: a conftest.py here would shadow
+tests/cli's, which its modules import by name) of a stand-in fold_run and a
+single-node Slurm started by scripts/slurm_local."""
 from __future__ import annotations
 
 import os
@@ -54,6 +56,17 @@ seeds = {list(seeds)}
 {extra}''')
 
 
+def wait_for(predicate, timeout: float, what: str, step: float = 0.2):
+    """Poll ``predicate`` until it returns something true; fail naming ``what`` after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(step)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
 @pytest.fixture
 def fake_fold_run(tmp_path, monkeypatch):
     """PYFOLD_FOLD_RUN -> tests/cli/_fake_fold_run.py (exit status from $FAKE_FOLD_RUN_EXIT)."""
@@ -81,14 +94,3 @@ def slurm():
     yield env
     if not was_running:  # leave the machine as found
         subprocess.run(["bash", str(SLURM_LOCAL), "stop"], capture_output=True, text=True, timeout=120)
-
-
-def wait_for(predicate, timeout: float, what: str, step: float = 0.2):
-    """Poll ``predicate`` until it returns something true; fail naming ``what`` after ``timeout`` s."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(step)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
