@@ -162,6 +162,18 @@ def submit(root: Path, run_ids: list[str], resources: Resources, name: str) -> s
     return job
 
 
+def finished_walls(root: Path, run_ids: list[str]) -> list[float]:
+    """Wall seconds of the complete runs among ``run_ids`` (their attempts summed): the ETA's basis."""
+    walls = []
+    for rid in run_ids:
+        folder = store.run_folder(root, rid)
+        if store.run_state(folder).state == "done":
+            tries = store.attempts(folder)
+            if tries:
+                walls.append(sum(float(a.get("wall_s", 0.0)) for a in tries))
+    return walls
+
+
 class SlurmExecutor:
     """Runs a sweep as Slurm job arrays (see the module docstring)."""
 
@@ -202,6 +214,8 @@ class SlurmExecutor:
                 time.sleep(POLL_SECONDS)
                 active = active_runs(root)
                 now = {rid: s.state for rid, s in states_of(root, run_ids).items()}
+                walls = finished_walls(root, run_ids)
+                running = max(1, sum(1 for state in active.values() if state != "PENDING"))
                 for rid in run_ids:
                     shown = ("running" if rid in active and active[rid] != "PENDING" else
                              "queued" if rid in active else now[rid])
@@ -209,5 +223,5 @@ class SlurmExecutor:
                         seen[rid] = shown
                         current[rid] = shown
                         if shown in ("done", "failed", "interrupted", "running"):
-                            progress.event(f"{rid} {shown}", current, [], max(1, len(active)))
-                progress.update(current, [], max(1, len(active)))
+                            progress.event(f"{rid} {shown}", current, walls, running)
+                progress.update(current, walls, running)
