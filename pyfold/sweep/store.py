@@ -3,7 +3,7 @@
 Layout of ``DIR``::
 
     sweep.json            the manifest: name, axes, seeds, resources, and every run
-                          (its identity, point and seed)
+                          (its identity, point and seed) of the sweep last run here
     runs/<id>/scene.toml  the run's scene
     runs/<id>/run.h5      its run file (run.h5.partial while it runs; run.xmf beside it)
     runs/<id>/attempts.jsonl   one line per attempt (start, end, exit status, executor,
@@ -133,7 +133,9 @@ def read_manifest(root: Path) -> dict[str, Any]:
 
 def check_folder(root: Path, wanted: dict[str, Any]) -> None:
     """Refuse ``--out`` when it holds something other than this sweep: a file, a folder with other
-    content, or the folder of a sweep with other runs (InputError naming it)."""
+    content, or the folder of a sweep of another name (InputError naming it). A sweep of the same
+    name with other points, seeds or strain (a study narrowed or extended) takes the folder over:
+    its manifest is replaced, the runs already there are reused where the scenes are the same."""
     if root.exists() and not root.is_dir():
         raise InputError(f"--out: {root} exists and is not a folder")
     if not root.exists():
@@ -144,11 +146,9 @@ def check_folder(root: Path, wanted: dict[str, Any]) -> None:
                              "folder")
         return
     have = read_manifest(root)
-    ours = [(r["id"], r["seed"]) for r in wanted["runs"]]
-    theirs = [(r.get("id"), r.get("seed")) for r in have["runs"]]
-    if ours != theirs or have.get("axes") != wanted["axes"]:
-        raise InputError(f"--out: {root} holds another sweep ({have.get('name')!r}, {len(theirs)} runs, from "
-                         f"{have.get('sweep_file')}); its runs differ from this sweep's: choose another --out")
+    if have.get("name") != wanted["name"]:
+        raise InputError(f"--out: {root} holds another sweep ({have.get('name')!r}, {len(have['runs'])} runs, from "
+                         f"{have.get('sweep_file')}), not {wanted['name']!r}: choose another --out")
 
 
 def prepare(root: Path, spec, runs) -> dict[str, Any]:

@@ -131,3 +131,19 @@ n_l3 = 4.0
     assert spec.axes == {"beta": (5.0, 10.0), "n_l3": (2.0, 4.0)}
     assert len(runs) == 4 and len({r.run_id for r in runs}) == 4
     assert "seed = 2" in runs[1].toml
+
+
+def test_same_sweep_narrowed_takes_the_folder_over(tmp_path):
+    """The same sweep (same name) with fewer seeds reuses the folder and its runs' folders."""
+    import dataclasses
+
+    from pyfold.sweep import store
+
+    spec = read_sweep(EXAMPLE)
+    runs = plan(spec)
+    store.prepare(tmp_path / "out", spec, runs)
+    narrowed = dataclasses.replace(spec, seeds=(1,))
+    data = store.prepare(tmp_path / "out", narrowed, plan(narrowed))
+    assert [r["id"] for r in data["runs"]] == [r.run_id for r in runs if r.seed == 1]
+    assert store.read_manifest(tmp_path / "out")["seeds"] == [1]
+    assert len(list((tmp_path / "out" / "runs").iterdir())) == 4  # the other runs' folders stay
