@@ -185,6 +185,7 @@ class SlurmExecutor:
     def execute(self, root: Path, run_ids: list[str], resources: Resources, progress: Progress,
                 name: str = "sweep") -> Outcome:
         submissions = 0
+        peak = 0
         seen: dict[str, str] = {}
         while True:
             states = {rid: s for rid, s in states_of(root, run_ids).items()}
@@ -215,7 +216,9 @@ class SlurmExecutor:
                 active = active_runs(root)
                 now = {rid: s.state for rid, s in states_of(root, run_ids).items()}
                 walls = finished_walls(root, run_ids)
-                running = max(1, sum(1 for state in active.values() if state != "PENDING"))
+                # tasks at once: the most seen running (a moment between two tasks shows one fewer)
+                peak = max(peak, sum(1 for state in active.values() if state != "PENDING"))
+                running = max(1, peak)
                 for rid in run_ids:
                     shown = ("running" if rid in active and active[rid] != "PENDING" else
                              "queued" if rid in active else now[rid])
