@@ -36,6 +36,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fit-ci": ("fit_ci", "Folgar-Tucker C_I from a measured steady A11 in simple shear (Tucker's FitCI)"),
     "report": ("report", "C_I per closure with errors, steady state, correlations and closure ranking for a run "
                          "or an ensemble of seeds"),
+    "sweep": ("sweep", "run a sweep of scenes (axes x seeds) locally or on Slurm, follow it, gather it into "
+                       "one dataset"),
     "demo": ("demo", "macro layer only: Folgar-Tucker per closure and a C_I fit on synthetic data"),
 }
 

@@ -57,8 +57,11 @@ Command
     nice -n 10 /work/main/.venv/bin/python studies/alpha_influence/alpha_influence.py            # small
     nice -n 10 /work/main/.venv/bin/python studies/alpha_influence/alpha_influence.py --stokes   # + Stokes
     nice -n 10 /work/main/.venv/bin/python studies/alpha_influence/alpha_influence.py --large    # large
-    Options: --seeds, --t-end, --stokes-t-end, --no-rule-series, --analyse-only, --out. Runs are simulated
-    one at a time (serial fold_run) and reused by a re-run.
+    Options: --seeds, --t-end, --stokes-t-end, --no-rule-series, --analyse-only, --out,
+    --executor local|slurm, --sweep-dir. The runs are the sweeps studies/sweeps/alpha_influence[_stokes][_large].toml
+    (pyfold sweep, docs/cluster.md): locally as many at once as the cores allow, or as Slurm
+    job arrays (`--large --executor slurm` on a cluster); each run is computed once, reused
+    by a re-run, and resumed from its checkpoint when it was cancelled or killed.
 
 Cost (2 shared cores, one run at a time; the measured wall times are in the md output)
     small: 20 fixed-Δt runs of 30 000 steps (~1 ms of CPU per step for 138 fibres: ~30 s
@@ -70,7 +73,8 @@ Cost (2 shared cores, one run at a time; the measured wall times are in the md o
     of ~110 CPU-s, ~1.4 CPU-h (serial on an idle core); not run here.
 
 Outputs (under out/alpha_influence/)
-    runs/*.h5 (+ .toml, .json wall time)   the runs (reused)
+    sweep/<sweep name>/runs/<id>/run.h5   the runs (+ scene.toml, attempts.jsonl with wall
+                          times): sweep folders, reused; pyfold sweep status|gather work on them
     alpha_influence.nc    per-run and per-α values with errors, paired tests, trend fits
     alpha_influence.md    tables and the answer
     alpha_influence.png   C_I, contacts and a11 versus α/d with error bars
@@ -79,7 +83,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import time
 from pathlib import Path
@@ -106,12 +109,30 @@ class Form:
     stokes_t_end: float
 
 
-SMALL = Form(alphas_over_d=(0.01, 0.02, 0.05, 0.1, 0.2), seeds=(1, 2, 3, 4), t_end=30.0,
-             stokes_alphas_over_d=(0.05, 0.2), stokes_t_end=2.0)
-#: Strain 110: two Jeffery periods 2π(β_e + 1/β_e) = 52 (β_e = 8.1 from the run's ξ = 0.970),
-#: the report's full trajectory-fit window.
-LARGE = Form(alphas_over_d=(0.01, 0.02, 0.05, 0.1, 0.2), seeds=tuple(range(1, 9)), t_end=110.0,
-             stokes_alphas_over_d=(0.02, 0.05, 0.1, 0.2), stokes_t_end=5.0)
+#: The sweep files of the forms: studies/sweeps/alpha_influence[_stokes][_large].toml.
+SWEEPS = Path(__file__).resolve().parents[1] / "sweeps"
+
+
+def sweep_spec(large: bool, stokes: bool = False, seeds=None, t_end=None):
+    """The sweep (pyfold.sweep.spec.SweepSpec) of a form's contacts-only or Stokes runs, narrowed to
+    ``seeds`` / ``t_end`` when given."""
+    from pyfold.sweep.study import load_form
+
+    return load_form(SWEEPS, "alpha_influence_stokes" if stokes else "alpha_influence", large,
+                     seeds=tuple(seeds) if seeds else None, arguments={"t_end": float(t_end)} if t_end else None)
+
+
+def form_of(large: bool) -> Form:
+    """A form as its sweep files give it. Large: strain 110, two Jeffery periods 2π(β_e + 1/β_e) = 52
+    (β_e = 8.1 from the run's ξ = 0.970), the report's full trajectory-fit window."""
+    main, stokes = sweep_spec(large), sweep_spec(large, stokes=True)
+    return Form(alphas_over_d=tuple(main.axes["alpha_over_d"]), seeds=tuple(main.seeds),
+                t_end=float(main.arguments["t_end"]), stokes_alphas_over_d=tuple(stokes.axes["alpha_over_d"]),
+                stokes_t_end=float(stokes.arguments["t_end"]))
+
+
+SMALL = form_of(False)
+LARGE = form_of(True)
 BETA, N_L3, INTERVAL = 10.0, 10.0, 0.2
 #: Stokes twin: the scene of studies/interaction_coefficient/ci_hydrodynamics.py (β = 5, grid 42³).
 STOKES_BETA, STOKES_N_L3 = 5.0, 5.0
@@ -158,37 +179,17 @@ def stokes_scene_of(a_over_d: float, seed: int, form: Form):
                           min_side=common_side(STOKES_BETA, STOKES_N_L3, form.stokes_alphas_over_d))
 
 
-def run_name(series: str, a_over_d: float, seed: int, t_end: float, dt: float) -> str:
-    return f"{series}_b{BETA:g}_nl3-{N_L3:g}_a{a_over_d:g}_dt{dt:g}_t{t_end:g}_s{seed}"
+# Builders of the sweep files' scenes
 
 
-# Solver: one fold_run at a time, finished runs reused
+def sweep_scene(series: str, alpha_over_d: float, seed: int, t_end: float, form: str):
+    """A contacts-only run of the form ``form`` ("small", "large")."""
+    return scene_of(series, alpha_over_d, seed, {"small": SMALL, "large": LARGE}[form], t_end)
 
 
-def ensure_run(runs: Path, name: str, toml: str) -> Path | None:
-    """The finished run file of a scene, simulated if missing (None if the scene is refused)."""
-    from pyfold.cli import main as cli_main
-
-    out = runs / f"{name}.h5"
-    if out.exists():
-        return out
-    scene = runs / f"{name}.toml"
-    scene.write_text(toml, encoding="utf-8")
-    argv = ["run", str(scene), "-o", str(out)]
-    start = time.perf_counter()
-    if Path(str(out) + ".partial").exists():
-        status = cli_main(argv + ["--resume"])
-        if status == 2:
-            status = cli_main(argv + ["--force"])
-    else:
-        status = cli_main(argv)
-    if status == 2:
-        print(f"run {name}: refused (status 2), left out", flush=True)
-        return None
-    if status != 0:
-        raise RuntimeError(f"pyfold run {scene} failed with status {status}")
-    (runs / f"{name}.json").write_text(json.dumps({"wall_s": time.perf_counter() - start}), encoding="utf-8")
-    return out
+def sweep_stokes_scene(alpha_over_d: float, seed: int, t_end: float):
+    """A Stokes-twin run (its dt from the small form's smallest Stokes alpha, as both forms share)."""
+    return stokes_scene_of(alpha_over_d, seed, dataclasses.replace(SMALL, stokes_t_end=t_end))
 
 
 # Analysis of one run
@@ -334,51 +335,38 @@ def main() -> None:
     parser.add_argument("--stokes-t-end", type=float, help="override the Stokes runs' strain")
     parser.add_argument("--analyse-only", action="store_true", help="use existing run files, simulate nothing")
     parser.add_argument("--out", type=Path, default=Path("out/alpha_influence"))
+    from pyfold.sweep import study as sweep_study
+    from pyfold.sweep.study import wall_seconds
+
+    sweep_study.add_arguments(parser)
     args = parser.parse_args()
-    form = LARGE if args.large else SMALL
-    if args.seeds:
-        form = dataclasses.replace(form, seeds=tuple(args.seeds))
-    if args.t_end:
-        if not args.t_end > 0.0:
-            parser.error(f"--t-end: must be > 0, got {args.t_end}")
-        form = dataclasses.replace(form, t_end=args.t_end)
-    if args.stokes_t_end:
-        if not args.stokes_t_end >= 0.1:
-            parser.error(f"--stokes-t-end: must be >= 0.1 (one record interval), got {args.stokes_t_end}")
-        form = dataclasses.replace(form, stokes_t_end=args.stokes_t_end)
-    runs = args.out / "runs"
-    runs.mkdir(parents=True, exist_ok=True)
+    if args.t_end is not None and not args.t_end > 0.0:
+        parser.error(f"--t-end: must be > 0, got {args.t_end}")
+    if args.stokes_t_end and not args.stokes_t_end >= 0.1:
+        parser.error(f"--stokes-t-end: must be >= 0.1 (one record interval), got {args.stokes_t_end}")
+    spec = sweep_spec(args.large, seeds=args.seeds, t_end=args.t_end)
+    if not args.rule_series:
+        spec = dataclasses.replace(spec, points=tuple(p for p in spec.points if p["series"] == SERIES[0]))
+    form = dataclasses.replace(LARGE if args.large else SMALL, seeds=tuple(spec.seeds),
+                               t_end=float(spec.arguments["t_end"]))
+    specs = [spec]
+    if args.stokes:
+        stokes_spec = sweep_spec(args.large, stokes=True, seeds=args.seeds, t_end=args.stokes_t_end)
+        form = dataclasses.replace(form, stokes_t_end=float(stokes_spec.arguments["t_end"]))
+        specs.append(stokes_spec)
     alphas, seeds = form.alphas_over_d, form.seeds
     start = time.perf_counter()
 
-    # Problem: the scenes of every (series, alpha, seed)
-    jobs = []  # (key, name, toml)
-    for series in SERIES if args.rule_series else SERIES[:1]:
-        for s in seeds:
-            for a in alphas:
-                sc = scene_of(series, a, s, form, form.t_end)
-                series_of_file = "fixed_dt" if math.isclose(sc.dt, fixed_dt(form)) else series
-                jobs.append(((series, a, s), run_name(series_of_file, a, s, sc.t_end, sc.dt), sc.toml))
-    if args.stokes:
-        for s in seeds:
-            for a in form.stokes_alphas_over_d:
-                sc = stokes_scene_of(a, s, form)
-                jobs.append((("stokes", a, s), f"stokes_b{STOKES_BETA:g}_nl3-{STOKES_N_L3:g}_a{a:g}_dt{sc.dt:g}"
-                             f"_t{sc.t_end:g}_s{s}", sc.toml))
-
-    # Solver
+    # Solver: the sweeps (pyfold.sweep), locally or on Slurm; a scene shared by both series runs once
     paths, walls = {}, {}
-    for key, name, toml in jobs:
-        if args.analyse_only:
-            p = runs / f"{name}.h5"
-            p = p if p.exists() else None
-        else:
-            p = ensure_run(runs, name, toml)
-            print(f"run {name}: ready ({time.perf_counter() - start:.0f} s)", flush=True)
-        if p is not None:
+    for sp in specs:
+        done = sweep_study.run_sweep(sp, (args.sweep_dir or args.out / "sweep") / sp.name, args.executor,
+                                     analyse_only=args.analyse_only)
+        for (values, s), p in done.items():
+            point = dict(zip(sp.axes, values))
+            key = (point.get("series", "stokes"), float(point["alpha_over_d"]), s)
             paths[key] = p
-            cost = runs / f"{name}.json"
-            walls[key] = json.loads(cost.read_text())["wall_s"] if cost.exists() else math.nan
+            walls[key] = wall_seconds(p)
     sim_seconds = time.perf_counter() - start
 
     # Analysis

@@ -61,8 +61,10 @@ Question
 Command
     Small form (default: β = 10 at n L³ ≈ 4 (semi-dilute, 55 fibres) and ≈ 15
     (concentrated, 207 fibres), 4 seeds each, strain 150, scenes from
-    pyfold.scene.sheared_fibres; runs under out/closures_vs_dns/runs/, re-used when
-    finished and resumed when interrupted, so a killed study continues where it stopped):
+    pyfold.scene.sheared_fibres; the runs are the sweep studies/sweeps/closure_verdict.toml,
+    kept in out/closures_vs_dns/sweep/ (pyfold sweep, docs/cluster.md): each computed once,
+    re-used, and resumed from its checkpoint when interrupted, so a killed study continues
+    where it stopped):
 
         nice -n 5 .venv/bin/python studies/closures_vs_dns/closure_verdict.py [--np 1]
 
@@ -84,7 +86,12 @@ Command
 
         .venv/bin/python studies/closures_vs_dns/closure_verdict.py --runs 'out/interaction_coefficient/runs/*.h5'
 
-    On a cluster every simulation is an independent `pyfold run`: write the scenes and
+    On a Slurm cluster the same command runs the simulations as job arrays and waits for
+    them (cancelled or timed-out runs are resubmitted and resume from their checkpoints):
+
+        .venv/bin/python studies/closures_vs_dns/closure_verdict.py --large --executor slurm
+
+    For another batch scheduler every simulation is an independent `pyfold run`: write the scenes and
     one command per line, submit them as an array job of a batch scheduler (Slurm
     shown; any scheduler that runs line i in task i will do), then run the study, which
     finds the finished runs and only analyses. Each line calls the pyfold beside the
@@ -159,8 +166,22 @@ from pyfold.scene.sheared_fibres import sheared_fibres
 from pyfold.steady_state import detect_steady_state
 
 # Parameters
-SMALL = dict(betas=(10.0,), n_l3=(4.0, 15.0), seeds=(1, 2, 3, 4), t_end=150.0)
-LARGE = dict(betas=(5.0, 10.0, 20.0), n_l3=(4.0, 15.0), seeds=tuple(range(1, 9)), t_end=300.0)
+#: The sweep files of the forms (betas, n L^3, seeds, strain): studies/sweeps/closure_verdict[_large].toml.
+SWEEPS = Path(__file__).resolve().parents[1] / "sweeps"
+
+
+def sweep_spec(large: bool, seeds=None, t_end=None):
+    """The sweep (pyfold.sweep.spec.SweepSpec) of a form, narrowed to ``seeds`` / ``t_end`` when given."""
+    from pyfold.sweep.study import load_form
+
+    return load_form(SWEEPS, "closure_verdict", large, seeds=tuple(seeds) if seeds else None,
+                     arguments={"t_end": float(t_end)} if t_end else None)
+
+
+def params_of(spec) -> dict:
+    """betas, n_l3, seeds, t_end of a sweep."""
+    return dict(betas=tuple(spec.axes["beta"]), n_l3=tuple(spec.axes["n_l3"]), seeds=tuple(spec.seeds),
+                t_end=float(spec.arguments["t_end"]))
 #: Every 3-D closure of pyfold.closures.available(3) once ("sihyb" is an alias of
 #: "implicit_hybrid").
 CLOSURES = ("fec", "ibof", "orw3", "orf", "orl", "orw", "ore", "ors", "natural",
@@ -198,26 +219,6 @@ def is_finished(path: Path) -> bool:
         return open_run(path).attrs.get("status") == "ok"
     except InputError:
         return False
-
-
-def simulate(beta: float, n_l3: float, seed: int, t_end: float, folder: Path, ranks: int) -> Path:
-    """The run of one seed, re-used if finished, resumed if interrupted."""
-    from pyfold.cli import main as cli_main
-
-    name = run_name(beta, n_l3, seed, t_end)
-    out = folder / f"{name}.h5"
-    if is_finished(out):
-        return out
-    scene = folder / f"{name}.toml"
-    scene.write_text(sheared_fibres(beta, n_l3, seed, t_end).toml)
-    argv = ["run", str(scene), "-o", str(out), "--np", str(ranks)]
-    partial = out.with_name(out.name + ".partial")
-    if partial.exists() or out.exists():
-        argv.append("--resume")
-    status = cli_main(argv)
-    if status != 0:
-        raise RuntimeError(f"pyfold run {scene} failed (status {status}); see the messages above")
-    return out
 
 
 def write_scenes(params: dict, folder: Path, ranks: int) -> Path:
@@ -677,7 +678,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, help="output folder (default out/closures_vs_dns; with --runs "
                         "out/closures_vs_dns/given_runs, with --ci fit out/closures_vs_dns/ci_fit)")
     parser.add_argument("--run-folder", type=Path, default=Path("out/closures_vs_dns/runs"),
-                        help="where the study's own runs are written and re-used")
+                        help="where --write-scenes writes the scenes and commands.txt")
+    from pyfold.sweep import study as sweep_study
+
+    sweep_study.add_arguments(parser)
     args = parser.parse_args()
     if args.write_scenes:
         try:  # before anything is written: commands.txt holds one command per line
@@ -690,11 +694,8 @@ def main() -> None:
     closures = tuple(c for c in pipeline.check_closures(args.closures, dim=3) if c != "exact")
     if "fec" not in closures:
         raise InputError("--closures: fec is needed (the verdict compares every closure with it)")
-    params = dict(LARGE if args.large else SMALL)
-    if args.seeds:
-        params["seeds"] = tuple(args.seeds)
-    if args.t_end:
-        params["t_end"] = float(args.t_end)
+    spec = sweep_spec(args.large, args.seeds, args.t_end)
+    params = params_of(spec)
     args.out.mkdir(parents=True, exist_ok=True)
     run_folder = args.run_folder
     run_folder.mkdir(parents=True, exist_ok=True)
@@ -712,13 +713,9 @@ def main() -> None:
         if not paths:
             raise InputError("--runs: no files")
     else:
-        paths = []
-        for beta in params["betas"]:
-            for n_l3 in params["n_l3"]:
-                for seed in params["seeds"]:
-                    t0 = time.perf_counter()
-                    paths.append(simulate(beta, n_l3, seed, params["t_end"], run_folder, args.np))
-                    print(f"run {paths[-1].name}: {time.perf_counter() - t0:.0f} s", flush=True)
+        # the sweep (pyfold.sweep), locally or on Slurm: each run once, resumed when interrupted
+        done = sweep_study.run_sweep(spec, args.sweep_dir or run_folder.parent / "sweep", args.executor, args.np)
+        paths = list(done.values())
     cost["simulations (or re-use)"] = time.perf_counter() - start
     scenes = group_scenes(paths)
     for label in list(scenes):

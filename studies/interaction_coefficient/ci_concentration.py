@@ -76,7 +76,9 @@ Why the methods differ (measured on the small form; numbers in ci_concentration.
 Command
     nice -n 5 .venv/bin/python studies/interaction_coefficient/ci_concentration.py           # small form
     nice -n 5 .venv/bin/python studies/interaction_coefficient/ci_concentration.py --large   # large form
-    Options: --np N (MPI ranks per pyfold run; on the 2 shared cores used here --np 2
+    Options: --executor local|slurm (pyfold sweep: this machine, or Slurm job arrays;
+    the runs are the sweep studies/sweeps/ci_concentration[_large].toml, kept in
+    OUT/sweep, see docs/cluster.md), --np N (MPI ranks per pyfold run; on the 2 shared cores used here --np 2
     was 9x SLOWER than serial for 213 fibres, so the default is 1), --trajectory-fit,
     --rsc, --seeds, --t-end, --out, --analyse-only, --emit-scenes DIR.
     Cluster: every (beta, n L^3, seed) run is an independent `pyfold run` job.
@@ -105,9 +107,10 @@ Cost (2 shared cores, serial runs, measured with other jobs loading the machine)
     a refused run is left out of its point and named.
 
 Outputs (under out/interaction_coefficient/)
-    runs/b{beta}_nl3-{n}_a{alpha/d}_t{strain}_s{seed}.h5 (+ .toml, .json wall time):
-        reused by a re-run (resumable; a killed run is resumed from its checkpoint)
-        and readable by other studies.
+    sweep/runs/<id>/run.h5 (+ scene.toml, attempts.jsonl with wall times): the sweep
+        folder (pyfold sweep status|gather work on it); each run is identified by its
+        scene, computed once, reused by a re-run, and a killed or cancelled run is
+        resumed from its checkpoint.
     ci_concentration.nc   C_I per point, method and seed, ensemble means and errors,
                           stationary a2, onset, seed-averaged a2(t)
     ci_concentration.png  C_I vs phi*beta and vs n L^2 d, with the correlations and
@@ -118,7 +121,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import time
 import warnings
@@ -150,13 +152,31 @@ class Form:
     rsc_betas: tuple  # betas whose most concentrated point gets the RSC fit with --rsc
 
 
-SMALL = Form(points={5.0: (2.0, 8.0), 10.0: (2.0, 10.0, 20.0), 20.0: (5.0, 10.0)},
-             seeds=(1, 2, 3, 4), t_end=100.0, fit_betas=(5.0, 10.0, 20.0), fit_closures=("ibof", "orw3"),
-             rsc_betas=(10.0,))
-LARGE = Form(points={5.0: (1.0, 2.0, 4.0, 8.0, 10.0), 10.0: (1.0, 2.0, 5.0, 10.0, 20.0, 30.0),
-                     20.0: (2.0, 5.0, 10.0, 20.0, 40.0)},
-             seeds=(1, 2, 3, 4, 5, 6, 7, 8), t_end=300.0, fit_betas=(5.0, 10.0, 20.0),
-             fit_closures=("ibof", "orw3", "fec"), rsc_betas=(5.0, 10.0, 20.0))
+#: The sweep files of the two forms (points, seeds, strain): studies/sweeps/ci_concentration[_large].toml.
+SWEEPS = Path(__file__).resolve().parents[1] / "sweeps"
+#: What each form analyses beyond its sweep.
+FITS = {False: dict(fit_betas=(5.0, 10.0, 20.0), fit_closures=("ibof", "orw3"), rsc_betas=(10.0,)),
+        True: dict(fit_betas=(5.0, 10.0, 20.0), fit_closures=("ibof", "orw3", "fec"), rsc_betas=(5.0, 10.0, 20.0))}
+
+
+def form_of(spec, large: bool) -> Form:
+    """The form a sweep (pyfold.sweep.spec.SweepSpec) describes, with the form's fits."""
+    points: dict = {}
+    for p in spec.points:
+        points.setdefault(float(p["beta"]), []).append(float(p["n_l3"]))
+    return Form(points={b: tuple(ns) for b, ns in points.items()}, seeds=tuple(spec.seeds),
+                t_end=float(spec.arguments["t_end"]), **FITS[large])
+
+
+def load_form(large: bool, seeds=None, t_end=None):
+    """(sweep, form) of the small or large form, narrowed to ``seeds`` / ``t_end`` when given."""
+    from pyfold.sweep.study import load_form as load
+
+    spec = load(SWEEPS, "ci_concentration", large, seeds=tuple(seeds) if seeds else None,
+                arguments={"t_end": float(t_end)} if t_end else None)
+    return spec, form_of(spec, large)
+
+
 #: Security zone alpha = 0.1 d: C_I by rate regression was the same at 0.1 d and 0.2 d
 #: (ci_methods.py), and random placement at n L^3 = 3 beta jams at 0.2 d.
 ALPHA_OVER_D = 0.1
@@ -184,38 +204,6 @@ def run_name(beta: float, n_l3: float, seed: int, t_end: float) -> str:
 def scene_of(beta: float, n_l3: float, seed: int, t_end: float):
     return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D, interval=INTERVAL,
                           min_side=min_side(n_l3))
-
-
-# Solver: direct simulations (one at a time; resumable)
-
-
-def ensure_run(runs: Path, beta: float, n_l3: float, seed: int, t_end: float, ranks: int) -> Path | None:
-    """The finished run file of one (beta, n L^3, seed), simulated if missing (None if refused)."""
-    from pyfold.cli import main as cli_main
-
-    name = run_name(beta, n_l3, seed, t_end)
-    out = runs / f"{name}.h5"
-    if out.exists():
-        return out
-    scene = scene_of(beta, n_l3, seed, t_end)
-    toml = runs / f"{name}.toml"
-    toml.write_text(scene.toml, encoding="utf-8")
-    argv = ["run", str(toml), "-o", str(out), "--np", str(ranks)]
-    start = time.perf_counter()
-    if Path(str(out) + ".partial").exists():
-        status = cli_main(argv + ["--resume"])
-        if status == 2:  # killed before its first checkpoint: nothing to resume, start over
-            status = cli_main(argv + ["--force"])
-    else:
-        status = cli_main(argv)
-    if status == 2:  # refused before running, e.g. a random placement that jams (message above)
-        print(f"run {name}: refused (status 2), left out of the ensemble", flush=True)
-        return None
-    if status != 0:
-        raise RuntimeError(f"pyfold run {toml} failed with status {status}")
-    (runs / f"{name}.json").write_text(json.dumps({"wall_s": time.perf_counter() - start, "ranks": ranks,
-                                                   "count": scene.count, "side": scene.side}), encoding="utf-8")
-    return out
 
 
 # Analysis of one run
@@ -328,6 +316,9 @@ def main() -> None:
     parser.add_argument("--analyse-only", action="store_true", help="use existing run files, simulate nothing")
     parser.add_argument("--emit-scenes", type=Path, help="write scenes + jobs.txt for a cluster and stop")
     parser.add_argument("--out", type=Path, default=Path("out/interaction_coefficient"))
+    from pyfold.sweep import study as sweep_study
+
+    sweep_study.add_arguments(parser)
     args = parser.parse_args()
     if args.emit_scenes:
         try:  # before anything is written: jobs.txt holds one command per line
@@ -335,15 +326,15 @@ def main() -> None:
             check_single_line("--out", args.out)
         except InputError as exc:
             parser.error(str(exc))
-    form = LARGE if args.large else SMALL
-    seeds = tuple(args.seeds) if args.seeds else form.seeds
-    t_end = args.t_end or form.t_end
+    spec, form = load_form(args.large, args.seeds, args.t_end)
+    seeds = form.seeds
+    t_end = form.t_end
     runs = args.out / "runs"
-    runs.mkdir(parents=True, exist_ok=True)
     points = [(b, n) for b, ns in form.points.items() for n in ns]
     start = time.perf_counter()
 
     if args.emit_scenes:
+        runs.mkdir(parents=True, exist_ok=True)
         args.emit_scenes.mkdir(parents=True, exist_ok=True)
         lines = []
         for b, n in points:
@@ -356,20 +347,10 @@ def main() -> None:
         print(f"{len(lines)} scenes and jobs.txt written to {args.emit_scenes}")
         return
 
-    # Solver
-    paths = {}
-    for b, n in points:
-        for s in seeds:
-            if args.analyse_only:
-                p = runs / f"{run_name(b, n, s, t_end)}.h5"
-                if p.exists():
-                    paths[b, n, s] = p
-            else:
-                p = ensure_run(runs, b, n, s, t_end, args.np)
-                if p is not None:
-                    paths[b, n, s] = p
-                print(f"run beta {b:g}, n L^3 {n:g}, seed {s}: ready ({time.perf_counter() - start:.0f} s)",
-                      flush=True)
+    # Solver: the sweep (pyfold.sweep), locally or on Slurm; each run once, resumed when interrupted
+    done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor, args.np,
+                                 analyse_only=args.analyse_only)
+    paths = {(float(b), float(n), s): p for ((b, n), s), p in done.items()}
     sim_seconds = time.perf_counter() - start
 
     # Analysis
@@ -377,6 +358,12 @@ def main() -> None:
     results = {}
     for (b, n, s), p in paths.items():
         results[b, n, s] = analyse_run(p, t_end, closures_a4)
+    if args.trajectory_fit:
+        for (b, n, s), r in results.items():
+            if b in form.fit_betas:
+                r["est"].update(trajectory_fits(r, form.fit_closures))
+                print(f"trajectory fits beta {b:g}, n L^3 {n:g}, seed {s} ({time.perf_counter() - start:.0f} s)",
+                      flush=True)
     points = [(b, n) for b, n in points if any((b, n, s) in results for s in seeds)]
     if args.trajectory_fit:
         for (b, n, s), r in results.items():
@@ -736,11 +723,9 @@ def markdown(table, trends, per_point, paths, form, seeds, t_end, total, sim_sec
               "| method | points | slope dC_I/d(φβ) ± s.e. | χ²/dof | verdict (2 s.e.) |", "|---|---|---|---|---|"]
     lines += [f"| {t['method']} | {t['group']} ({t['n']}) | {t['slope']:+.2e} ± {t['stderr']:.1e} | "
               f"{t['chi2']:.2g} | {t['verdict']} |" for t in trends]
-    walls = []
-    for p in paths.values():
-        j = p.with_suffix(".json")
-        if j.exists():
-            walls.append((p.stem, json.loads(j.read_text())["wall_s"]))
+    from pyfold.sweep.study import wall_seconds
+
+    walls = [(f"b{b:g}_nl3-{n:g}_s{s}", wall_seconds(p)) for (b, n, s), p in paths.items()]
     if walls:
         lines += ["", f"## Wall time per run (s, serial, 2 shared cores; sum {sum(w for _, w in walls):.0f} s)", "",
                   ", ".join(f"{name}: {w:.0f}" for name, w in walls)]

@@ -51,15 +51,19 @@ Scene (small form, the default)
 Command
     small (serial, one rank per run; about 31 CPU-min, see Cost):
         .venv/bin/python studies/interaction_coefficient/ci_hydrodynamics.py [--np 1]
-    large (a cluster; each run an independent ``pyfold run`` job):
+    large on a Slurm cluster (the sweep studies/sweeps/ci_hydrodynamics_large.toml as job arrays,
+    8 ranks per run; docs/cluster.md):
+        .venv/bin/python studies/interaction_coefficient/ci_hydrodynamics.py --large --executor slurm
+    large with another batch scheduler (each run an independent ``pyfold run`` job):
         .venv/bin/python studies/interaction_coefficient/ci_hydrodynamics.py --large --write-scenes
             # writes runs/<model>_seed<k>.toml and prints one `pyfold run` command per run
             # and line (the pyfold beside the python, every argument shell-quoted, so `> jobs.txt`
             # gives a file whose line i `sh` runs as job i; e.g. a batch job array,
             # `--np 8` each), then:
         .venv/bin/python studies/interaction_coefficient/ci_hydrodynamics.py --large --analyse-only
-    Finished runs whose stored scene equals the study's are re-used; a killed run
-    (``.h5.partial``) is resumed (``pyfold run --resume``).
+    The runs are the sweep studies/sweeps/ci_hydrodynamics[_large].toml (pyfold sweep), kept in
+    OUT/sweep: each identified by its scene, computed once and re-used; a killed or cancelled
+    run is resumed from its checkpoint (``pyfold run --resume``).
 
 Cost (measured, small form, one rank, 2 cores shared with other simulations)
     Stokes run: 0.30–0.32 CPU-s per step (42³ grid, 98 fibres, up to 106 CG iterations
@@ -70,7 +74,7 @@ Cost (measured, small form, one rank, 2 cores shared with other simulations)
     The small form is about 31 CPU-min, i.e. 30–35 min wall on an otherwise idle 2-core
     machine and proportionally more on a loaded one; it cannot be made much smaller
     without dropping below 4 seeds or a strain of one Jeffery period. The measured CPU and wall time of every run are stored
-    beside it (``runs/<run>.cost.json``) and in the outputs.
+    in the sweep folder (``sweep/runs/<id>/attempts.jsonl``) and in the outputs.
 
 Outputs (under out/interaction_coefficient/hydrodynamics/, ``--out``)
     runs/                    the scenes, run files and their measured cost
@@ -92,7 +96,6 @@ import argparse
 import dataclasses
 import json
 import math
-import resource
 import time
 from pathlib import Path
 
@@ -101,7 +104,7 @@ import xarray as xr
 
 from pyfold import pipeline
 from pyfold.ci_estimators import ci_rate_regression
-from pyfold.cli import main as cli_main
+from pyfold.sweep import store as sweep_store
 from pyfold.command_line import check_single_line, job_line
 from pyfold.closures import get_closure
 from pyfold.correlations import PUBLISHED_RANGE, correlations_at
@@ -143,11 +146,27 @@ class Study:
                               time_scheme="ab2")
 
 
-SMALL = Study(beta=5.0, n_l3=5.0, t_end=30.0, seeds=(1, 2, 3, 4), cells_per_diameter=3, tolerance=1e-4,
+#: The sweep files of the forms (models x seeds): studies/sweeps/ci_hydrodynamics[_large].toml.
+SWEEPS = Path(__file__).resolve().parents[1] / "sweeps"
+
+
+def sweep_spec(large: bool, seeds=None):
+    """The sweep (pyfold.sweep.spec.SweepSpec) of a form, narrowed to ``seeds`` when given."""
+    from pyfold.sweep.study import load_form
+
+    return load_form(SWEEPS, "ci_hydrodynamics", large, seeds=tuple(seeds) if seeds else None)
+
+
+SMALL = Study(beta=5.0, n_l3=5.0, t_end=30.0, seeds=sweep_spec(False).seeds, cells_per_diameter=3, tolerance=1e-4,
               kappa=1e3, max_grid_points=262144, check_refinements=(1,))
 # Same phi*beta as SMALL at twice the aspect ratio; 96^3 grid (0.27 kB per point: ~240 MB per run).
-LARGE = Study(beta=10.0, n_l3=10.0, t_end=50.0, seeds=tuple(range(1, 17)), cells_per_diameter=4,
+LARGE = Study(beta=10.0, n_l3=10.0, t_end=50.0, seeds=sweep_spec(True).seeds, cells_per_diameter=4,
               tolerance=1e-6, kappa=1e3, max_grid_points=1_000_000, check_refinements=(1,))
+
+
+def sweep_scene(model: str, seed: int, form: str):
+    """The scene of ``model`` and ``seed`` in the form ``form`` ("small", "large"): the sweep files' builder."""
+    return {"small": SMALL, "large": LARGE}[form].scene(model, seed)
 CHECK_ORIENTATIONS = 24  # omega(theta) carries voxelisation wiggles: ~0.3 % on T at 24 (jeffery_period.py)
 
 
@@ -155,49 +174,6 @@ CHECK_ORIENTATIONS = 24  # omega(theta) carries voxelisation wiggles: ~0.3 % on 
 def run_paths(runs: Path, model: str, seed: int) -> tuple[Path, Path, Path]:
     stem = f"{model}_seed{seed}"
     return runs / f"{stem}.toml", runs / f"{stem}.h5", runs / f"{stem}.cost.json"
-
-
-def reusable(path: Path, toml: str) -> bool:
-    """A finished run of exactly this scene (the scene text is stored verbatim in /setup)."""
-    if not path.exists():
-        return False
-    try:
-        ok = open_run(path).attrs.get("status") == "ok"
-        return ok and read_setup(path).scene_toml == toml
-    except (OSError, PyfoldError, KeyError):
-        return False
-
-
-def simulate(study: Study, runs: Path, ranks: int) -> None:
-    """Run every (seed, model) not already finished; seeds in order so pairs complete early."""
-    for seed in study.seeds:
-        for model in MODELS:
-            scene = study.scene(model, seed)
-            toml_path, out, cost_path = run_paths(runs, model, seed)
-            if reusable(out, scene.toml):
-                continue
-            toml_path.write_text(scene.toml)
-            argv = ["run", str(toml_path), "-o", str(out), "--np", str(ranks)]
-            partial = Path(str(out) + ".partial")
-            if partial.exists():
-                argv.append("--resume")
-            elif out.exists():
-                print(f"{out.name}: stored scene differs from the study's; running again")
-                argv.append("--force")
-            t0, r0 = time.perf_counter(), _cpu_seconds()
-            status = cli_main(argv)
-            if status != 0:
-                raise PyfoldError(f"{out}: pyfold run exited with status {status}")
-            cost = {"cpu_s": _cpu_seconds() - r0, "wall_s": time.perf_counter() - t0,
-                    "steps": int(round(scene.t_end / scene.dt)), "ranks": ranks, "resumed": "--resume" in argv}
-            cost_path.write_text(json.dumps(cost, indent=1))
-            print(f"{out.name}: {cost['cpu_s']:.0f} CPU-s, {cost['wall_s']:.0f} s wall", flush=True)
-
-
-def _cpu_seconds() -> float:
-    """CPU time of this process and its finished children (fold_run) [s]."""
-    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def write_scenes(study: Study, runs: Path, ranks: int) -> None:
@@ -211,7 +187,7 @@ def write_scenes(study: Study, runs: Path, ranks: int) -> None:
 
 
 # Solver: estimates from one run
-def analyse_run(path: Path, cost_path: Path) -> dict:
+def analyse_run(path: Path) -> dict:
     ds = open_run(path)
     L = pipeline.velocity_gradient_of(path)
     xi = pipeline.shape_factor_of(ds)  # Cox beta_e, recorded in /initial/xi; the same in both models
@@ -238,9 +214,9 @@ def analyse_run(path: Path, cost_path: Path) -> dict:
     out["cg_max"] = int(ds["stokes_iterations"].values.max()) if stokes else -1
     out["rigidity_max"] = float(ds["rigidity_max"].values.max()) if stokes else math.nan
     out["grid"] = [int(g) for g in np.ravel(setup["stokes_grid"])] if stokes else []
-    cost = json.loads(cost_path.read_text()) if cost_path.exists() else {}
-    out["cpu_s"] = float(cost.get("cpu_s", math.nan))
-    out["wall_s"] = float(cost.get("wall_s", math.nan))
+    attempts = sweep_store.attempts(path.parent)  # a sweep run's costs (pyfold.sweep.worker)
+    out["cpu_s"] = float(sum(a.get("cpu_s", math.nan) for a in attempts)) if attempts else math.nan
+    out["wall_s"] = float(sum(a.get("wall_s", math.nan) for a in attempts)) if attempts else math.nan
     return out
 
 
@@ -296,11 +272,15 @@ def main() -> None:
     ap.add_argument("--large", action="store_true", help="the cluster form (see the docstring)")
     ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
     ap.add_argument("--write-scenes", action="store_true", help="write the scenes and print the run commands")
-    ap.add_argument("--np", type=int, default=1, help="MPI ranks per run")
+    ap.add_argument("--np", type=int, default=None,
+                    help="MPI ranks per run (default: the sweep file's resources.np: 1 small, 8 large)")
     ap.add_argument("--seeds", type=int, nargs="+", help="override the form's seeds")
     ap.add_argument("--check-refinements", type=int, nargs="+",
                     help="single-fibre check on the scene grid times each factor (default: 1, the scene grid)")
     ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/hydrodynamics"))
+    from pyfold.sweep import study as sweep_study
+
+    sweep_study.add_arguments(ap)
     args = ap.parse_args()
     if args.write_scenes:
         try:  # before anything is written: the commands are printed one per line
@@ -308,29 +288,29 @@ def main() -> None:
         except InputError as exc:
             ap.error(str(exc))
     study = LARGE if args.large else SMALL
-    if args.seeds:
-        study = dataclasses.replace(study, seeds=tuple(args.seeds))
+    spec = sweep_spec(args.large, args.seeds)
+    study = dataclasses.replace(study, seeds=tuple(spec.seeds))
     if args.check_refinements:
         study = dataclasses.replace(study, check_refinements=tuple(args.check_refinements))
     runs = args.out / "runs"
-    runs.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     if args.write_scenes:
-        write_scenes(study, runs, args.np)
+        runs.mkdir(parents=True, exist_ok=True)
+        write_scenes(study, runs, args.np or spec.resources.np)
         return
-    if not args.analyse_only:
-        simulate(study, runs, args.np)
+    # the sweep (pyfold.sweep), locally or on Slurm: each run once, resumed when interrupted
+    done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor, args.np,
+                                 analyse_only=args.analyse_only)
+    paths = {(model, seed): p for ((model,), seed), p in done.items()}
 
     rows: dict[tuple[str, int], dict] = {}
-    for seed in study.seeds:
-        for model in MODELS:
-            toml_path, out, cost_path = run_paths(runs, model, seed)
-            if reusable(out, study.scene(model, seed).toml):
-                rows[model, seed] = analyse_run(out, cost_path)
+    for key, path in paths.items():
+        rows[key] = analyse_run(path)
     seeds = [s for s in study.seeds if all((m, s) in rows for m in MODELS)]
     missing = sorted(set(study.seeds) - set(seeds))
     if not seeds:
-        raise SystemExit(f"no finished pair of runs under {runs}; run without --analyse-only first")
+        raise SystemExit(f"no finished pair of runs under {args.sweep_dir or args.out / 'sweep'}; run without "
+                         "--analyse-only first")
     if missing:
         print(f"seeds without a finished pair of runs (left out): {missing}")
     grid = rows["stokes", seeds[0]]["grid"]
@@ -342,7 +322,7 @@ def main() -> None:
     xi_measured = (be * be - 1.0) / (be * be + 1.0)
     for seed in seeds:
         r = rows["stokes", seed]
-        path = run_paths(runs, "stokes", seed)[1]
+        path = paths["stokes", seed]
         ds = open_run(path)
         r["reg_xi_measured"] = ci_rate_regression(r["t"], r["a2"], ds["a4"].values,
                                                   pipeline.velocity_gradient_of(path), xi_measured)

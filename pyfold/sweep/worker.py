@@ -1,0 +1,88 @@
+"""One run of a sweep, wherever it executes: ``python -m pyfold.sweep.worker RUN_FOLDER --np N``.
+
+Brings the run in ``RUN_FOLDER`` (:mod:`pyfold.sweep.store`) to completion with
+``pyfold run``: nothing to do when it is ``done``; its physical failure reported
+(exit 1) when it is ``failed``; ``pyfold run --resume`` from the last checkpoint when
+it was ``interrupted`` (cancelled, timed out, killed), and a fresh ``pyfold run
+--force`` when it was interrupted before its first checkpoint (``--resume`` refuses
+that file with exit 2); ``pyfold run`` when ``queued``. Each attempt is appended to
+``attempts.jsonl`` (start, end, wall and CPU seconds, exit status, host, Slurm job). The exit status is
+``pyfold run``'s. Signals (``scancel``, a time limit) reach ``pyfold run``, which stops
+fold_run and keeps the partial file for the next attempt.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import socket
+import sys
+import time
+from pathlib import Path
+
+from pyfold.sweep import store
+
+
+def slurm_job() -> str:
+    """``JOBID_TASK`` of the Slurm array task this runs in ("" outside Slurm)."""
+    job = os.environ.get("SLURM_ARRAY_JOB_ID") or os.environ.get("SLURM_JOB_ID") or ""
+    task = os.environ.get("SLURM_ARRAY_TASK_ID")
+    return f"{job}_{task}" if job and task is not None else job
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and its finished children (fold_run, mpirun) [s]."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
+    """Complete the run in ``folder`` (see the module docstring); returns an exit status."""
+    from pyfold.cli import main as cli_main
+
+    state = store.run_state(folder)
+    if state.state == "done":
+        print(f"pyfold sweep: {folder.name}: already complete", flush=True)
+        return 0
+    if state.state == "failed":
+        print(f"pyfold sweep: {folder.name}: {state.detail} (not retried)", file=sys.stderr, flush=True)
+        return 1
+    argv = ["run", str(folder / store.SCENE), "-o", str(folder / store.RUN_FILE), "--np", str(ranks),
+            "--oversubscribe"]
+    start = time.time()
+    cpu0 = _cpu_seconds()
+    entry = {"start": start, "executor": executor, "host": socket.gethostname(), "job": slurm_job(),
+             "np": ranks, "from": state.state}
+    rc = 1
+    try:
+        if state.state == "interrupted":
+            rc = cli_main(argv + ["--resume", "--force"])
+            if rc == 2 and store.run_state(folder).state == "interrupted":
+                # nothing to resume (killed before its first checkpoint, or the file is damaged): start over
+                print(f"pyfold sweep: {folder.name}: not resumable, starting again", file=sys.stderr, flush=True)
+                entry["from"] = "start (not resumable)"
+                rc = cli_main(argv + ["--force"])
+        else:  # --force: only a stale run.xmf can be here (its run.h5 was removed); the lock guards the rest
+            rc = cli_main(argv + ["--force"])
+    finally:
+        entry.update(end=time.time(), rc=rc, state=store.run_state(folder).state)
+        entry["wall_s"] = entry["end"] - start
+        entry["cpu_s"] = _cpu_seconds() - cpu0
+        try:
+            store.record_attempt(folder, entry)
+        except OSError:  # pragma: no cover - the run's own result is what counts
+            pass
+    return rc
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pyfold.sweep.worker", description=__doc__.splitlines()[0])
+    parser.add_argument("folder", type=Path)
+    parser.add_argument("--np", type=int, default=1)
+    parser.add_argument("--executor", default="local")
+    args = parser.parse_args(argv)
+    return run_folder(args.folder, args.np, args.executor)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
