@@ -1,0 +1,429 @@
+!> Exact-rigidity Stokes solve on the periodic (skewed) cell: the constraint
+!> eps(u) = 0 in the solid imposed by a multiplier instead of a penalty.
+!>
+!> The penalised solve (fold_stokes_fft) regularises the constraint with a viscosity
+!> kappa eta_f in the solid; its CG count grows like sqrt(kappa) and its particles keep a
+!> strain of order 1/kappa times the stress they carry, which for a fibre of aspect ratio
+!> beta is ~ beta^2 / ln beta times the imposed rate (docs/physics.md#exact-rigidity).
+!> Here the fluid viscosity is eta_f everywhere (the fictitious domain extends the fluid
+!> into the particles) and a symmetric, traceless multiplier lambda [Pa] lives on the
+!> solid voxels, those whose coverage chi >= FOLD_RIGID_COVERAGE (the union of these
+!> closed voxels approximates the particle without bias; every corner of a solid voxel
+!> then moves rigidly). The stress is sigma = 2 eta_f eps(u) + chi_s lambda - p I, and
+!> u = G x + u~ solves
+!>     -div(2 eta_f eps(u~)) + grad p = div(chi_s lambda),  div u~ = 0,
+!>     chi_s (E + eps(u~)) = 0                                   (rigidity),
+!> the rigidity constraint D(u) = 0 with a stress-like multiplier of Patankar, Singh,
+!> Joseph, Glowinski & Pan (2000, Int. J. Multiphase Flow 26:1509). With the uniform
+!> fluid, u~ = -A^-1 P B^H (chi_s lambda), A = eta_f |kv|^2 on the divergence-free
+!> modes (the Green operator of the FFT backend, exact and diagonal in Fourier space),
+!> and the multiplier solves the Schur-complement system
+!>     S lambda = chi_s E,   S = chi_s B A^-1 P B^H chi_s,
+!> symmetric positive semi-definite in the Frobenius product (its null space, the
+!> self-equilibrated stresses inside a body, never enters the CG iterates started from a
+!> guess in its range, and does not change u~). CG on it needs no kappa: the spectrum of
+!> S lies in [0, 1/(2 eta_f)] and is set by the geometry alone. The residual
+!> r = chi_s E - S lambda = chi_s (E + eps(u~)) is the strain left inside the particles,
+!> so the solver tolerance is the rigidity error: ||r|| / ||chi_s E|| <= tol.
+!> Net force and torque on each body vanish by construction (the force density is the
+!> divergence of a symmetric stress supported on the body), so the free rigid motion is
+!> the velocity of the solution inside the body; rigid_fit reads it with weight 1 on the
+!> solid voxels and 0 elsewhere. The bulk stress is 2 eta_f E + <chi_s lambda>.
+!>
+!> One iteration: the multiplier of the direction scattered on the solid voxels, ncg r2c
+!> transforms, the Green operator per mode, ncg c2r transforms of the strain, the strain
+!> gathered on the solid voxels: 2 ncg = 10 real FFTs in 3-D (4 in 2-D). The velocity of
+!> the solution accumulates in Fourier space along the iterations (x += alpha q), so no
+!> transform is spent on it. Warm start: the multiplier of the previous solve at the
+!> voxels that are still solid (a real-space field, unaffected by the change of lattice).
+!> Works serially and over FFTW-MPI slabs (every operation is local to the slab except
+!> the transforms and the dot products).
+module fold_stokes_rigid
+   use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
+   use fold_kinds, only: dp, ip, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
+   use fold_fft_backend, only: fft_backend_t
+   use fold_grid, only: grid_total
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_FFT_DOUBLE, FOLD_RIGID_COVERAGE, &
+                                 FOLD_RIGIDITY_EXACT
+   use fold_stokes_fft, only: stokes_fft_t, stokes_fft_init, stokes_fft_destroy, stokes_fft_new
+   implicit none
+   private
+
+   !> Exact-rigidity solver: the FFT solver's grid, plans, per-mode tables and outputs,
+   !> with its own solve.
+   type, extends(stokes_fft_t), public :: stokes_rigid_t
+      !> Local solid voxels (i, j, k) of this solve; nsol of the capacity in use
+      integer(ip), allocatable :: sol(:, :)
+      integer(ip) :: nsol = 0
+      !> Multiplier, residual, direction and S applied to the direction on the solid
+      !> voxels, in the ncg independent components (3-D: 11, 22, 12, 13, 23) [Pa, 1/s]
+      real(dp), allocatable :: lam(:, :), res(:, :), dir(:, :), sdir(:, :)
+      !> Multiplier of the last solve as fields (ncg, nx, local y, local z), zero off the
+      !> solid: the warm start of the next solve
+      real(dp), allocatable :: lam_field(:, :, :, :)
+   contains
+      procedure :: solve => stokes_rigid_solve
+      procedure :: destroy => stokes_rigid_destroy
+   end type stokes_rigid_t
+
+   public :: stokes_rigid_new, stokes_periodic_new
+
+contains
+
+   !> The solver of the periodic cell that the settings ask for: exact rigidity
+   !> (stokes_rigid_new) or the penalty (stokes_fft_new); on failure solver stays
+   !> unallocated.
+   subroutine stokes_periodic_new(fft, set, solver, stat, errmsg)
+      class(fft_backend_t), allocatable, intent(inout) :: fft
+      type(stokes_settings_t), intent(in) :: set
+      class(stokes_solver_t), allocatable, intent(out) :: solver
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      if (set%rigidity == FOLD_RIGIDITY_EXACT) then
+         call stokes_rigid_new(fft, set, solver, stat, errmsg)
+      else
+         call stokes_fft_new(fft, set, solver, stat, errmsg)
+      end if
+   end subroutine stokes_periodic_new
+
+   !> An exact-rigidity solver seen through the abstract type (stokes_fft_init on a new
+   !> object); on failure solver stays unallocated and errmsg names the setting.
+   subroutine stokes_rigid_new(fft, set, solver, stat, errmsg)
+      !> Backend; moved into the solver (deallocated on return)
+      class(fft_backend_t), allocatable, intent(inout) :: fft
+      type(stokes_settings_t), intent(in) :: set
+      class(stokes_solver_t), allocatable, intent(out) :: solver
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      type(stokes_rigid_t), allocatable :: s
+      if (set%fft_precision /= FOLD_FFT_DOUBLE) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "stokes settings: rigidity exact transforms in double precision only; "// &
+                  "set fft_precision double (or rigidity penalty)"
+         return
+      end if
+      allocate (s)
+      call stokes_fft_init(s%stokes_fft_t, fft, set, stat, errmsg)
+      if (stat /= FOLD_OK) then
+         call s%destroy()
+         return
+      end if
+      s%exact_rigidity = .true.
+      ! the stencil form belongs to the penalised operator
+      s%stencil_ok = .false.
+      s%stencil = .false.
+      allocate (s%sol(3, 0), s%lam(s%ncg, 0), s%res(s%ncg, 0), s%dir(s%ncg, 0), s%sdir(s%ncg, 0))
+      allocate (s%lam_field(s%ncg, s%grid%n(1), s%grid%nl(2), s%grid%nl(3)))
+      s%lam_field = 0.0_dp
+      call move_alloc(s, solver)
+   end subroutine stokes_rigid_new
+
+   subroutine stokes_rigid_destroy(s)
+      class(stokes_rigid_t), intent(inout) :: s
+      if (allocated(s%sol)) deallocate (s%sol, s%lam, s%res, s%dir, s%sdir)
+      if (allocated(s%lam_field)) deallocate (s%lam_field)
+      s%nsol = 0
+      call stokes_fft_destroy(s%stokes_fft_t)
+   end subroutine stokes_rigid_destroy
+
+   !> Solve for u~ and the multiplier given chi (nx, n2l, n3l) and G. FOLD_NOT_CONVERGED
+   !> (the message gives the rigidity error reached) keeps the last iterate.
+   subroutine stokes_rigid_solve(s, chi, G, stat, errmsg)
+      class(stokes_rigid_t), intent(inout) :: s
+      !> Solid volume fraction of each local voxel [-]
+      real(dp), intent(in) :: chi(:, :, :)
+      !> Mean velocity gradient [1/s]
+      real(dp), intent(in) :: G(3, 3)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(ip) :: nx, it, v
+      real(dp) :: red(2), bb, rr, rr_new, alpha, beta, pq, eb(5)
+
+      stat = FOLD_OK
+      errmsg = ""
+      if (.not. s%lattice_set) then
+         stat = FOLD_INPUT_ERROR
+         errmsg = "stokes_rigid_solve: call set_lattice first"
+         return
+      end if
+      nx = s%grid%n(1)
+      if (any(shape(chi) /= [nx, s%grid%nl(2), s%grid%nl(3)])) then
+         stat = FOLD_INPUT_ERROR
+         write (errmsg, '(a,3(1x,i0),a,3(1x,i0))') "stokes_rigid_solve: chi must have shape", nx, s%grid%nl(2:3), &
+            ", got", shape(chi)
+         return
+      end if
+      s%E = 0.5_dp*(G + transpose(G))
+      if (s%dim == 2) s%E(3, :) = 0.0_dp
+      if (s%dim == 2) s%E(:, 3) = 0.0_dp
+      ! the fluid fills the cell: the viscosity field is eta_f everywhere
+      s%eta%r = s%set%eta_f
+      s%multiplier_stress = 0.0_dp
+      call solid_list(s, chi)
+      eb = reduced(s, s%E)
+
+      ! b = chi_s E on the solid voxels
+      s%history = 0.0_dp
+      s%iterations = 0
+      bb = real(s%nsol, dp)*frob(s, eb, eb)
+      red = [bb, 0.0_dp]
+      call s%fft%sum_all(red)
+      bb = red(1)
+      s%x = 0.0_dp
+      if (bb <= 0.0_dp) then
+         ! no solid voxel, or no imposed strain: u~ = 0 exactly
+         s%residual = 0.0_dp
+         s%lam_field = 0.0_dp
+         s%have_guess = .true.
+         return
+      end if
+
+      ! guess: the previous multiplier where the voxel is still solid
+      do v = 1, s%nsol
+         if (s%set%warm_start .and. s%have_guess) then
+            s%lam(:, v) = s%lam_field(:, s%sol(1, v), s%sol(2, v), s%sol(3, v))
+         else
+            s%lam(:, v) = 0.0_dp
+         end if
+         s%res(:, v) = eb
+      end do
+      red = [sum(abs(s%lam(:, 1:s%nsol))), 0.0_dp]
+      call s%fft%sum_all(red)
+      if (red(1) > 0.0_dp) then
+         ! r = b - S lambda0; the velocity of lambda0 starts the accumulator
+         s%dir(:, 1:s%nsol) = s%lam(:, 1:s%nsol)
+         call apply_schur(s)
+         s%x = s%q
+         s%res(:, 1:s%nsol) = s%res(:, 1:s%nsol) - s%sdir(:, 1:s%nsol)
+      end if
+      red = [dot_list(s, s%res, s%res), 0.0_dp]
+      call s%fft%sum_all(red)
+      rr = red(1)
+      s%residual = sqrt(max(rr, 0.0_dp)/bb)
+      s%history(0) = s%residual
+      s%dir(:, 1:s%nsol) = s%res(:, 1:s%nsol)
+      it = 0
+      do while (s%residual > s%set%tol .and. it < s%set%max_iter)
+         it = it + 1
+         call apply_schur(s)
+         red = [dot_list(s, s%dir, s%sdir), 0.0_dp]
+         call s%fft%sum_all(red)
+         pq = red(1)
+         if (.not. (pq > 0.0_dp)) then
+            stat = FOLD_NUMERICAL
+            write (errmsg, '(a,i0,a,es10.3)') "stokes_rigid_solve: CG breakdown at iteration ", it, &
+               ", <p, S p> = ", pq
+            s%iterations = it
+            return
+         end if
+         alpha = rr/pq
+         s%lam(:, 1:s%nsol) = s%lam(:, 1:s%nsol) + alpha*s%dir(:, 1:s%nsol)
+         s%res(:, 1:s%nsol) = s%res(:, 1:s%nsol) - alpha*s%sdir(:, 1:s%nsol)
+         s%x = s%x + alpha*s%q
+         red = [dot_list(s, s%res, s%res), 0.0_dp]
+         call s%fft%sum_all(red)
+         rr_new = red(1)
+         beta = rr_new/rr
+         rr = rr_new
+         s%residual = sqrt(max(rr, 0.0_dp)/bb)
+         s%history(it) = s%residual
+         s%dir(:, 1:s%nsol) = s%res(:, 1:s%nsol) + beta*s%dir(:, 1:s%nsol)
+      end do
+      s%iterations = it
+      s%have_guess = .true.
+
+      ! the multiplier as fields (next guess) and its mean, the particles' stress
+      s%lam_field = 0.0_dp
+      do v = 1, s%nsol
+         s%lam_field(:, s%sol(1, v), s%sol(2, v), s%sol(3, v)) = s%lam(:, v)
+      end do
+      call multiplier_mean(s)
+      if (.not. (s%residual <= s%set%tol)) then
+         if (ieee_is_nan(s%residual)) then
+            stat = FOLD_NUMERICAL
+            errmsg = "stokes_rigid_solve: residual is NaN"
+         else
+            stat = FOLD_NOT_CONVERGED
+            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a)') "stokes_rigid_solve: not converged after ", it, &
+               " CG iterations: rigidity error ", s%residual, " > tol ", s%set%tol, " (rigidity exact)"
+         end if
+      end if
+   end subroutine stokes_rigid_solve
+
+   ! ------------------------------------------------------------------ internals
+
+   !> The local voxels with chi >= FOLD_RIGID_COVERAGE, listed once per solve.
+   subroutine solid_list(s, chi)
+      type(stokes_rigid_t), intent(inout) :: s
+      real(dp), intent(in) :: chi(:, :, :)
+      integer(ip) :: i, j, k, n, cap
+      n = int(count(chi >= FOLD_RIGID_COVERAGE), ip)
+      cap = size(s%sol, 2)
+      if (cap < n) then
+         deallocate (s%sol, s%lam, s%res, s%dir, s%sdir)
+         cap = n + n/4
+         allocate (s%sol(3, cap), s%lam(s%ncg, cap), s%res(s%ncg, cap), s%dir(s%ncg, cap), s%sdir(s%ncg, cap))
+      end if
+      s%lam = 0.0_dp
+      s%res = 0.0_dp
+      s%dir = 0.0_dp
+      s%sdir = 0.0_dp
+      n = 0
+      do k = 1, size(chi, 3)
+         do j = 1, size(chi, 2)
+            do i = 1, size(chi, 1)
+               if (chi(i, j, k) >= FOLD_RIGID_COVERAGE) then
+                  n = n + 1
+                  s%sol(:, n) = [i, j, k]
+               end if
+            end do
+         end do
+      end do
+      s%nsol = n
+   end subroutine solid_list
+
+   !> The ncg independent components of a traceless symmetric tensor (3-D: 11, 22, 12,
+   !> 13, 23; 2-D: 11, 12).
+   function reduced(s, t) result(v)
+      type(stokes_rigid_t), intent(in) :: s
+      real(dp), intent(in) :: t(3, 3)
+      real(dp) :: v(5)
+      v = 0.0_dp
+      if (s%dim == 3) then
+         v = [t(1, 1), t(2, 2), t(1, 2), t(1, 3), t(2, 3)]
+      else
+         v(1:2) = [t(1, 1), t(1, 2)]
+      end if
+   end function reduced
+
+   !> Frobenius product of two traceless symmetric tensors in reduced components.
+   pure function frob(s, a, b) result(v)
+      type(stokes_rigid_t), intent(in) :: s
+      real(dp), intent(in) :: a(:), b(:)
+      real(dp) :: v
+      if (s%dim == 3) then
+         v = a(1)*b(1) + a(2)*b(2) + (a(1) + a(2))*(b(1) + b(2)) + 2.0_dp*(a(3)*b(3) + a(4)*b(4) + a(5)*b(5))
+      else
+         v = 2.0_dp*(a(1)*b(1) + a(2)*b(2))
+      end if
+   end function frob
+
+   !> Local sum of the Frobenius products over the solid voxels.
+   function dot_list(s, a, b) result(v)
+      type(stokes_rigid_t), intent(in) :: s
+      real(dp), intent(in) :: a(:, :), b(:, :)
+      real(dp) :: v
+      integer(ip) :: n
+      v = 0.0_dp
+      do n = 1, s%nsol
+         v = v + frob(s, a(:, n), b(:, n))
+      end do
+   end function dot_list
+
+   !> sdir = S dir on the solid voxels, and q = the staggered Fourier velocity
+   !> -A^-1 P B^H (chi_s dir) of the direction (unnormalised transforms, as s%x).
+   subroutine apply_schur(s)
+      type(stokes_rigid_t), intent(inout) :: s
+      integer(ip) :: c, v, i, j, k, fc, ncg
+      real(dp) :: kv(3), scale, ik2
+      complex(dp) :: t(3, 3), f(3), u(3)
+      ncg = s%ncg
+      ! the direction's stress on the solid voxels, one field per independent component
+      do c = 1, ncg
+         fc = s%cg_comp(c)
+         s%work(fc)%r = 0.0_dp
+         do v = 1, s%nsol
+            s%work(fc)%r(s%sol(1, v), s%sol(2, v), s%sol(3, v)) = s%dir(c, v)
+         end do
+         call s%fft%r2c(s%work(fc))
+      end do
+      ! force kv . tau, projected, through the Green operator; its strain per mode
+      do k = 1, s%fft%nsl(3)
+         do j = 1, s%fft%nsl(2)
+            do i = 1, s%fft%nxh
+               ik2 = s%ik2(i, j, k)
+               if (ik2 == 0.0_dp) then
+                  s%q(i, j, k, :) = 0.0_dp
+                  do c = 1, ncg
+                     s%work(s%cg_comp(c))%c(i, j, k) = 0.0_dp
+                  end do
+                  cycle
+               end if
+               kv = 0.0_dp
+               kv(1:s%dim) = s%kv(:, i, j, k)
+               t = 0.0_dp
+               if (s%dim == 3) then
+                  t(1, 1) = s%work(1)%c(i, j, k)
+                  t(2, 2) = s%work(2)%c(i, j, k)
+                  t(3, 3) = -(t(1, 1) + t(2, 2))
+                  t(1, 2) = s%work(4)%c(i, j, k)
+                  t(1, 3) = s%work(5)%c(i, j, k)
+                  t(2, 3) = s%work(6)%c(i, j, k)
+               else
+                  t(1, 1) = s%work(1)%c(i, j, k)
+                  t(2, 2) = -t(1, 1)
+                  t(1, 2) = s%work(3)%c(i, j, k)
+               end if
+               t(2, 1) = t(1, 2)
+               t(3, 1) = t(1, 3)
+               t(3, 2) = t(2, 3)
+               f = matmul(t, cmplx(kv, 0.0_dp, dp))
+               f = f - kv*sum(kv*f)*ik2
+               u = -f*(ik2/s%set%eta_f)
+               s%q(i, j, k, :) = u(1:s%dim)
+               if (s%dim == 3) then
+                  s%work(1)%c(i, j, k) = kv(1)*u(1)
+                  s%work(2)%c(i, j, k) = kv(2)*u(2)
+                  s%work(4)%c(i, j, k) = 0.5_dp*(kv(1)*u(2) + kv(2)*u(1))
+                  s%work(5)%c(i, j, k) = 0.5_dp*(kv(1)*u(3) + kv(3)*u(1))
+                  s%work(6)%c(i, j, k) = 0.5_dp*(kv(2)*u(3) + kv(3)*u(2))
+               else
+                  s%work(1)%c(i, j, k) = kv(1)*u(1)
+                  s%work(3)%c(i, j, k) = 0.5_dp*(kv(1)*u(2) + kv(2)*u(1))
+               end if
+            end do
+         end do
+      end do
+      ! strain of the direction's velocity at the solid voxels: S dir = -chi_s eps
+      scale = 1.0_dp/real(grid_total(s%grid), dp)
+      do c = 1, ncg
+         fc = s%cg_comp(c)
+         call s%fft%c2r(s%work(fc))
+         do v = 1, s%nsol
+            s%sdir(c, v) = -scale*s%work(fc)%r(s%sol(1, v), s%sol(2, v), s%sol(3, v))
+         end do
+      end do
+   end subroutine apply_schur
+
+   !> <chi_s lambda> over the cell, summed over ranks, into s%multiplier_stress [Pa].
+   subroutine multiplier_mean(s)
+      type(stokes_rigid_t), intent(inout) :: s
+      real(dp) :: red(5), m(3, 3)
+      integer(ip) :: v
+      red = 0.0_dp
+      do v = 1, s%nsol
+         red(1:s%ncg) = red(1:s%ncg) + s%lam(:, v)
+      end do
+      call s%fft%sum_all(red)
+      red = red/real(grid_total(s%grid), dp)
+      m = 0.0_dp
+      if (s%dim == 3) then
+         m(1, 1) = red(1)
+         m(2, 2) = red(2)
+         m(3, 3) = -(red(1) + red(2))
+         m(1, 2) = red(3)
+         m(1, 3) = red(4)
+         m(2, 3) = red(5)
+      else
+         m(1, 1) = red(1)
+         m(2, 2) = -red(1)
+         m(1, 2) = red(2)
+      end if
+      m(2, 1) = m(1, 2)
+      m(3, 1) = m(1, 3)
+      m(3, 2) = m(2, 3)
+      s%multiplier_stress = m
+   end subroutine multiplier_mean
+
+end module fold_stokes_rigid
