@@ -1,0 +1,145 @@
+"""Exact-rigidity Stokes solve (numerics.stokes.rigidity = "exact", fold_stokes_rigid):
+exact results of the discrete scheme, the rigidity error at the solver tolerance, and its
+relation to the penalised solve.
+
+The penalised solve on a binary chi is a Tikhonov regularisation of the exact one. With
+S the multiplier's Schur complement (fold_stokes_rigid) and b = chi_s E, the penalty
+kappa gives the multiplier lambda_k = (S + e I)^-1 b, e = 1 / (2 eta_f (kappa - 1))
+(the solid's excess viscosity (kappa - 1) eta_f is the multiplier's quadratic cost), and
+the exact solve lambda* = S^+ b. The particles' stress is <b, lambda>, so in the
+eigenbasis of S (eigenvalues s_i > 0, components c_i of lambda*):
+    eta_exact - eta_kappa  is proportional to  sum_i c_i^2 s_i e / (s_i + e)  > 0,
+which (i) is positive (the penalised particles are softer), (ii) falls monotonically as
+kappa grows, (iii) falls by at most the ratio of the e's between two kappas,
+(kappa2 - 1) / (kappa1 - 1), and (iv) approaches that ratio as e -> 0 (first order in
+1/kappa). The tests check those four statements, not a measured number.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pyfold.native.stokes import Particles, StokesSettings, solve_chi, solve_particles
+
+SHEAR2 = np.array([[0.0, 1.0], [0.0, 0.0]])
+
+
+def _exact(**kw) -> StokesSettings:
+    return StokesSettings(rigidity="exact", measure_plans=False, **kw)
+
+
+def test_rigid_layers_in_shear_give_the_exact_laminate_viscosity():
+    # shear across rigid layers: with the rotated differences (velocity at the corners) the
+    # fluid rows carry all the shear, so on the grid eta_eff = eta_f n / (n - m) for m
+    # solid rows of n, exactly. Coverage 0.7 is solid
+    # (>= 1/2), 0.3 is fluid; the Lees-Edwards basis must not change that.
+    n, eta_f = 16, 2.0
+    prof = np.zeros(n)
+    prof[4:8] = 1.0
+    prof[8] = 0.7
+    prof[3] = 0.3
+    chi = np.broadcast_to(prof[None, :], (n, n)).copy()
+    sol = solve_chi(chi, np.array([[1.0, 0.37], [0.0, 0.8]]), SHEAR2, _exact(eta_f=eta_f, tol=1e-12))
+    assert sol.eta_eff == pytest.approx(eta_f * n / (n - 5), rel=1e-10)
+    assert sol.eta_dissipation == pytest.approx(sol.eta_eff, rel=1e-10)
+    assert np.abs(sol.u[..., 1]).max() < 1e-10 * np.abs(sol.u[..., 0]).max()
+
+
+def test_rigid_layers_3d_with_kappa_irrelevant():
+    n = 12
+    prof = np.zeros(n)
+    prof[2:5] = 1.0
+    chi = np.broadcast_to(prof[None, :, None], (8, n, 6)).copy()
+    G = np.zeros((3, 3))
+    G[0, 1] = 0.7
+    eta = [solve_chi(chi, np.diag([1.0, 1.2, 0.9]), G, _exact(kappa=k, tol=1e-12)).eta_eff for k in (10.0, 1e9)]
+    assert eta[0] == pytest.approx(n / (n - 3), rel=1e-10)
+    assert eta[1] == eta[0]  # kappa plays no part
+
+
+@pytest.fixture(scope="module")
+def symmetric_sphere():
+    # radius 5 voxels, centred on a grid corner of a 32^3 cell: the voxel set is symmetric
+    # under x <-> y, under which the strain E_xy is invariant and a spin about z changes
+    # sign, so the strain part of the spin vanishes: omega_z = -gamma_dot/2 exactly (up
+    # to the solve), whatever the discretisation.
+    P = Particles(x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=5 / 32, length=10 / 32, shape="sphere")
+    tol = 1e-10
+    return tol, solve_particles(P, [1, 1, 1], (32, 32, 32), settings=_exact(tol=tol))
+
+
+def test_symmetric_sphere_spins_at_half_the_shear_rate_to_the_solver_tolerance(symmetric_sphere):
+    tol, sol = symmetric_sphere
+    assert sol.omega[0, 2] == pytest.approx(-0.5, abs=100 * tol)
+    assert np.abs(sol.omega[0, :2]).max() < 100 * tol
+    assert np.abs(sol.v[0]).max() < 100 * tol  # at the centre of the shear
+
+
+def test_rigidity_error_is_the_solver_tolerance(symmetric_sphere):
+    tol, sol = symmetric_sphere
+    # the residual is the strain left on the solid voxels relative to E (fold_stress's
+    # solid strain over the same voxels); the recursive and the true residual differ by
+    # round-off only, far below tol
+    assert sol.residual <= tol
+    assert sol.solid_strain <= 2 * tol
+    # Hill's lemma: <sigma>:E = <sigma:eps> once the constraint holds
+    assert sol.eta_dissipation == pytest.approx(sol.eta_eff, rel=10 * tol)
+    assert sol.eta_eff > 1.0
+
+
+def test_penalised_solve_converges_to_the_exact_one_at_first_order_in_one_over_kappa():
+    # a cube of 5^3 voxels (binary chi, so both solves see the same solid) off-centre
+    n = 20
+    chi = np.zeros((n, n, n))
+    chi[4:9, 6:11, 3:8] = 1.0
+    G = np.zeros((3, 3))
+    G[0, 1] = 1.0
+    lattice = np.eye(3)
+    exact = solve_chi(chi, lattice, G, _exact(tol=1e-12)).eta_eff
+    kappas = [1e2, 1e3, 1e4]
+    gap = [exact - solve_chi(chi, lattice, G, StokesSettings(kappa=k, tol=1e-12, measure_plans=False,
+                                                             mixing="arithmetic")).eta_eff for k in kappas]
+    # solver error of each penalised eta: <= (kappa - 1) (tol + eps_op) of the particles'
+    # part (fold_stokes_trust), 1e-7 of it at kappa 1e4: far below the gaps (~1e-4 of it)
+    assert all(g > 0 for g in gap)  # (i)
+    assert gap[0] > gap[1] > gap[2]  # (ii)
+    r1, r2 = gap[0] / gap[1], gap[1] / gap[2]
+    bound = [(kappas[i + 1] - 1) / (kappas[i] - 1) for i in range(2)]
+    assert r1 <= bound[0] * (1 + 1e-6) and r2 <= bound[1] * (1 + 1e-6)  # (iii)
+    assert r2 >= r1  # (iv): the ratio climbs towards kappa2 / kappa1
+
+
+def _scene(path, **stokes):
+    import tomli_w
+
+    scene = {
+        "cell": {"dim": 3, "size": [1.0, 1.0, 1.0]},
+        "flow": {"type": "simple_shear", "rate": 1.0},
+        "particles": [{"name": "ball", "shape": "sphere", "radius": 0.125, "count": 1,
+                       "orientation": "aligned", "direction": [1.0, 0.0, 0.0]}],
+        "model": {"hydrodynamics": "stokes", "collisions": "none"},
+        "numerics": {"dt": 0.05, "t_end": 0.1, "seed": 5,
+                     "stokes": {"cells_per_diameter": 4, "fft_plan": "estimate", **stokes}},
+    }
+    path.write_text(tomli_w.dumps(scene), encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("stokes, key", [
+    ({"rigidity": "exact", "fft_precision": "single", "tolerance": 1e-3}, "numerics.stokes.fft_precision"),
+    ({"rigidity": "exact", "backend": "hypre"}, "numerics.stokes.backend"),
+    ({"rigidity": "rigid"}, "numerics.stokes.rigidity"),
+])
+def test_validate_refuses_what_the_exact_solve_cannot_do_naming_the_key(tmp_path, capsys, stokes, key):
+    from pyfold.cli import main
+
+    assert main(["validate", str(_scene(tmp_path / "s.toml", **stokes))]) == 2
+    assert key in capsys.readouterr().err
+
+
+def test_validate_accepts_exact_rigidity_without_a_kappa_check(tmp_path, capsys):
+    from pyfold.cli import main
+
+    # tolerance 1e-2 would refuse kappa 1e3 under the penalty (kappa_max ~ 1/tol);
+    # exact rigidity carries no penalty, so nothing limits it
+    assert main(["validate", str(_scene(tmp_path / "s.toml", rigidity="exact", tolerance=1e-2))]) == 0
