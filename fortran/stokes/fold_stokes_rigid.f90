@@ -25,6 +25,18 @@
 !> S lies in [0, 1/(2 eta_f)] and is set by the geometry alone. The residual
 !> r = chi_s E - S lambda = chi_s (E + eps(u~)) is the strain left inside the particles,
 !> so the solver tolerance is the rigidity error: ||r|| / ||chi_s E|| <= tol.
+!> Partly covered voxels. A voxel covered less than half is not rigid: it takes the
+!> kappa -> infinity limit of the harmonic mixing of the penalised solve, eta_f / (1 - chi)
+!> (<= 2 eta_f), whose stress 2 (eta - eta_f) eps is a polarisation tau = D eps with
+!> D = 2 eta_f chi / (1 - chi). Listing those voxels with the solid ones, the unknown is
+!> the polarisation on every voxel the particles touch, and with Gamma = B A^-1 P B^H,
+!>     (Gamma + C) tau = E,   C = D^-1 on the partly covered voxels, 0 on the solid ones,
+!> still symmetric positive semi-definite (C adds a diagonal >= 1/(2 eta_f)); on the
+!> solid voxels it is the rigidity constraint above, on the others tau = D (E - Gamma tau).
+!> The partial voxels move the particle's effective surface smoothly with its position
+!> (a binary solid alone jumps by whole voxels). The residual over all these voxels is at
+!> most tol ||E|| sqrt(N_touched), so the strain left on the solid voxels relative to E
+!> is at most tol sqrt(N_touched / N_solid).
 !> Net force and torque on each body vanish by construction (the force density is the
 !> divergence of a symmetric stress supported on the body), so the free rigid motion is
 !> the velocity of the solution inside the body; rigid_fit reads it with weight 1 on the
@@ -56,6 +68,10 @@ module fold_stokes_rigid
       !> Local solid voxels (i, j, k) of this solve; nsol of the capacity in use
       integer(ip), allocatable :: sol(:, :)
       integer(ip) :: nsol = 0
+      !> The compliance of each listed voxel, 1 / (2 (eta - eta_f)) with the harmonic
+      !> mixing's kappa -> infinity viscosity eta = eta_f / (1 - chi) where chi < 1/2, and 0
+      !> on the solid voxels (chi >= FOLD_RIGID_COVERAGE, rigid) [1/(Pa s)]
+      real(dp), allocatable :: comp(:)
       !> Multiplier, residual, direction and S applied to the direction on the solid
       !> voxels, in the ncg independent components (3-D: 11, 22, 12, 13, 23) [Pa, 1/s]
       real(dp), allocatable :: lam(:, :), res(:, :), dir(:, :), sdir(:, :)
@@ -113,7 +129,7 @@ contains
       ! the stencil form belongs to the penalised operator
       s%stencil_ok = .false.
       s%stencil = .false.
-      allocate (s%sol(3, 0), s%lam(s%ncg, 0), s%res(s%ncg, 0), s%dir(s%ncg, 0), s%sdir(s%ncg, 0))
+      allocate (s%sol(3, 0), s%comp(0), s%lam(s%ncg, 0), s%res(s%ncg, 0), s%dir(s%ncg, 0), s%sdir(s%ncg, 0))
       allocate (s%lam_field(s%ncg, s%grid%n(1), s%grid%nl(2), s%grid%nl(3)))
       s%lam_field = 0.0_dp
       call move_alloc(s, solver)
@@ -121,7 +137,7 @@ contains
 
    subroutine stokes_rigid_destroy(s)
       class(stokes_rigid_t), intent(inout) :: s
-      if (allocated(s%sol)) deallocate (s%sol, s%lam, s%res, s%dir, s%sdir)
+      if (allocated(s%sol)) deallocate (s%sol, s%comp, s%lam, s%res, s%dir, s%sdir)
       if (allocated(s%lam_field)) deallocate (s%lam_field)
       s%nsol = 0
       call stokes_fft_destroy(s%stokes_fft_t)
@@ -138,7 +154,7 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(ip) :: nx, it, v
-      real(dp) :: red(2), bb, rr, rr_new, alpha, beta, pq, eb(5)
+      real(dp) :: red(2), bb, rr, rz, alpha, beta, pq, eb(5)
 
       stat = FOLD_OK
       errmsg = ""
@@ -157,8 +173,10 @@ contains
       s%E = 0.5_dp*(G + transpose(G))
       if (s%dim == 2) s%E(3, :) = 0.0_dp
       if (s%dim == 2) s%E(:, 3) = 0.0_dp
-      ! the fluid fills the cell: the viscosity field is eta_f everywhere
+      ! the fluid fills the cell: eta_f, and eta_f / (1 - chi) on the voxels covered less
+      ! than half (the rigid voxels' stress is the multiplier's, their strain vanishes)
       s%eta%r = s%set%eta_f
+      where (chi > 0.0_dp .and. chi < FOLD_RIGID_COVERAGE) s%eta%r(1:nx, :, :) = s%set%eta_f/(1.0_dp - chi)
       s%multiplier_stress = 0.0_dp
       call solid_list(s, chi)
       eb = reduced(s, s%E)
@@ -197,12 +215,15 @@ contains
          s%x = s%q
          s%res(:, 1:s%nsol) = s%res(:, 1:s%nsol) - s%sdir(:, 1:s%nsol)
       end if
-      red = [dot_list(s, s%res, s%res), 0.0_dp]
+      ! Jacobi-preconditioned CG: z = W r, W = g0 / (g0 + C) per voxel, g0 the mean diagonal of
+      ! Gamma (1 on the solid voxels; it rescales the stiff, nearly empty partial voxels)
+      call precondition(s, s%res, s%dir)
+      red = [dot_list(s, s%res, s%res), dot_list(s, s%res, s%dir)]
       call s%fft%sum_all(red)
       rr = red(1)
+      rz = red(2)
       s%residual = sqrt(max(rr, 0.0_dp)/bb)
       s%history(0) = s%residual
-      s%dir(:, 1:s%nsol) = s%res(:, 1:s%nsol)
       it = 0
       do while (s%residual > s%set%tol .and. it < s%set%max_iter)
          it = it + 1
@@ -217,18 +238,20 @@ contains
             s%iterations = it
             return
          end if
-         alpha = rr/pq
+         alpha = rz/pq
          s%lam(:, 1:s%nsol) = s%lam(:, 1:s%nsol) + alpha*s%dir(:, 1:s%nsol)
          s%res(:, 1:s%nsol) = s%res(:, 1:s%nsol) - alpha*s%sdir(:, 1:s%nsol)
          s%x = s%x + alpha*s%q
-         red = [dot_list(s, s%res, s%res), 0.0_dp]
+         ! z = W r into sdir (free until the next apply_schur)
+         call precondition(s, s%res, s%sdir)
+         red = [dot_list(s, s%res, s%res), dot_list(s, s%res, s%sdir)]
          call s%fft%sum_all(red)
-         rr_new = red(1)
-         beta = rr_new/rr
-         rr = rr_new
+         rr = red(1)
+         beta = red(2)/rz
+         rz = red(2)
          s%residual = sqrt(max(rr, 0.0_dp)/bb)
          s%history(it) = s%residual
-         s%dir(:, 1:s%nsol) = s%res(:, 1:s%nsol) + beta*s%dir(:, 1:s%nsol)
+         s%dir(:, 1:s%nsol) = s%sdir(:, 1:s%nsol) + beta*s%dir(:, 1:s%nsol)
       end do
       s%iterations = it
       s%have_guess = .true.
@@ -253,17 +276,23 @@ contains
 
    ! ------------------------------------------------------------------ internals
 
-   !> The local voxels with chi >= FOLD_RIGID_COVERAGE, listed once per solve.
+   !> The local voxels the particles touch (chi > 0), listed once per solve with their
+   !> compliance: 0 where chi >= FOLD_RIGID_COVERAGE (rigid), else 1 / (2 (eta - eta_f))
+   !> = (1 - chi) / (2 eta_f chi), the harmonic mixing's viscosity eta_f / (1 - chi) at
+   !> kappa -> infinity (at most 2 eta_f below coverage 1/2, so these voxels add a
+   !> well-conditioned diagonal to the Schur complement).
    subroutine solid_list(s, chi)
       type(stokes_rigid_t), intent(inout) :: s
       real(dp), intent(in) :: chi(:, :, :)
       integer(ip) :: i, j, k, n, cap
-      n = int(count(chi >= FOLD_RIGID_COVERAGE), ip)
+      real(dp) :: c
+      n = int(count(chi > 0.0_dp), ip)
       cap = size(s%sol, 2)
       if (cap < n) then
-         deallocate (s%sol, s%lam, s%res, s%dir, s%sdir)
+         deallocate (s%sol, s%comp, s%lam, s%res, s%dir, s%sdir)
          cap = n + n/4
-         allocate (s%sol(3, cap), s%lam(s%ncg, cap), s%res(s%ncg, cap), s%dir(s%ncg, cap), s%sdir(s%ncg, cap))
+         allocate (s%sol(3, cap), s%comp(cap), s%lam(s%ncg, cap), s%res(s%ncg, cap), s%dir(s%ncg, cap), &
+                   s%sdir(s%ncg, cap))
       end if
       s%lam = 0.0_dp
       s%res = 0.0_dp
@@ -273,15 +302,33 @@ contains
       do k = 1, size(chi, 3)
          do j = 1, size(chi, 2)
             do i = 1, size(chi, 1)
-               if (chi(i, j, k) >= FOLD_RIGID_COVERAGE) then
+               c = chi(i, j, k)
+               if (c > 0.0_dp) then
                   n = n + 1
                   s%sol(:, n) = [i, j, k]
+                  s%comp(n) = 0.0_dp
+                  if (c < FOLD_RIGID_COVERAGE) s%comp(n) = (1.0_dp - c)/(2.0_dp*s%set%eta_f*c)
                end if
             end do
          end do
       end do
       s%nsol = n
    end subroutine solid_list
+
+   !> z = W r with W = g0 / (g0 + C) per listed voxel, g0 = (dim - 1) / (2 eta_f ncg) the
+   !> mean diagonal of Gamma (on every kept mode Gamma is 1/(2 eta_f) times a projector of
+   !> rank dim - 1 among the ncg deviatoric components): 1 on the solid voxels.
+   subroutine precondition(s, r, z)
+      type(stokes_rigid_t), intent(in) :: s
+      real(dp), intent(in) :: r(:, :)
+      real(dp), intent(inout) :: z(:, :)
+      real(dp) :: g0
+      integer(ip) :: v
+      g0 = real(s%dim - 1, dp)/(2.0_dp*s%set%eta_f*real(s%ncg, dp))
+      do v = 1, s%nsol
+         z(:, v) = r(:, v)*(g0/(g0 + s%comp(v)))
+      end do
+   end subroutine precondition
 
    !> The ncg independent components of a traceless symmetric tensor (3-D: 11, 22, 12,
    !> 13, 23; 2-D: 11, 12).
@@ -391,7 +438,7 @@ contains
          fc = s%cg_comp(c)
          call s%fft%c2r(s%work(fc))
          do v = 1, s%nsol
-            s%sdir(c, v) = -scale*s%work(fc)%r(s%sol(1, v), s%sol(2, v), s%sol(3, v))
+            s%sdir(c, v) = -scale*s%work(fc)%r(s%sol(1, v), s%sol(2, v), s%sol(3, v)) + s%comp(v)*s%dir(c, v)
          end do
       end do
    end subroutine apply_schur
@@ -403,7 +450,8 @@ contains
       integer(ip) :: v
       red = 0.0_dp
       do v = 1, s%nsol
-         red(1:s%ncg) = red(1:s%ncg) + s%lam(:, v)
+         ! the rigid voxels only: the others' stress 2 (eta - eta_f) eps is the viscosity's
+         if (s%comp(v) == 0.0_dp) red(1:s%ncg) = red(1:s%ncg) + s%lam(:, v)
       end do
       call s%fft%sum_all(red)
       red = red/real(grid_total(s%grid), dp)
