@@ -144,3 +144,41 @@ def test_validate_accepts_exact_rigidity_without_a_kappa_check(tmp_path, capsys)
     # tolerance 1e-2 would refuse kappa 1e3 under the penalty (kappa_max ~ 1/tol);
     # exact rigidity carries no penalty, so nothing limits it
     assert main(["validate", str(_scene(tmp_path / "s.toml", rigidity="exact", tolerance=1e-2))]) == 0
+
+
+def _tiny_exact_run(path, tol):
+    """Three particles (sphere, spheroid, fibre) in a 1.25^3 cell, 24^3 grid, exact rigidity."""
+    from test_run_common import write_run_file, xi_of
+
+    x = 1.25 * np.array([[0.3, 0.3, 0.3], [0.72, 0.62, 0.55], [0.35, 0.8, 0.8]])
+    p = np.array([[1.0, 0.0, 0.0], [0.6, 0.64, 0.48], [0.0, 0.6, 0.8]])
+    write_run_file(path, x=x, p=p, radius=[0.1, 0.075, 0.06], length=[0.2, 0.3, 0.3], xi=[0.0, xi_of(2.0), 0.7],
+                   shape=[2, 3, 1], dt=0.02, t_end=0.1, collisions=2, alpha=0.01, output_every=1, snapshot_every=5,
+                   cell_lengths=(1.25, 1.25, 1.25),
+                   stokes={"stokes_grid": (24, 24, 24), "stokes_tolerance": tol, "stokes_rigidity": np.int64(1)})
+
+
+def test_fold_run_exact_np2_equals_np1_to_the_solver_tolerance(tmp_path):
+    from test_run_common import require_fold_run, run_fold
+
+    require_fold_run()
+    xr = pytest.importorskip("xarray")
+    tol = 1e-10
+    runs = []
+    for ranks in (1, 2):
+        path = tmp_path / f"np{ranks}.h5"
+        _tiny_exact_run(path, tol)
+        proc = run_fold(path, np_ranks=ranks)
+        assert proc.returncode == 0, proc.stderr
+        runs.append(xr.open_dataset(path, engine="h5netcdf"))
+    one, two = runs
+    # slab and serial transforms round differently: the same CG to tol, fields equal to ~tol
+    for ds in (one, two):
+        # the solver residual is the strain left in the particles (fold_stokes_rigid)
+        assert np.all(ds.stokes_residual.values <= tol)
+    its1, its2 = one.stokes_iterations.values, two.stokes_iterations.values
+    assert np.all(np.abs(its1 - its2) <= 0.1 * its1)
+    np.testing.assert_allclose(two.effective_viscosity.values, one.effective_viscosity.values, rtol=1e-8)
+    np.testing.assert_allclose(two.x.values, one.x.values, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(two.a2.values, one.a2.values, rtol=0, atol=1e-9)
+    assert np.all(one.effective_viscosity.values > 1.0)
