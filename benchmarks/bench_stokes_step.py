@@ -72,7 +72,6 @@ SETTINGS: dict[str, tuple[dict, str]] = {
                        "tolerance 9.9e-4, single-precision transforms of the CG operator"),
     "tol1e-4_single": ({"tolerance": 1e-4, "fft_precision": "single"},
                        "tolerance 1e-4, single-precision transforms of the CG operator"),
-    "kappa1e4": ({"kappa": 1e4}, "penalty kappa 1e4, tolerance 1e-6"),
     # exact rigidity (fold_stokes_rigid): the tolerance is the rigidity error; "exact_ref" is
     # the kappa -> infinity reference of --reference exact_ref
     "exact_ref": ({"rigidity": "exact", "tolerance": 1e-10}, "exact rigidity, tolerance 1e-10 (kappa -> infinity)"),

@@ -18,7 +18,7 @@
 module fold_rigid_fit
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
-   use fold_stokes_solver, only: stokes_solver_t, FOLD_RIGID_COVERAGE
+   use fold_stokes_solver, only: stokes_solver_t
    use fold_voxelise, only: voxel_set_t
    use fold_particles, only: particle_set_t
    use fold_cell, only: cell_t, cell_mean_velocity
@@ -176,16 +176,16 @@ contains
       end do
    contains
 
-      !> (eta - eta_f) / ((kappa - 1) eta_f chi) at the voxel of entry e (1 without contrast);
-      !> under exact rigidity 1/chi on the solid voxels (chi >= FOLD_RIGID_COVERAGE, every
-      !> particle there shares their rigid motion) and 0 on the others (fluid)
+      !> (eta - eta_f) / ((kappa - 1) eta_f chi) at the voxel of entry e (1 without contrast).
+      !> Under exact rigidity 1: the fit weights every voxel by the particle's coverage. (The
+      !> penalised weights vanish like 1/kappa on the partly covered voxels, which would
+      !> leave a thin particle without a fully covered voxel unmeasured in the limit.)
       real(dp) function penalty_weight(e)
          integer(i8), intent(in) :: e
          real(dp) :: chi
          chi = vox%chi(vox%ijk(1, e), vox%ijk(2, e), vox%ijk(3, e))
          if (solver%exact_rigidity) then
-            penalty_weight = 0.0_dp
-            if (chi >= FOLD_RIGID_COVERAGE) penalty_weight = 1.0_dp/chi
+            penalty_weight = 1.0_dp
          else if (kappa > 1.0_dp .and. chi > 0.0_dp) then
             penalty_weight = (eta%r(vox%ijk(1, e), vox%ijk(2, e), vox%ijk(3, e)) - eta_f)/((kappa - 1.0_dp)*eta_f*chi)
          else

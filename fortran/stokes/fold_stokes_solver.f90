@@ -50,9 +50,10 @@ module fold_stokes_solver
    !> by a multiplier (fold_stokes_rigid; FFT backend only, no kappa)
    integer(ip), parameter, public :: FOLD_RIGIDITY_PENALTY = 0, FOLD_RIGIDITY_EXACT = 1
 
-   !> Coverage from which a voxel is solid under exact rigidity: the union of the voxels
-   !> covered at least half approximates the particle without bias [-]
-   real(dp), parameter, public :: FOLD_RIGID_COVERAGE = 0.5_dp
+   !> Coverage from which a voxel is rigid under exact rigidity: the fully covered voxels,
+   !> the only ones the penalised solve's default (harmonic) mixing makes rigid as kappa ->
+   !> infinity, so that the exact solve is that limit [-]
+   real(dp), parameter, public :: FOLD_RIGID_COVERAGE = 1.0_dp
 
    !> Fibre ends of the voxelisation: flat cylinder or capsule (fold_voxelise)
    integer(ip), parameter, public :: FOLD_ENDS_FLAT = 0, FOLD_ENDS_CAPPED = 1

@@ -2,12 +2,14 @@
 exact results of the discrete scheme, the rigidity error at the solver tolerance, and its
 relation to the penalised solve.
 
-The penalised solve on a binary chi is a Tikhonov regularisation of the exact one. With
-S the multiplier's Schur complement (fold_stokes_rigid) and b = chi_s E, the penalty
-kappa gives the multiplier lambda_k = (S + e I)^-1 b, e = 1 / (2 eta_f (kappa - 1))
-(the solid's excess viscosity (kappa - 1) eta_f is the multiplier's quadratic cost), and
-the exact solve lambda* = S^+ b. The particles' stress is <b, lambda>, so in the
-eigenbasis of S (eigenvalues s_i > 0, components c_i of lambda*):
+The penalised solve (harmonic mixing, or any mixing on a binary chi) is a Tikhonov
+regularisation of the exact one. With K = Gamma + C the exact solve's operator on the
+voxels the particles touch (fold_stokes_rigid) and b = E there, the penalty kappa gives
+the polarisation tau_k = (K + e W)^-1 b with e = 1 / (kappa - 1) and the fixed positive
+diagonal W = 1 / (2 eta_f chi) (the harmonic viscosity's compliance exceeds its
+kappa -> infinity value by e W), and the exact solve tau* = K^+ b. The particles' stress
+is <b, tau>, so in the eigenbasis of K relative to W (eigenvalues s_i > 0, components c_i
+of tau*):
     eta_exact - eta_kappa  is proportional to  sum_i c_i^2 s_i e / (s_i + e)  > 0,
 which (i) is positive (the penalised particles are softer), (ii) falls monotonically as
 kappa grows, (iii) falls by at most the ratio of the e's between two kappas,
@@ -31,9 +33,9 @@ def _exact(**kw) -> StokesSettings:
 def test_rigid_layers_in_shear_give_the_exact_laminate_viscosity():
     # shear across layers: with the rotated differences (velocity at the corners) the
     # shear stress is uniform, so eta_eff = 1 / <1 / eta> over the rows, exactly on the grid:
-    # a rigid row (coverage >= 1/2, here 1 and 0.7) adds 0, a row of coverage 0.3 has the
-    # harmonic mixing's eta_f / (1 - 0.3), a fluid row eta_f. The Lees-Edwards basis must
-    # not change that.
+    # a rigid (fully covered) row adds 0, a row of coverage c has the harmonic mixing's
+    # kappa -> infinity viscosity eta_f / (1 - c), a fluid row eta_f. The Lees-Edwards basis
+    # must not change that.
     n, eta_f = 16, 2.0
     prof = np.zeros(n)
     prof[4:8] = 1.0
@@ -41,7 +43,7 @@ def test_rigid_layers_in_shear_give_the_exact_laminate_viscosity():
     prof[3] = 0.3
     chi = np.broadcast_to(prof[None, :], (n, n)).copy()
     sol = solve_chi(chi, np.array([[1.0, 0.37], [0.0, 0.8]]), SHEAR2, _exact(eta_f=eta_f, tol=1e-12))
-    assert sol.eta_eff == pytest.approx(eta_f * n / ((n - 6) + (1 - 0.3)), rel=1e-10)
+    assert sol.eta_eff == pytest.approx(eta_f * n / ((n - 6) + (1 - 0.7) + (1 - 0.3)), rel=1e-10)
     assert sol.eta_dissipation == pytest.approx(sol.eta_eff, rel=1e-10)
     assert np.abs(sol.u[..., 1]).max() < 1e-10 * np.abs(sol.u[..., 0]).max()
 
@@ -88,18 +90,12 @@ def test_rigidity_error_is_the_solver_tolerance(symmetric_sphere):
     assert sol.eta_eff > 1.0
 
 
-def test_penalised_solve_converges_to_the_exact_one_at_first_order_in_one_over_kappa():
-    # a cube of 5^3 voxels (binary chi, so both solves see the same solid) off-centre
-    n = 20
-    chi = np.zeros((n, n, n))
-    chi[4:9, 6:11, 3:8] = 1.0
-    G = np.zeros((3, 3))
-    G[0, 1] = 1.0
-    lattice = np.eye(3)
-    exact = solve_chi(chi, lattice, G, _exact(tol=1e-12)).eta_eff
-    kappas = [1e2, 1e3, 1e4]
-    gap = [exact - solve_chi(chi, lattice, G, StokesSettings(kappa=k, tol=1e-12, measure_plans=False,
-                                                             mixing="arithmetic")).eta_eff for k in kappas]
+def _tikhonov_gaps(solve, kappas):
+    exact = solve(StokesSettings(rigidity="exact", tol=1e-12, measure_plans=False)).eta_eff
+    return [exact - solve(StokesSettings(kappa=k, tol=1e-12, measure_plans=False)).eta_eff for k in kappas]
+
+
+def _check_tikhonov(gap, kappas):
     # solver error of each penalised eta: <= (kappa - 1) (tol + eps_op) of the particles'
     # part (fold_stokes_trust), 1e-7 of it at kappa 1e4: far below the gaps (~1e-4 of it)
     assert all(g > 0 for g in gap)  # (i)
@@ -108,6 +104,25 @@ def test_penalised_solve_converges_to_the_exact_one_at_first_order_in_one_over_k
     bound = [(kappas[i + 1] - 1) / (kappas[i] - 1) for i in range(2)]
     assert r1 <= bound[0] * (1 + 1e-6) and r2 <= bound[1] * (1 + 1e-6)  # (iii)
     assert r2 >= r1  # (iv): the ratio climbs towards kappa2 / kappa1
+
+
+def test_penalised_solve_of_a_binary_solid_converges_to_the_exact_one_like_one_over_kappa():
+    # a cube of 5^3 voxels off-centre: chi is 0 or 1, so any mixing rule gives the same
+    n = 20
+    chi = np.zeros((n, n, n))
+    chi[4:9, 6:11, 3:8] = 1.0
+    G = np.zeros((3, 3))
+    G[0, 1] = 1.0
+    kappas = [1e2, 1e3, 1e4]
+    _check_tikhonov(_tikhonov_gaps(lambda st: solve_chi(chi, np.eye(3), G, st), kappas), kappas)
+
+
+def test_penalised_solve_with_harmonic_mixing_converges_to_the_exact_one_like_one_over_kappa():
+    # a sphere of radius 3.3 voxels with partial volumes (the default harmonic mixing)
+    P = Particles(x=[[0.43, 0.52, 0.47]], p=[[1.0, 0.0, 0.0]], radius=3.3 / 20, length=6.6 / 20, shape="sphere")
+    kappas = [1e2, 1e3, 1e4]
+    gap = _tikhonov_gaps(lambda st: solve_particles(P, [1, 1, 1], (20, 20, 20), settings=st), kappas)
+    _check_tikhonov(gap, kappas)
 
 
 def _scene(path, **stokes):
