@@ -7,8 +7,8 @@
 !> beta is ~ beta^2 / ln beta times the imposed rate (docs/physics.md#exact-rigidity).
 !> Here the fluid viscosity is eta_f everywhere (the fictitious domain extends the fluid
 !> into the particles) and a symmetric, traceless multiplier lambda [Pa] lives on the
-!> solid voxels, those fully covered (chi >= FOLD_RIGID_COVERAGE = 1; every corner of a
-!> solid voxel then moves rigidly). The stress is sigma = 2 eta_f eps(u) + chi_s lambda - p I, and
+!> solid voxels, those covered at least half (chi >= FOLD_RIGID_COVERAGE; every corner of
+!> a solid voxel then moves rigidly). The stress is sigma = 2 eta_f eps(u) + chi_s lambda - p I, and
 !> u = G x + u~ solves
 !>     -div(2 eta_f eps(u~)) + grad p = div(chi_s lambda),  div u~ = 0,
 !>     chi_s (E + eps(u~)) = 0                                   (rigidity),
@@ -24,19 +24,22 @@
 !> S lies in [0, 1/(2 eta_f)] and is set by the geometry alone. The residual
 !> r = chi_s E - S lambda = chi_s (E + eps(u~)) is the strain left inside the particles,
 !> so the solver tolerance is the rigidity error: ||r|| / ||chi_s E|| <= tol.
-!> Partly covered voxels. A partly covered voxel is not rigid: it takes the kappa ->
-!> infinity limit of the penalised solve's default (harmonic) mixing, eta_f / (1 - chi),
-!> whose stress 2 (eta - eta_f) eps is a polarisation tau = D eps with
+!> Partly covered voxels. A voxel covered less than half is not rigid: it takes the
+!> kappa -> infinity limit of the penalised solve's default (harmonic) mixing,
+!> eta_f / (1 - chi) <= 2 eta_f, whose stress 2 (eta - eta_f) eps is a polarisation tau = D eps with
 !> D = 2 eta_f chi / (1 - chi). Listing those voxels with the solid ones, the unknown is
 !> the polarisation on every voxel the particles touch, and with Gamma = B A^-1 P B^H,
 !>     (Gamma + C) tau = E,   C = D^-1 on the partly covered voxels, 0 on the solid ones,
-!> still symmetric positive semi-definite; on the solid voxels it is the rigidity
-!> constraint above, on the others tau = D (E - Gamma tau). The partial voxels move the
-!> particle's surface smoothly with its position (a binary solid jumps by whole voxels).
-!> The penalised solve with harmonic mixing is this system with C + 1/(2 eta_f chi
-!> (kappa - 1)) on every touched voxel, a Tikhonov regularisation: its eta_eff lies below
-!> this one's and approaches it like 1/kappa (tests/micro/test_stokes_exact.py). This is
-!> therefore the kappa -> infinity limit of the default penalised solve, on the same grid. The residual over all these voxels is at
+!> still symmetric positive semi-definite (C adds a diagonal >= 1/(2 eta_f)); on the
+!> solid voxels it is the rigidity constraint above, on the others tau = D (E - Gamma tau).
+!> The partial voxels move the particle's surface smoothly with its position (a binary
+!> solid jumps by whole voxels). On a binary chi the penalised solve is this system with
+!> 1/(2 eta_f (kappa - 1)) added on the solid voxels, a Tikhonov regularisation: its
+!> eta_eff lies below this one's and approaches it like 1/kappa
+!> (tests/micro/test_stokes_exact.py). With partial volumes the two are different
+!> discretisations of the surface (the penalty's harmonic mixing leaves every partly
+!> covered voxel soft), which differ at first order in the voxel size
+!> (docs/physics.md#exact-rigidity). The residual over all these voxels is at
 !> most tol ||E|| sqrt(N_touched), so the strain left on the solid voxels relative to E
 !> is at most tol sqrt(N_touched / N_solid).
 !> Net force and torque on each body vanish by construction (the force density is the
@@ -71,8 +74,8 @@ module fold_stokes_rigid
       integer(ip), allocatable :: sol(:, :)
       integer(ip) :: nsol = 0
       !> The compliance of each listed voxel, 1 / (2 (eta - eta_f)) with the harmonic
-      !> mixing's kappa -> infinity viscosity eta = eta_f / (1 - chi) on the partly covered
-      !> voxels, and 0 on the solid ones (chi >= FOLD_RIGID_COVERAGE, rigid) [1/(Pa s)]
+      !> mixing's kappa -> infinity viscosity eta = eta_f / (1 - chi) where chi < 1/2, and 0
+      !> on the solid voxels (chi >= FOLD_RIGID_COVERAGE, rigid) [1/(Pa s)]
       real(dp), allocatable :: comp(:)
       !> Multiplier, residual, direction and S applied to the direction on the solid
       !> voxels, in the ncg independent components (3-D: 11, 22, 12, 13, 23) [Pa, 1/s]
@@ -175,10 +178,10 @@ contains
       s%E = 0.5_dp*(G + transpose(G))
       if (s%dim == 2) s%E(3, :) = 0.0_dp
       if (s%dim == 2) s%E(:, 3) = 0.0_dp
-      ! the fluid fills the cell: eta_f, and eta_f / (1 - chi) on the partly covered voxels
-      ! (the rigid voxels' stress is the multiplier's, their strain vanishes)
+      ! the fluid fills the cell; the particles' stress is the polarisation's (on the partly
+      ! covered voxels too: 2 (eta - eta_f) eps from the strain would amplify the CG error
+      ! of eps there by eta / eta_f)
       s%eta%r = s%set%eta_f
-      where (chi > 0.0_dp .and. chi < FOLD_RIGID_COVERAGE) s%eta%r(1:nx, :, :) = s%set%eta_f/(1.0_dp - chi)
       s%multiplier_stress = 0.0_dp
       call solid_list(s, chi)
       eb = reduced(s, s%E)
@@ -281,7 +284,7 @@ contains
    !> The local voxels the particles touch (chi > 0), listed once per solve with their
    !> compliance: 0 where chi >= FOLD_RIGID_COVERAGE (rigid), else 1 / (2 (eta - eta_f))
    !> = (1 - chi) / (2 eta_f chi), the harmonic mixing's viscosity eta_f / (1 - chi) at
-   !> kappa -> infinity.
+   !> kappa -> infinity (at most 2 eta_f below coverage 1/2: a well-conditioned diagonal).
    subroutine solid_list(s, chi)
       type(stokes_rigid_t), intent(inout) :: s
       real(dp), intent(in) :: chi(:, :, :)
@@ -444,18 +447,21 @@ contains
       end do
    end subroutine apply_schur
 
-   !> <chi_s lambda> over the cell, summed over ranks, into s%multiplier_stress [Pa].
+   !> The polarisation's mean <tau> over the cell into s%multiplier_stress [Pa] and its
+   !> dissipation <tau : eps> into s%multiplier_dissipation [Pa/s], with the strain on the
+   !> listed voxels eps = E - Gamma tau = r + C tau (r the CG residual); summed over ranks.
    subroutine multiplier_mean(s)
       type(stokes_rigid_t), intent(inout) :: s
-      real(dp) :: red(5), m(3, 3)
+      real(dp) :: red(6), m(3, 3)
       integer(ip) :: v
       red = 0.0_dp
       do v = 1, s%nsol
-         ! the rigid voxels only: the others' stress 2 (eta - eta_f) eps is the viscosity's
-         if (s%comp(v) == 0.0_dp) red(1:s%ncg) = red(1:s%ncg) + s%lam(:, v)
+         red(1:s%ncg) = red(1:s%ncg) + s%lam(:, v)
+         red(6) = red(6) + frob(s, s%lam(:, v), s%res(:, v) + s%comp(v)*s%lam(:, v))
       end do
       call s%fft%sum_all(red)
       red = red/real(grid_total(s%grid), dp)
+      s%multiplier_dissipation = red(6)
       m = 0.0_dp
       if (s%dim == 3) then
          m(1, 1) = red(1)

@@ -11,8 +11,8 @@
 !> lemma makes the two equal for an exactly balanced field, so their difference
 !> measures the solver error. All sums are over voxel centres (volume weight dv).
 !> Under exact rigidity (fold_stokes_rigid) eta = eta_f everywhere and the particles'
-!> contribution is the multiplier's mean stress <chi_s lambda>; the solid strain ratio is
-!> then taken over the solid voxels (chi >= FOLD_RIGID_COVERAGE).
+!> contribution is the polarisation's mean stress <tau> and dissipation <tau : eps>; the
+!> solid strain ratio is then taken over the rigid voxels (chi >= FOLD_RIGID_COVERAGE).
 module fold_stress
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
@@ -114,9 +114,10 @@ contains
          out%sigma_particles(b, a) = red(6 + c)
       end do
       if (s%exact_rigidity) then
-         ! the particles' stress is the multiplier's (eta = eta_f everywhere)
+         ! the particles' stress and dissipation are the polarisation's (eta = eta_f everywhere)
          out%sigma = out%sigma + s%multiplier_stress
          out%sigma_particles = s%multiplier_stress
+         red(13) = red(13) + s%multiplier_dissipation
       end if
       ee = sum(s%E**2)
       if (ee > 0.0_dp) then

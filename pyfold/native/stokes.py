@@ -40,7 +40,7 @@ FFT_PLANS = {"estimate": 0, "measure": 1}
 #: transforms of the CG operator (fold_stokes_solver FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE); fold_run only
 FFT_PRECISIONS = {"double": 0, "single": 1}
 #: rigidity of the particles (fold_stokes_solver FOLD_RIGIDITY_*): the seed's penalty kappa, or the
-#: constraint eps(u) = 0 on the fully covered voxels imposed by a multiplier (fold_stokes_rigid; fft)
+#: constraint eps(u) = 0 on the voxels covered at least half, by a multiplier (fold_stokes_rigid; fft)
 RIGIDITIES = {"penalty": 0, "exact": 1}
 SHAPES = {"fibre": 1, "sphere": 2, "spheroid": 3}
 
@@ -168,8 +168,7 @@ class StokesSettings:
     measure_plans : FFTW_MEASURE plans (seconds to make, faster transforms; repeated
         runs agree to the solver tolerance) or FFTW_ESTIMATE (bitwise reproducible).
     rigidity : ``"penalty"`` (default; kappa in the solid) or ``"exact"`` (eps(u) = 0 on the
-        fully covered voxels, by a multiplier; the κ → ∞ limit of the harmonic mixing;
-        kappa unused; fold_stokes_rigid).
+        voxels covered at least half, by a multiplier; kappa unused; fold_stokes_rigid).
     backend : the Stokes backend, a word of :data:`BACKEND_CHOICES` (the bindings below
         solve periodic cells, for which ``"auto"`` is ``"fft"``: :func:`backend_for`).
 

@@ -223,10 +223,9 @@ class StokesSettings(_Table):
     fft_precision: Literal["double", "single"] = _STOKES["fft_precision"]
     #: rigidity of the particles: "penalty" (the seed's viscosity kappa eta_f in the solid;
     #: rigidity error ~ 1/kappa, CG iterations ~ sqrt(kappa)) or "exact" (eps(u) = 0 on the
-    #: fully covered voxels, imposed by a multiplier, the partly covered ones with the harmonic
-    #: mixing's kappa -> infinity viscosity: the penalty's kappa -> infinity limit without
-    #: kappa; the CG tolerance is the rigidity error; fft backend, double precision;
-    #: docs/physics.md#exact-rigidity)
+    #: voxels covered at least half, imposed by a multiplier, the others with the harmonic
+    #: mixing's kappa -> infinity viscosity; no kappa; the CG tolerance is the rigidity
+    #: error; fft backend, double precision; docs/physics.md#exact-rigidity)
     rigidity: Literal["penalty", "exact"] = _STOKES["rigidity"]
     #: initial guess of each CG solve: "previous" (the last step's solution) or
     #: "extrapolate" (2 u_n - u_(n-1) of the last two solutions); measured by
