@@ -79,6 +79,7 @@ import h5py
 import numpy as np
 
 from pyfold.scene.sheared_fibres import sheared_fibres
+from pyfold.xdmf_files import xdmf_paths
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "micro"))
@@ -248,7 +249,7 @@ def concurrent_tries(args, rng, tmp: Path, w) -> dict[str, int]:
                     outcome, cause, f"{time.monotonic() - t_start:.2f}"])
         print(f"concurrent {t:3d}: second ({mode}) after {delay:.2f} s"
               f"{' (first had ended)' if first_ended else ''}: exits {codes}: {outcome}: {cause}", flush=True)
-        for path in (out, out.with_suffix(".xmf")):
+        for path in (out, *xdmf_paths(out)):
             path.unlink(missing_ok=True)
     return counts
 

@@ -33,6 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "validate": ("validate", "check a scene file completely and print it normalised"),
     "run": ("run", "run the direct simulation of a scene into an HDF5 run file"),
     "analyse": ("analyse", "fit C_I per closure and judge closures against a finished run's a4"),
+    "fit-ci": ("fit_ci", "Folgar-Tucker C_I from a measured steady A11 in simple shear (Tucker's FitCI)"),
     "report": ("report", "C_I per closure with errors, steady state, correlations and closure ranking for a run "
                          "or an ensemble of seeds"),
     "demo": ("demo", "macro layer only: Folgar-Tucker per closure and a C_I fit on synthetic data"),

@@ -21,6 +21,7 @@ what the fibre–fibre interactions do from what a closure approximation does.
 """
 from __future__ import annotations
 
+import json
 import sys
 import tempfile
 import time
@@ -57,6 +58,7 @@ class ChainResult:
     closure_errors: xr.Dataset
     figures: list[Path] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)  # --force overrides, shown in every output
 
 
 def check_closures(closures: str | Sequence[str], dim: int | None = None) -> tuple[str, ...]:
@@ -328,11 +330,14 @@ def fit_ci_per_closure(ds: xr.Dataset, L: np.ndarray, closures: Sequence[str], x
 
 
 def fit_and_compare(run_path: Path, outdir: Path, closures: Sequence[str] = DEFAULT_CLOSURES,
-                    quiet: bool = False, run: xr.Dataset | None = None, allow_failed: bool = False) -> ChainResult:
+                    quiet: bool = False, run: xr.Dataset | None = None, allow_failed: bool = False,
+                    provenance=None, warnings: Sequence[str] = ()) -> ChainResult:
     """The macro half of the chain on a finished run: fits, closure test, figures.
 
     ``run``: the run already opened by :func:`open_checked_run` (else it is opened
     and checked here, with ``allow_failed``). Closure names are checked first.
+    ``provenance`` (:class:`pyfold.provenance.Provenance`) and ``warnings`` are shown in
+    the figures and the table.
     """
     closures = check_closures(closures)
     ds = run if run is not None else open_checked_run(run_path, allow_failed=allow_failed)
@@ -354,12 +359,14 @@ def fit_and_compare(run_path: Path, outdir: Path, closures: Sequence[str] = DEFA
         pending = side.submit(timed, "closure_errors", _closure_errors_padded, ds, judged, L)
         fits = timed("fit", fit_ci_per_closure, ds, L, closures, xi)
         errors = pending.result()
-    result = ChainResult(run_path=run_path, fits=fits, closure_errors=errors, seconds=seconds)
+    result = ChainResult(run_path=run_path, fits=fits, closure_errors=errors, seconds=seconds,
+                         warnings=list(warnings))
     t0 = time.perf_counter()
-    result.figures = _figures(ds, fits, errors, L, outdir)
+    notes = [provenance.line()] if provenance is not None else []
+    result.figures = _figures(ds, fits, errors, L, outdir, notes + list(warnings))
     seconds["figures"] = time.perf_counter() - t0
     if not quiet:
-        print(summary_table(fits, errors))
+        print("\n".join(notes + list(warnings) + [summary_table(fits, errors)]))
     return result
 
 
@@ -412,13 +419,32 @@ def summary_table(fits: xr.Dataset, errors: xr.Dataset) -> str:
                          f"at t = {t_bad:.4g} s)")
             continue
         flag = "" if int(fits["success"].sel(closure=name)) else "  (fit did not converge)"
+        if not flag and ci <= 0.0:
+            flag = "  (on its bound C_I >= 0: a bound, not a measurement)"
         lines.append(f"{name:<10} {ci:11.3e} {se:10.1e} {rms:9.1e} {err}{flag}")
     lines.append("a4:D error: time mean of ||(closure(a2) - a4):D|| / ||a4:D|| against the simulation's own a4")
     return "\n".join(lines)
 
 
-def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray, outdir: Path) -> list[Path]:
+def _save_figure(fig, path: Path) -> None:
+    """Save with fixed margins, or grown to hold every text when one would be cut off
+    (:func:`pyfold.plotting.clipped_texts`)."""
+    from pyfold.plotting import clipped_texts
+
+    tight = {"bbox_inches": "tight", "pad_inches": 0.05} if clipped_texts(fig) else {}
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, dpi=130, **tight)
+
+
+def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray, outdir: Path,
+             notes: Sequence[str] = ()) -> list[Path]:
+    import textwrap
+
     from matplotlib.figure import Figure
+
+    from pyfold.plotting import closure_colour
+
+    below = [textwrap.fill(n, 190) for n in notes]
 
     outdir.mkdir(parents=True, exist_ok=True)
     rate = float(np.sqrt(2.0 * np.sum((0.5 * (L + L.T)) ** 2))) or 1.0
@@ -428,8 +454,8 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
 
     # Fixed margins, not layout="constrained": the constrained layout measures every
     # text extent in extra draws, half the cost of the figures.
-    fig = Figure(figsize=(10, 3.6))
-    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.14, top=0.9, wspace=0.28)
+    fig = Figure(figsize=(10, 3.6 + 0.15 * len(below)))
+    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.14, top=0.88 - 0.035 * len(below), wspace=0.28)
     axes = fig.subplots(1, 3)
     for ax, (i, j) in zip(axes, [(0, 0), (1, 1), (0, 1)]):
         ax.plot(strain, a2[:, i, j], "k.", ms=3, label="direct simulation")
@@ -440,31 +466,34 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
                 # and labelled as failed: it is not a fit
                 t_bad = float(fits["inadmissible_time"].sel(closure=name))
                 shown = np.asarray(ds["time"].values) <= t_bad
-                ax.plot(strain[shown], curve[shown], ":", lw=1.0,
+                ax.plot(strain[shown], curve[shown], ":", lw=1.0, color=closure_colour(str(name)),
                         label=f"FT {name}: failed, a2 inadmissible at γ̇t={t_bad * rate:.3g}")
                 continue
-            ax.plot(strain, curve, lw=1.2, label=f"FT {name}, C_I={float(fits['ci'].sel(closure=name)):.2g}")
+            ax.plot(strain, curve, lw=1.2, color=closure_colour(str(name)),
+                    label=f"FT {name}, trajectory-fitted C_I={float(fits['ci'].sel(closure=name)):.2g}")
         ax.set_xlabel("shear strain γ̇t")
         ax.set_ylabel(f"a{i + 1}{j + 1}")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7, frameon=False)
-    fig.suptitle("Direct simulation vs Folgar–Tucker with the fitted C_I, per closure", fontsize=10)
+    fig.suptitle("\n".join(["Direct simulation vs Folgar–Tucker with the C_I fitted over every record "
+                            f"(strain {strain[0]:.3g}–{strain[-1]:.3g}), per closure", *below]), fontsize=8)
     paths.append(outdir / "a2_dns_vs_fitted_ft.png")
-    with atomic_output(paths[-1]) as tmp:
-        fig.savefig(tmp, dpi=130)
+    _save_figure(fig, paths[-1])
 
-    fig = Figure(figsize=(10, 3.8))
-    fig.subplots_adjust(left=0.08, right=0.99, bottom=0.2, top=0.9, wspace=0.22)
+    fig = Figure(figsize=(10, 3.8 + 0.15 * len(below)))
+    fig.subplots_adjust(left=0.08, right=0.99, bottom=0.22, top=0.88 - 0.035 * len(below), wspace=0.22)
     left, right = fig.subplots(1, 2)
     for name in errors["closure"].values:
-        left.semilogy(strain, np.maximum(errors["error_contracted"].sel(closure=name).values, 1e-16), lw=1.2, label=name)
+        left.semilogy(strain, np.maximum(errors["error_contracted"].sel(closure=name).values, 1e-16), lw=1.2,
+                      label=name, color=closure_colour(str(name)))
     left.set_xlabel("shear strain γ̇t")
     left.set_ylabel("||(closure(a2) − a4):D|| / ||a4:D||")
     left.grid(alpha=0.3, which="both")
     if len(errors["closure"]):
         left.legend(fontsize=7, frameon=False)
     names = list(fits["closure"].values)
-    right.bar(range(len(names)), fits["ci"].values, yerr=fits["ci_stderr"].values, capsize=3, color="C0")
+    right.bar(range(len(names)), fits["ci"].values, yerr=fits["ci_stderr"].values, capsize=3,
+              color=[closure_colour(str(n)) for n in names])
     for k, name in enumerate(names):
         if "admissible" in fits and not int(fits["admissible"].sel(closure=name)):
             # ci is NaN (no bar): say why at its place
@@ -472,12 +501,12 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
                        color="C3")
     right.set_xlim(-0.6, len(names) - 0.4)  # a NaN bar takes no room otherwise
     right.set_xticks(range(len(names)), names, rotation=30)
-    right.set_ylabel("fitted C_I")
+    right.set_ylabel("C_I (trajectory fit)")
     right.grid(alpha=0.3, axis="y")
-    fig.suptitle("Closures against the simulation's own a4 (left); fitted C_I per closure (right)", fontsize=10)
+    fig.suptitle("\n".join(["Closures against the simulation's own a4 (left); C_I per closure by trajectory fit "
+                            "(right)", *below]), fontsize=8)
     paths.append(outdir / "closures_vs_dns.png")
-    with atomic_output(paths[-1]) as tmp:
-        fig.savefig(tmp, dpi=130)
+    _save_figure(fig, paths[-1])
     return paths
 
 
@@ -485,8 +514,14 @@ def stokes_summary(run_path: Path) -> str:
     """Summary lines of a Stokes run: effective viscosity and solver records."""
     from pyfold.runs import open_run
 
+    from pyfold.provenance import provenance_of
+
     ds = open_run(run_path)
     lines = [f"Stokes run {run_path.name}: status {ds.attrs.get('status', '?')}"]
+    if "time" in ds.dims and ds.sizes["time"] > 1 and "particle_xi" in ds:
+        xi = float(np.max(np.abs(np.asarray(ds["particle_xi"].values))))
+        lines.append("  " + provenance_of(run_path, np.asarray(ds["time"].values), velocity_gradient_of(run_path),
+                                          xi).line())
     if "effective_viscosity" in ds:
         eta = np.asarray(ds["effective_viscosity"].values)
         eta_f = float(ds.attrs.get("viscosity", 1.0))
@@ -501,10 +536,56 @@ def stokes_summary(run_path: Path) -> str:
     return "\n".join(lines)
 
 
-def results_dataset(chain: ChainResult) -> xr.Dataset:
+#: long_name and units of the variables and coordinates of ``pyfold analyse``'s results.nc
+#: that the fit and the closure check leave undescribed.
+_DESCRIPTIONS: dict[str, tuple[str, str]] = {
+    "closure": ("closure of Folgar-Tucker ('exact': the run's own a4)", ""),
+    "judged_closure": ("closure judged against the run's own a4", ""),
+    "time": ("time of the run's records", "s"),
+    "i": ("first index of a2 (x flow, y gradient, z vorticity)", ""),
+    "j": ("second index of a2", ""),
+    "k": ("third index of a4", ""),
+    "l": ("fourth index of a4", ""),
+    "component": ("component (i, j) of the error (f(a2) - a4):D", ""),
+    "success": ("fit converged on an admissible trajectory (1) or not (0)", "1"),
+    "admissible": ("fitted a2 stays in the orientation tensors (1) or leaves them (0; the C_I is then NaN)", "1"),
+    "mean_error_full": ("time mean of ||f(a2) - a4||_F / ||a4||_F", "1"),
+    "mean_error_contracted": ("time mean of ||(f(a2) - a4):D||_F / ||a4:D||_F", "1"),
+}
+
+
+def check_described(ds: xr.Dataset) -> xr.Dataset:
+    """Fill ``long_name``/``units`` from :data:`_DESCRIPTIONS` where missing, then make sure
+    every variable and coordinate has both (a results file must say what each number is)."""
+    for name, var in ds.variables.items():
+        if name in _DESCRIPTIONS:
+            long_name, units = _DESCRIPTIONS[name]
+            var.attrs.setdefault("long_name", long_name)
+            var.attrs.setdefault("units", units)
+    missing = [str(n) for n, v in ds.variables.items() if "long_name" not in v.attrs or "units" not in v.attrs]
+    if missing:
+        raise PyfoldError(f"results: variables without long_name/units: {', '.join(missing)} (a defect of pyfold)")
+    return ds
+
+
+#: Name of the C_I to use in analyse's results.nc (attribute ``recommended_ci``), as in the report's.
+RECOMMENDED_CI = "ci_recommended"
+
+
+def results_dataset(chain: ChainResult, provenance=None) -> xr.Dataset:
     """One Dataset with the fits (over ``closure``) and the closure errors (over
-    ``judged_closure``: the data-driven "exact" closure is fitted, not judged)."""
+    ``judged_closure``: the data-driven "exact" closure is fitted, not judged).
+
+    The trajectory-fitted C_I is ``ci_recommended`` (attribute ``recommended_ci``), every
+    variable has ``long_name`` and ``units``, and the attributes name the physics model,
+    resolution and strain range (``provenance``: :class:`pyfold.provenance.Provenance`)."""
     errors = chain.closure_errors.rename(closure="judged_closure")
-    out = xr.merge([chain.fits, errors], join="outer", compat="override")
-    out.attrs.update(format="pyfold.chain", format_version="1.0", run=chain.run_path.name)
-    return out
+    fits = chain.fits.rename(ci=RECOMMENDED_CI, ci_stderr=RECOMMENDED_CI + "_stderr")
+    fits[RECOMMENDED_CI].attrs.update(long_name="Folgar-Tucker C_I by trajectory fit over every record (the C_I to "
+                                      "use with that closure)", recommended="yes")
+    out = xr.merge([fits, errors], join="outer", compat="override")
+    out.attrs.update(format="pyfold.chain", format_version="2.0", run=str(Path(chain.run_path).resolve()),
+                     recommended_ci=RECOMMENDED_CI, warnings=json.dumps(chain.warnings))
+    if provenance is not None:
+        out.attrs.update(provenance.attrs())
+    return check_described(out)

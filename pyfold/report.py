@@ -44,6 +44,7 @@ import xarray as xr
 
 from pyfold.errors import InputError, PyfoldError
 from pyfold.files import atomic_output, describe_os_error, regular_file
+from pyfold.seed_checks import EQUIVALENCE_MARGIN
 
 #: Records per run on which closures are evaluated: a longer run is thinned to every
 #: k-th record (the rate regression gives the same C_I at record spacings 0.1 to 0.5,
@@ -66,6 +67,8 @@ PREDICTION_MAX_STEP = 0.5
 TRAJECTORY_PERIODS = 2.0
 #: Largest C_I the trajectory fit considers (the published range ends at 3e-2).
 TRAJECTORY_CI_MAX = 0.1
+#: Absolute tolerance of the trajectory fit's search in ``s = sqrt(C_I)``.
+TRAJECTORY_XATOL = 1e-4
 #: Fewest records a stationary window must hold for the estimators (ci_rate_regression
 #: needs 8 interior records; blocking errors need 16 samples).
 MIN_WINDOW_RECORDS = 16
@@ -161,7 +164,7 @@ class RunAnalysis:
     seed: int
     t: np.ndarray  # record times [s]
     a2: np.ndarray  # (nt, d, d)
-    onset_time: float  # start of the stationary part (MSER-5) [s]
+    onset_time: float  # start of the stationary part (MSER-5, not inside the first Jeffery period; NaN: none) [s]
     stationary: bool
     steady_message: str
     window: tuple[float, float]  # times used by the estimators [s]
@@ -204,20 +207,27 @@ def closure_a4(name: str, a2: np.ndarray) -> np.ndarray:
     return np.asarray(_CLOSURE_JIT[key](jnp.asarray(_padded(a2))))[: len(a2)]
 
 
-def stationary_window(t: np.ndarray, a2: np.ndarray):
+def stationary_window(t: np.ndarray, a2: np.ndarray, earliest: float = -math.inf):
     """The steady-state verdict of a run and the window the estimators use.
 
-    The window starts at the MSER-5 onset (:func:`pyfold.steady_state.detect_steady_state`)
-    when at least :data:`MIN_WINDOW_RECORDS` records follow it, else at the middle of
-    the run; the verdict (``stationary``, ``message``) is reported either way.
+    The window starts at the MSER-5 onset (:func:`pyfold.steady_state.detect_steady_state`),
+    but not before ``earliest`` [s] (one Jeffery period from the start: before the first
+    flip of the orbits no state is steady, whatever MSER finds in a short record), when at
+    least :data:`MIN_WINDOW_RECORDS` records follow it, else at the middle of the run; the
+    verdict (``stationary``, ``message``) is reported either way. Returns
+    ``(steady, window, onset_time)`` with the onset after that bound.
     """
     from pyfold.steady_state import detect_steady_state
 
     steady = detect_steady_state(t, a2)
     start = steady.onset_index
+    onset = float(steady.onset_time)
+    if onset < earliest:
+        start = min(int(np.searchsorted(t, earliest)), len(t) - 1)
+        onset = float(t[start])
     if len(t) - start < MIN_WINDOW_RECORDS:
         start = len(t) // 2
-    return steady, (float(t[start]), float(t[-1]))
+    return steady, (float(t[start]), float(t[-1])), onset
 
 
 def analyse_run(path: Path, ds: xr.Dataset, seed: int, closures: Sequence[str], L: np.ndarray,
@@ -231,7 +241,20 @@ def analyse_run(path: Path, ds: xr.Dataset, seed: int, closures: Sequence[str], 
     if len(t_all) < 4 * MIN_WINDOW_RECORDS // 2:
         raise InputError(f"{path}: {len(t_all)} records; the report needs at least {4 * MIN_WINDOW_RECORDS // 2} "
                          "(steady-state detection and a rate regression over its window)")
-    steady, window = stationary_window(t_all, a2_all)
+    from pyfold.provenance import jeffery_period_strain, shear_rate_of
+
+    t_period = jeffery_period_strain(xi) / shear_rate_of(L)
+    steady, window, onset = stationary_window(t_all, a2_all, float(t_all[0]) + t_period)
+    message = steady.message
+    stationary = bool(steady.stationary)
+    if float(t_all[0]) + t_period > float(t_all[-1]):
+        message = (f"the run ends inside the first Jeffery period ({t_period:.4g} s), before the orbits have flipped "
+                   f"once: no steady state can be judged (MSER-5 alone would put an onset at t = "
+                   f"{steady.onset_time:.4g} s); the estimators use its second half. " + message)
+        onset, stationary = math.nan, False
+    elif onset > float(steady.onset_time):
+        message = (f"MSER-5 onset at t = {steady.onset_time:.4g} s lies inside the first Jeffery period "
+                   f"({t_period:.4g} s), before the orbits have flipped once: moved to t = {onset:.4g} s. " + message)
     idx, _ = _thin_pad(len(t_all))
     t, a2, a4 = t_all[idx], a2_all[idx], a4_all[idx]
     d = a2.shape[-1]
@@ -247,8 +270,8 @@ def analyse_run(path: Path, ds: xr.Dataset, seed: int, closures: Sequence[str], 
     labels = ("x", "y", "z")[:d]
     slope, slope_se = np.asarray(steady.drift_slope), np.asarray(steady.drift_stderr)
     drift = {f"a_{labels[i]}{labels[i]}": (float(slope[i, i]), float(slope_se[i, i])) for i in range(d)}
-    return RunAnalysis(path=path, seed=seed, t=t_all, a2=a2_all, onset_time=steady.onset_time,
-                       stationary=bool(steady.stationary), steady_message=steady.message, window=window, ci=ci,
+    return RunAnalysis(path=path, seed=seed, t=t_all, a2=a2_all, onset_time=onset,
+                       stationary=stationary, steady_message=message, window=window, ci=ci,
                        ci_stderr=ci_se, error_t=t, error_contracted={}, error_mean={}, error_stderr={}, drift=drift,
                        thinned=(a2, a4))
 
@@ -374,7 +397,7 @@ def fit_ci_trajectory(closure: str, xi: float, t: np.ndarray, a2: np.ndarray, L:
         return value if math.isfinite(value) else math.inf
 
     hi = math.sqrt(TRAJECTORY_CI_MAX)
-    best = minimize_scalar(cost, bounds=(0.0, hi), method="bounded", options={"xatol": 1e-4})
+    best = minimize_scalar(cost, bounds=(0.0, hi), method="bounded", options={"xatol": TRAJECTORY_XATOL})
     s_opt = float(best.x)
     # the bounded search never evaluates the bound itself: C_I = 0 (Jeffery with the closure) may be better
     if cost(0.0) <= best.fun:
@@ -414,6 +437,20 @@ class Report:
     fit_window: tuple[float, float] = (math.nan, math.nan)  # times of the trajectory fit [s]
     allow_failed: bool = False
     notes: list[str] = dataclasses.field(default_factory=list)
+    provenance: object = None  # pyfold.provenance.Provenance of the runs
+    fit_flags: dict[str, object] = dataclasses.field(default_factory=dict)  # closure -> pyfold.seed_checks.SeedFlags
+    equivalence: dict[str, object] = dataclasses.field(default_factory=dict)  # closure -> Equivalence with the next
+    departure: dict[str, tuple[float, float, float]] = dataclasses.field(default_factory=dict)
+    # closure -> (largest |FT - simulation| inside the fit window, largest after it, strain where) of a2
+    redistribution: dict[str, object] = dataclasses.field(default_factory=dict)  # see measure_redistribution
+    warnings: list[str] = dataclasses.field(default_factory=list)  # --force overrides, shown in every output
+
+    @property
+    def fit_periods(self) -> float:
+        """Jeffery periods spanned by the trajectory fit (from the particles' actual xi)."""
+        from pyfold.provenance import jeffery_period_strain
+
+        return (self.fit_window[1] - self.fit_window[0]) * self.gamma_dot / jeffery_period_strain(self.xi)
 
     @property
     def n(self) -> int:
@@ -477,8 +514,47 @@ def _rank_one_run(run: RunAnalysis, judged: Sequence[str]) -> list:
     return rows
 
 
-def build_report(paths: Sequence[str | Path], closures: Sequence[str], allow_failed: bool = False,
-                 progress=None) -> Report:
+def default_closures(dim: int) -> tuple[str, ...]:
+    """:data:`pyfold.pipeline.DEFAULT_CLOSURES` defined in dimension ``dim`` (in 2-D the
+    orthotropic fits IBOF/ORW3 are not defined: the others are used instead of failing)."""
+    from pyfold.closures import available
+    from pyfold.pipeline import DEFAULT_CLOSURES
+
+    return tuple(c for c in DEFAULT_CLOSURES if c == "exact" or c in available(dim))
+
+
+def fit_flags(values: Sequence[float]):
+    """:func:`pyfold.seed_checks.flag_fits` for :func:`fit_ci_trajectory`: it searches
+    ``s = sqrt(C_I)`` with absolute tolerance ``xatol`` (1e-4), so a value within
+    ``xatol^2`` of C_I = 0, or within ``2 s_max xatol`` of :data:`TRAJECTORY_CI_MAX`, is on
+    its bound to the optimiser's resolution."""
+    from pyfold.seed_checks import flag_fits
+
+    xatol = TRAJECTORY_XATOL
+    return flag_fits(values, 0.0, TRAJECTORY_CI_MAX, xatol**2, 2.0 * math.sqrt(TRAJECTORY_CI_MAX) * xatol)
+
+
+def measure_redistribution(runs: Sequence[RunAnalysis], early_end: float) -> dict[str, object]:
+    """How the simulated state changes from the start (strain up to ``early_end`` [s]: the
+    trajectory-fit window) to the stationary windows: ``|a2 - I/d|`` (Frobenius) and the
+    diagonal of a2, means over the runs. Words in the summary follow these numbers."""
+    def mean_over(select):
+        values = []
+        for r in runs:
+            inside = select(r)
+            values.append(np.mean(r.a2[inside], axis=0))
+        return np.mean(values, axis=0)
+
+    early = mean_over(lambda r: r.t <= early_end)
+    late = mean_over(lambda r: (r.t >= r.window[0]) & (r.t <= r.window[1]))
+    d = early.shape[-1]
+    spread = lambda a: float(np.linalg.norm(a - np.eye(d) / d))  # noqa: E731
+    return {"early_end": early_end, "early": early, "late": late, "anisotropy_early": spread(early),
+            "anisotropy_late": spread(late)}
+
+
+def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, allow_failed: bool = False,
+                 progress=None, force: bool = False) -> Report:
     """Check the runs (each by :func:`pyfold.pipeline.open_checked_run`, and that they are
     one scene) and measure everything the report shows.
 
@@ -486,11 +562,15 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str], allow_fai
     ------
     InputError
         A run that cannot be analysed (named), runs of different scenes (the file and
-        the differing key), closure names not defined in the runs' dimension.
+        the differing key), closure names not defined in the runs' dimension; unless
+        ``force``, runs whose particles have no orientation or shorter than the
+        estimators need (:func:`pyfold.provenance.applicability_problems`).
+
+    ``closures`` None: :func:`default_closures` of the runs' dimension.
     """
     from pyfold import pipeline
     from pyfold.correlations import correlations_at
-    from pyfold.ensemble import ensemble_mean, rank_paired
+    from pyfold.ensemble import EnsembleMean, ensemble_mean, rank_paired
 
     say = progress or (lambda text: None)
     paths = [Path(p) for p in paths]
@@ -498,14 +578,22 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str], allow_fai
         raise InputError("RUN.h5: give at least one run file")
     for p in paths:
         regular_file(p, "RUN.h5")  # a folder, FIFO or device: refused before HDF5 opens it
-    closures = pipeline.check_closures(closures)
+    from pyfold.provenance import (applicability_problems, enforce, jeffery_period_strain, provenance_of,
+                                   shear_rate_of)
+
+    if closures is not None:
+        closures = pipeline.check_closures(closures)
     datasets = [pipeline.open_checked_run(p, allow_failed=allow_failed, command="pyfold report") for p in paths]
     seeds = check_same_scene(paths)
     dim = int(datasets[0].sizes["i"])
-    closures = pipeline.check_closures(closures, dim=dim)
+    closures = pipeline.check_closures(default_closures(dim) if closures is None else closures, dim=dim)
     judged = tuple(c for c in closures if c != "exact")
     L = pipeline.velocity_gradient_of(paths[0])[:dim, :dim]
     xi = pipeline.shape_factor_of(datasets[0])
+    problems = []
+    for p, ds in zip(paths, datasets):
+        problems += applicability_problems(p, np.asarray(ds["time"].values), L, xi)
+    warnings = enforce(problems, force, "pyfold report")
     runs = []
     for p, ds, seed in zip(paths, datasets, seeds):
         say(f"{p.name} (seed {seed}): steady state, C_I per closure")
@@ -526,6 +614,7 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str], allow_fai
         ranking = rank_paired({c: [r.error_mean[c] for r in runs] for c in judged}, level=RANK_LEVEL)
         method = (f"paired t-tests over the {len(runs)} seeds between neighbours in the ranking, Holm-adjusted "
                   "(pyfold.ensemble.rank_paired)")
+    equivalence = _ranking_equivalence(runs, ranking)
     # prediction from the ensemble-mean initial state over the span of the runs
     a2_0 = np.mean([r.a2[0] for r in runs], axis=0)
     a2_0 = 0.5 * (a2_0 + a2_0.T)
@@ -533,37 +622,106 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str], allow_fai
     t1 = float(max(r.t[-1] for r in runs))
     prediction, prediction_ci, notes = {}, {}, []
     pred_t = np.linspace(t0, t1, PREDICTION_POINTS)
-    gamma_dot = math.sqrt(2.0 * float(np.sum((0.5 * (L + L.T)) ** 2))) or 1.0
-    beta_e = math.sqrt((1.0 + xi) / (1.0 - xi)) if xi < 1.0 else math.inf
-    period = 2.0 * math.pi * (beta_e + 1.0 / beta_e) / gamma_dot
+    gamma_dot = shear_rate_of(L)
+    period = jeffery_period_strain(xi) / gamma_dot
     fit_end = min(t1, t0 + TRAJECTORY_PERIODS * period) if math.isfinite(period) else t1
-    ci_fit, ci_fit_runs, fit_rms = {}, {}, {}
+    ci_fit, ci_fit_runs, fit_rms, flags, departure = {}, {}, {}, {}, {}
     for c in judged:
         say(f"trajectory fit of C_I with {c} over strain {t0 * gamma_dot:.3g}-{fit_end * gamma_dot:.3g}")
         fits = [fit_ci_trajectory(c, xi, r.t, r.a2, L, min(fit_end, float(r.t[-1]))) for r in runs]
         ci_fit_runs[c] = [f[0] for f in fits]
         fit_rms[c] = [f[1] for f in fits]
-        ci_fit[c] = ensemble_mean(ci_fit_runs[c])
-        used = ci_fit[c].mean
+        flags[c] = fit_flags(ci_fit_runs[c])
+        # a fit on its bound is not a measurement: the mean is over the others (all on a bound: NaN)
+        kept = flags[c].kept
+        ci_fit[c] = ensemble_mean(kept) if kept else EnsembleMean(math.nan, math.nan, math.nan, 0)
+        used = ci_fit[c].mean if kept else float(np.mean(ci_fit_runs[c]))
         say(f"Folgar-Tucker with {c} at the fitted C_I = {used:.3g}")
         pred_t, prediction[c] = predict_ft(c, used, xi, a2_0, L, t1, t0)
         prediction_ci[c] = used
+        departure[c] = _departure(runs, pred_t, prediction[c], fit_end, gamma_dot)
     for ds in datasets:
         ds.close()
     scene = json.loads(datasets[0].attrs.get("scene", "{}"))
+    provenance = provenance_of(paths[0], np.array([t0, t1]), L, xi)
     return Report(runs=runs, closures=tuple(closures), judged=judged, scene=scene,
                   scene_title=str(scene.get("title", "")), dim=dim, L=np.asarray(L), xi=xi, beta=beta, n_l3=n_l3,
                   phi_beta=pb, correlations=corr, ci=ci, errors=errors, ranking=ranking, ranking_method=method,
                   prediction_t=pred_t, prediction=prediction, prediction_ci=prediction_ci,
                   allow_failed=allow_failed, notes=notes, ci_fit=ci_fit, ci_fit_runs=ci_fit_runs, fit_rms=fit_rms,
-                  fit_window=(t0, fit_end))
+                  fit_window=(t0, fit_end), provenance=provenance, fit_flags=flags, equivalence=equivalence,
+                  departure=departure, redistribution=measure_redistribution(runs, fit_end), warnings=warnings)
+
+
+def _departure(runs: Sequence[RunAnalysis], pred_t: np.ndarray, pred: np.ndarray, fit_end: float,
+               gamma_dot: float) -> tuple[float, float, float]:
+    """Largest component-wise |a2_FT - a2_simulation| (simulation: mean over the runs,
+    interpolated onto the prediction times) inside the fit window and after it, and the
+    strain of the latter (NaN when the runs end with the window)."""
+    d = pred.shape[-1]
+    sim = np.mean([np.stack([[np.interp(pred_t, r.t, r.a2[:, i, j]) for j in range(d)] for i in range(d)])
+                   .transpose(2, 0, 1) for r in runs], axis=0)
+    gap = np.max(np.abs(pred - sim).reshape(len(pred_t), -1), axis=1)
+    inside = pred_t <= fit_end * (1.0 + 1e-12)
+    within = float(np.max(gap[inside])) if np.any(inside) else math.nan
+    if np.all(inside):
+        return within, math.nan, math.nan
+    k = int(np.argmax(np.where(inside, -np.inf, gap)))
+    return within, float(gap[k]), float(pred_t[k] * gamma_dot)
+
+
+def _ranking_equivalence(runs: Sequence[RunAnalysis], ranking) -> dict[str, object]:
+    """Effect size and equivalence verdict (:func:`pyfold.seed_checks.equivalence`) of
+    every closure in the ranking against the next one."""
+    from pyfold.seed_checks import equivalence
+    from pyfold.steady_state import blocking_stderr
+
+    out = {}
+    for a, b in zip(ranking[:-1], ranking[1:]):
+        if len(runs) > 1:
+            out[a.name] = equivalence(a.mean, [r.error_mean[b.name] - r.error_mean[a.name] for r in runs])
+        else:
+            r = runs[0]
+            inside = (r.error_t >= r.window[0]) & (r.error_t <= r.window[1])
+            diff = r.error_contracted[b.name][inside] - r.error_contracted[a.name][inside]
+            out[a.name] = equivalence(a.mean, mean_difference=float(np.mean(diff)),
+                                      stderr=float(blocking_stderr(diff)[0]))
+    return out
 
 
 # --------------------------------------------------------------------------- outputs
 
 
-def results_dataset(rep: Report) -> xr.Dataset:
-    """The report's numbers as one Dataset (written as results.nc)."""
+#: Name of the C_I a moulding code should use in results.nc (attribute ``recommended_ci``).
+RECOMMENDED_CI = "ci_recommended"
+
+
+def _run_references(rep: Report, out: Path | None) -> list[str]:
+    """The run files as results.nc names them: relative to ``out`` when they lie in it (the
+    main job moves its folder, with its runs, into place after writing), else absolute."""
+    refs = []
+    for r in rep.runs:
+        path = Path(r.path).resolve()
+        if out is not None:
+            try:
+                refs.append(str(path.relative_to(Path(out).resolve())))
+                continue
+            except ValueError:
+                pass
+        refs.append(str(path))
+    return refs
+
+
+def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
+    """The report's numbers as one Dataset (written as results.nc into ``out``).
+
+    Every variable and coordinate has ``long_name`` and ``units``
+    (:func:`pyfold.pipeline.check_described`); the C_I to use is ``ci_recommended`` (the
+    trajectory fit, also named by the attribute ``recommended_ci``); ``ci_rate_regression``
+    is the closure-free diagnostic and its closure counterparts."""
+    from pyfold.pipeline import check_described
+    from pyfold.seed_checks import EQUIVALENCE_MARGIN, FLAG_MEANINGS
+
     seeds = [r.seed for r in rep.runs]
     closures = list(rep.closures)
     judged = list(rep.judged)
@@ -578,107 +736,229 @@ def results_dataset(rep: Report) -> xr.Dataset:
     def per_seed(attr, names):
         return np.array([[getattr(r, attr)[c] for c in names] for r in rep.runs], dtype=float).reshape(rep.n, len(names))
 
+    def one(long_name, units="1", **more):
+        return {"long_name": long_name, "units": units, **more}
+
     ens = {c: rep.ci[c] for c in closures}
-    out = xr.Dataset(
+    rr = "Folgar-Tucker C_I by rate regression over the stationary window ('exact': the runs' own a4, closure-free)"
+    out_ds = xr.Dataset(
         {
-            "ci": ("closure", [ens[c].mean for c in closures],
-                   {"units": "1", "long_name": "Folgar-Tucker C_I by rate regression, mean over the runs"}),
-            "ci_error": ("closure", [ens[c].error for c in closures],
-                         {"units": "1", "long_name": "standard error quoted for ci", "description": rep.error_kind}),
-            "ci_stderr_across": ("closure", [ens[c].stderr_across for c in closures],
-                                 {"units": "1", "long_name": "standard error across seeds, s/sqrt(n) (NaN for one run)"}),
-            "ci_stderr_pooled": ("closure", [ens[c].stderr_pooled for c in closures],
-                                 {"units": "1", "long_name": "pooled within-run standard error, sqrt(sum se^2)/n"}),
-            "ci_seed": (("seed", "closure"), per_seed("ci", closures),
-                        {"units": "1", "long_name": "C_I by rate regression per run"}),
-            "ci_seed_stderr": (("seed", "closure"), per_seed("ci_stderr", closures),
-                               {"units": "1", "long_name": "within-run standard error of ci_seed (blocking)"}),
+            "ci_rate_regression": ("closure", [ens[c].mean for c in closures],
+                                   one(rr + ", mean over the runs", recommended="no: a diagnostic; use "
+                                       + RECOMMENDED_CI)),
+            "ci_rate_regression_error": ("closure", [ens[c].error for c in closures],
+                                         one("standard error quoted for ci_rate_regression",
+                                             description=rep.error_kind)),
+            "ci_rate_regression_stderr_across": ("closure", [ens[c].stderr_across for c in closures],
+                                                 one("standard error across seeds of ci_rate_regression, s/sqrt(n) "
+                                                     "(NaN for one run)")),
+            "ci_rate_regression_stderr_pooled": ("closure", [ens[c].stderr_pooled for c in closures],
+                                                 one("pooled within-run standard error of ci_rate_regression, "
+                                                     "sqrt(sum se^2)/n")),
+            "ci_rate_regression_seed": (("seed", "closure"), per_seed("ci", closures), one(rr + ", per run")),
+            "ci_rate_regression_seed_stderr": (("seed", "closure"), per_seed("ci_stderr", closures),
+                                               one("within-run standard error of ci_rate_regression_seed (blocking)")),
             "onset_time": ("seed", [r.onset_time for r in rep.runs],
-                           {"units": "s", "long_name": "start of the stationary part (MSER-5)"}),
+                           one("start of the stationary part (MSER-5, not before one Jeffery period; NaN: the run "
+                               "ends inside the first period)", "s")),
             "stationary": ("seed", np.array([r.stationary for r in rep.runs], dtype=np.int8),
-                           {"long_name": "stationary part found and not drifting (1) or not (0)"}),
-            "steady_message": ("seed", [r.steady_message for r in rep.runs]),
-            "window_start": ("seed", [r.window[0] for r in rep.runs],
-                             {"units": "s", "long_name": "first time used by the estimators"}),
-            "window_end": ("seed", [r.window[1] for r in rep.runs], {"units": "s"}),
+                           one("stationary part found and not drifting (1) or not (0)")),
+            "steady_message": ("seed", [r.steady_message for r in rep.runs],
+                               one("verdict of the steady-state detection (pyfold.steady_state)", "")),
+            "window_start": ("seed", [r.window[0] for r in rep.runs], one("first time used by the estimators", "s")),
+            "window_end": ("seed", [r.window[1] for r in rep.runs], one("last time used by the estimators", "s")),
             "a2_drift": (("seed", "i"), [[v for v, _ in r.drift.values()] for r in rep.runs],
-                         {"units": "1/s", "long_name": "slope of the diagonal of a2 over the last half of the "
-                          "stationary part (pyfold.steady_state drift test)"}),
+                         one("slope of the diagonal of a2 over the last half of the stationary part "
+                             "(pyfold.steady_state drift test)", "1/s")),
             "a2_drift_stderr": (("seed", "i"), [[se for _, se in r.drift.values()] for r in rep.runs],
-                                {"units": "1/s"}),
-            "a2": (("seed", "time", "i", "j"), a2, {"units": "1", "long_name": "a2 of the direct simulation"}),
+                                one("standard error of a2_drift", "1/s")),
+            "a2": (("seed", "time", "i", "j"), a2, one("orientation tensor a2 of the direct simulation")),
             "a2_ft": (("closure_predicted", "time_ft", "i", "j"),
                       np.stack([rep.prediction[c] for c in rep.prediction]) if rep.prediction
                       else np.zeros((0, PREDICTION_POINTS, d, d)),
-                      {"units": "1", "long_name": "a2 of Folgar-Tucker at the closure's fitted C_I (ci_fit)"}),
-            "ci_ft": ("closure_predicted", [rep.prediction_ci[c] for c in rep.prediction],
-                      {"units": "1", "long_name": "C_I used by a2_ft"}),
+                      one("a2 of Folgar-Tucker with the closure at its recommended C_I (ci_recommended)")),
+            "ci_ft": ("closure_predicted", [rep.prediction_ci[c] for c in rep.prediction], one("C_I used by a2_ft")),
         },
-        coords={"seed": seeds, "closure": closures, "time": ("time", t, {"units": "s"}),
-                "time_ft": ("time_ft", rep.prediction_t, {"units": "s"}), "closure_predicted": list(rep.prediction),
-                "i": labels, "j": labels},
+        coords={"seed": ("seed", seeds, one("random seed of the run", "")),
+                "closure": ("closure", closures, one("closure of Folgar-Tucker ('exact': the runs' own a4)", "")),
+                "time": ("time", t, one("time of the simulation's records", "s")),
+                "time_ft": ("time_ft", rep.prediction_t, one("time of the Folgar-Tucker prediction", "s")),
+                "closure_predicted": ("closure_predicted", list(rep.prediction),
+                                      one("closure of the Folgar-Tucker prediction a2_ft", "")),
+                "i": ("i", labels, one("first index of a2 (x flow, y gradient, z vorticity)", "")),
+                "j": ("j", labels, one("second index of a2", ""))},
     )
     if judged:
-        out["a4D_error"] = ("judged_closure", [rep.errors[c].mean for c in judged],
-                            {"units": "1", "long_name": "time mean of ||(closure(a2) - a4):D|| / ||a4:D|| over the "
-                             "stationary window, mean over the runs"})
-        out["a4D_error_error"] = ("judged_closure", [rep.errors[c].error for c in judged], {"units": "1"})
-        out["a4D_error_stderr_across"] = ("judged_closure", [rep.errors[c].stderr_across for c in judged], {"units": "1"})
-        out["a4D_error_seed"] = (("seed", "judged_closure"), per_seed("error_mean", judged), {"units": "1"})
+        out_ds["a4D_error"] = ("judged_closure", [rep.errors[c].mean for c in judged],
+                               one("time mean of ||(closure(a2) - a4):D|| / ||a4:D|| over the stationary window, "
+                                   "mean over the runs"))
+        out_ds["a4D_error_error"] = ("judged_closure", [rep.errors[c].error for c in judged],
+                                     one("standard error quoted for a4D_error", description=rep.error_kind))
+        out_ds["a4D_error_stderr_across"] = ("judged_closure", [rep.errors[c].stderr_across for c in judged],
+                                             one("standard error across seeds of a4D_error (NaN for one run)"))
+        out_ds["a4D_error_seed"] = (("seed", "judged_closure"), per_seed("error_mean", judged),
+                                    one("a4D_error per run"))
         rank = {e.name: e for e in rep.ranking}
-        out["rank"] = ("judged_closure", [rank[c].rank for c in judged], {"long_name": "1 = smallest a4:D error"})
-        out["p_next"] = ("judged_closure", [rank[c].p_next for c in judged],
-                         {"long_name": "Holm-adjusted p of the test against the next in the ranking"})
-        out = out.assign_coords(judged_closure=judged)
+        out_ds["closure_rank"] = ("judged_closure", np.array([rank[c].rank for c in judged], dtype=np.int32),
+                                  one("rank of the closure by a4D_error, 1 = smallest"))
+        out_ds["p_next"] = ("judged_closure", [rank[c].p_next for c in judged],
+                            one("Holm-adjusted p of the test against the next in the ranking",
+                                method=rep.ranking_method))
+        eq = [rep.equivalence.get(c) for c in judged]
+        nan = math.nan
+        out_ds["a4D_difference_next"] = ("judged_closure", [e.difference if e else nan for e in eq],
+                                         one("effect size: a4D_error of the next closure in the ranking minus this "
+                                             "one's (paired mean)"))
+        out_ds["a4D_difference_next_low"] = ("judged_closure", [e.low if e else nan for e in eq],
+                                             one("lower end of the 90 % confidence interval of a4D_difference_next"))
+        out_ds["a4D_difference_next_high"] = ("judged_closure", [e.high if e else nan for e in eq],
+                                              one("upper end of the 90 % confidence interval of a4D_difference_next"))
+        out_ds["equivalent_to_next"] = ("judged_closure",
+                                        np.array([{"equivalent": 1, "different": 0}.get(e.verdict, -1) if e else -1
+                                                  for e in eq], dtype=np.int8),
+                                        one("two one-sided tests: 1 equivalent to the next closure within the margin, "
+                                            "0 different beyond it, -1 inconclusive or no next",
+                                            margin=EQUIVALENCE_MARGIN))
+        out_ds = out_ds.assign_coords(judged_closure=("judged_closure", judged,
+                                                      one("closure judged against the runs' own a4", "")))
     if rep.ci_fit:
         fitted = [c for c in judged if c in rep.ci_fit]
-        out["ci_fit"] = ("judged_closure", [rep.ci_fit[c].mean if c in rep.ci_fit else np.nan for c in judged],
-                         {"units": "1", "long_name": "C_I of Folgar-Tucker with the closure by trajectory fit to a2(t), "
-                          "mean over the runs (pyfold.report.fit_ci_trajectory)",
-                          "fit_window_start": rep.fit_window[0], "fit_window_end": rep.fit_window[1]})
-        out["ci_fit_error"] = ("judged_closure", [rep.ci_fit[c].error if c in rep.ci_fit else np.nan for c in judged],
-                               {"units": "1", "long_name": "standard error across seeds of ci_fit (NaN for one run)"})
-        out["ci_fit_seed"] = (("seed", "judged_closure"),
-                              np.array([[rep.ci_fit_runs[c][k] if c in fitted else np.nan for c in judged]
-                                        for k in range(rep.n)]), {"units": "1"})
-        out["ci_fit_rms_seed"] = (("seed", "judged_closure"),
-                                  np.array([[rep.fit_rms[c][k] if c in fitted else np.nan for c in judged]
-                                            for k in range(rep.n)]),
-                                  {"units": "1", "long_name": "RMS a2 error of the trajectory fit"})
+        f0, f1 = rep.fit_window
+        tf = ("C_I of Folgar-Tucker with the closure by trajectory fit to a2(t) (pyfold.report.fit_ci_trajectory) "
+              f"over strain {f0 * rep.gamma_dot:.4g}-{f1 * rep.gamma_dot:.4g}")
+        out_ds[RECOMMENDED_CI] = ("judged_closure", [rep.ci_fit[c].mean if c in rep.ci_fit else np.nan for c in judged],
+                                  one(tf + ", mean over the seeds not on a bound (the C_I to use with that closure)",
+                                      recommended="yes", fit_window_start=f0, fit_window_end=f1,
+                                      fit_window_periods=rep.fit_periods))
+        out_ds[RECOMMENDED_CI + "_error"] = ("judged_closure",
+                                             [rep.ci_fit[c].error if c in rep.ci_fit else np.nan for c in judged],
+                                             one("standard error across the seeds used of ci_recommended "
+                                                 "(NaN for one seed)"))
+        out_ds[RECOMMENDED_CI + "_n_seeds"] = ("judged_closure",
+                                               np.array([rep.ci_fit[c].n if c in rep.ci_fit else 0 for c in judged],
+                                                        dtype=np.int32),
+                                               one("seeds averaged in ci_recommended (fits on a bound excluded)"))
+        out_ds["ci_trajectory_fit_seed"] = (("seed", "judged_closure"),
+                                            np.array([[rep.ci_fit_runs[c][k] if c in fitted else np.nan
+                                                       for c in judged] for k in range(rep.n)]),
+                                            one(tf + ", per run"))
+        out_ds["ci_trajectory_fit_seed_flag"] = (("seed", "judged_closure"),
+                                                 np.array([[rep.fit_flags[c].flags[k] if c in fitted else -1
+                                                            for c in judged] for k in range(rep.n)], dtype=np.int8),
+                                                 one("verdict on ci_trajectory_fit_seed: " + FLAG_MEANINGS))
+        out_ds["ci_trajectory_fit_rms_seed"] = (("seed", "judged_closure"),
+                                                np.array([[rep.fit_rms[c][k] if c in fitted else np.nan
+                                                           for c in judged] for k in range(rep.n)]),
+                                                one("RMS a2 error of the trajectory fit per run"))
     for name, value in rep.correlations.items():
-        out.attrs[f"ci_correlation {name}"] = value
-    out.attrs.update(format="pyfold.report", format_version="1.0",
-                     runs=json.dumps([str(r.path) for r in rep.runs]), n_runs=rep.n, error_kind=rep.error_kind,
-                     ranking_method=rep.ranking_method, xi=rep.xi, beta=rep.beta, n_L3=rep.n_l3, phi_beta=rep.phi_beta,
-                     scene=json.dumps(rep.scene), estimator="ci: pyfold.ci_estimators.ci_rate_regression over the "
-                     "stationary window, 'exact' = the run's own a4; ci_fit: trajectory fit over the first "
-                     f"{TRAJECTORY_PERIODS:g} Jeffery periods (pyfold.report.fit_ci_trajectory)")
-    return out
+        out_ds.attrs[f"ci_correlation {name}"] = value
+    out_ds.attrs.update(format="pyfold.report", format_version="2.0",
+                        runs=json.dumps(_run_references(rep, out)), n_runs=rep.n, error_kind=rep.error_kind,
+                        ranking_method=rep.ranking_method, xi=rep.xi, beta=rep.beta, n_L3=rep.n_l3,
+                        phi_beta=rep.phi_beta, scene=json.dumps(rep.scene), recommended_ci=RECOMMENDED_CI,
+                        equivalence_margin=EQUIVALENCE_MARGIN,
+                        estimator=f"{RECOMMENDED_CI}: trajectory fit over the first {rep.fit_periods:.3g} Jeffery "
+                        "periods (pyfold.report.fit_ci_trajectory), the value a moulding code running that closure "
+                        "should use; ci_rate_regression: pyfold.ci_estimators.ci_rate_regression over the stationary "
+                        "window, 'exact' = the runs' own a4 (closure-free)",
+                        warnings=json.dumps(rep.warnings))
+    if rep.provenance is not None:
+        out_ds.attrs.update(rep.provenance.attrs())
+    check_described(out_ds)
+    return out_ds
 
 
 def _fmt(x: float, spec: str = ".2e") -> str:
     return "n/a" if not math.isfinite(x) else format(x, spec)
 
 
+def redistribution_words(rep: Report) -> str:
+    """What the simulated state did between the fit window and the stationary windows, as
+    measured (:func:`measure_redistribution`): broadened or narrowed, and which diagonal
+    components of a2 gained (flow x, gradient y, vorticity z)."""
+    m = rep.redistribution
+    if not m:
+        return ""
+    early, late = m["early"], m["late"]
+    d = early.shape[-1]
+    axes = ("flow", "gradient", "vorticity")[:d]
+    change = np.diag(late) - np.diag(early)
+    gained = [axes[i] for i in range(d) if change[i] > 0]
+    lost = [axes[i] for i in range(d) if change[i] < 0]
+    widen = "broadens" if m["anisotropy_late"] < m["anisotropy_early"] else "narrows"
+    diag = ", ".join(f"a{i + 1}{i + 1} {early[i, i]:.2f} -> {late[i, i]:.2f}" for i in range(d))
+    g = rep.gamma_dot
+    return (f"from the fit window (strain up to {m['early_end'] * g:.3g}) to the stationary windows the state {widen} "
+            f"(|a2 - I/{d}| {m['anisotropy_early']:.2f} -> {m['anisotropy_late']:.2f}; {diag}): orientation moves "
+            f"from the {'/'.join(lost) or '-'} towards the {'/'.join(gained) or '-'} direction")
+
+
 def interpretation(rep: Report) -> list[str]:
     """Which C_I a moulding code should use, and what the closure-free one means (from the numbers)."""
+    from pyfold.seed_checks import FLAG_LOWER_BOUND
+
     lines = ["Which C_I to use: a moulding code should take the trajectory-fitted C_I of the closure it runs (C_I "
-             "is not a material constant: each closure's a4:D error is absorbed into its C_I, docs/physics.md)."]
-    at_zero = [c for c, e in rep.ci_fit.items() if e.mean == 0.0]
+             "is not a material constant: each closure's a4:D error is absorbed into its C_I, docs/physics.md); "
+             f"results.nc: {RECOMMENDED_CI}."]
+    if rep.provenance is not None and rep.provenance.hydrodynamics == "jeffery":
+        lines.append("These C_I come from Jeffery kinematics + contacts without hydrodynamic interactions: expect "
+                     "them below the published correlations, which are fitted to real suspensions "
+                     "(docs/physics.md#what-contacts-alone-do).")
+    at_zero = [c for c, f in rep.fit_flags.items() if all(x == FLAG_LOWER_BOUND for x in f.flags)]
     if at_zero:
-        lines.append(f"The trajectory fit ends at C_I = 0 for {', '.join(at_zero)}: Folgar-Tucker with that closure "
-                     "follows the simulation best without any diffusion.")
+        lines.append(f"The trajectory fit ends at C_I = 0 for every seed with {', '.join(at_zero)}: Folgar-Tucker "
+                     "with that closure follows the simulation best without any diffusion.")
     if "exact" in rep.ci:
         e = rep.ci["exact"]
-        sign = ("negative: the contacts narrow the orientation spread instead of diffusing it" if e.mean < 0 else
-                "positive: the contacts diffuse orientations")
         significant = math.isfinite(e.error) and abs(e.mean) > 2.0 * e.error
+        moved = redistribution_words(rep)
+        if not significant:
+            sign = "not distinguishable from 0"
+        elif e.mean < 0:
+            sign = ("negative: the contacts do not act as isotropic diffusion; they redistribute orientation "
+                    "anisotropically" + (f" ({moved})" if moved else "") + ", and that redistribution projected on "
+                    "isotropic diffusion has a negative coefficient")
+        else:
+            sign = "positive: projected on isotropic diffusion the contacts spread orientations" + (
+                f" ({moved})" if moved else "")
         lines.append(f"The closure-free C_I (rate regression with the runs' own a4) = {e.mean:+.2e} ± "
                      f"{_fmt(e.error, '.1e')} is what the contacts alone do, projected on Folgar-Tucker's isotropic "
-                     "diffusion; " + (sign if significant else "not distinguishable from 0") + ". The difference from "
+                     "diffusion; " + sign + ". The difference from "
                      "the fitted values is the closure's error plus the memory of the initial orbits that "
                      "Folgar-Tucker's diffusion stands in for (docs/physics.md#what-contacts-alone-do).")
     return lines
+
+
+def flagged_fit_lines(rep: Report) -> list[str]:
+    """Per-seed trajectory fits on a bound (excluded from the mean) or outside the other
+    seeds' prediction interval (kept), one line per closure with any; and rate regressions
+    whose seeds disagree beyond their within-run errors (:func:`pyfold.seed_checks.consistency`)."""
+    from pyfold.seed_checks import consistency
+
+    seeds = [r.seed for r in rep.runs]
+    lines = []
+    for c, flags in rep.fit_flags.items():
+        notes = flags.describe(seeds, (0.0, TRAJECTORY_CI_MAX))
+        if notes:
+            values = ", ".join(f"{v:.3g}" for v in flags.values)
+            lines.append(f"{c}: per-seed fits {values}; " + "; ".join(notes))
+    for c in rep.closures:
+        test = consistency([r.ci[c] for r in rep.runs], [r.ci_stderr[c] for r in rep.runs])
+        if test.disagree:
+            values = ", ".join(f"{r.ci[c]:+.2e} ± {r.ci_stderr[c]:.1e}" for r in rep.runs)
+            lines.append(f"{c} (rate regression): the seeds disagree beyond their within-run errors (chi2 = "
+                         f"{test.chi2:.3g} for {test.dof} degrees of freedom, p = {test.p:.2g}): {values}; the error "
+                         "quoted is the larger, across-seed one")
+    return lines
+
+
+def ranking_verdict(rep: Report, e) -> str:
+    """The 'vs next' text of one ranked closure: p-value, effect size and equivalence."""
+    if not math.isfinite(e.p_next):
+        return "" if e.rank == len(rep.ranking) else "no test (one value per closure)"
+    q = rep.equivalence.get(e.name)
+    test = f"{'differs' if e.better_than_next else 'not distinguishable'} (p = {e.p_next:.2g})"
+    return f"{test}; {q.text()}" if q is not None else test
 
 
 def summary_lines(rep: Report) -> list[str]:
@@ -690,7 +970,10 @@ def summary_lines(rep: Report) -> list[str]:
         lines.append(f"fibres: beta = {rep.beta:.3g}, n L^3 = {rep.n_l3:.3g}, phi beta = {rep.phi_beta:.3g}, "
                      f"xi = {rep.xi:.4f}")
     t_end = max(float(r.t[-1]) for r in rep.runs)
+    if rep.provenance is not None:
+        lines.append(rep.provenance.line())
     lines.append(f"error bars: {rep.error_kind}")
+    lines += rep.warnings
     if rep.allow_failed:
         lines.append("WARNING: --allow-failed: runs that did not finish are used up to their last good state")
     lines += ["", f"Steady state (MSER-5 onset and drift test, pyfold.steady_state; run to strain {t_end * g:.4g}):"]
@@ -699,7 +982,7 @@ def summary_lines(rep: Report) -> list[str]:
         verdict = "stationary" if r.stationary else "NOT judged stationary"
         drift = ", ".join(f"{k} {v / g:+.1e} ± {se / g:.0e}" for k, (v, se) in r.drift.items())
         msg = r.steady_message if len(r.steady_message) <= 160 else r.steady_message[:157] + "..."
-        lines.append(f"  seed {r.seed}: onset strain {r.onset_time * g:.4g}, {verdict}; window strain "
+        lines.append(f"  seed {r.seed}: onset strain {_fmt(r.onset_time * g, '.4g')}, {verdict}; window strain "
                      f"{r.window[0] * g:.4g}-{r.window[1] * g:.4g}; drift per unit strain over its last half: {drift}")
         if not r.stationary:
             lines.append(f"    ({msg})")
@@ -707,21 +990,27 @@ def summary_lines(rep: Report) -> list[str]:
         "" if n_ok == rep.n else "; the numbers below are averages over the window after the onset of runs still "
         "drifting slowly: read them as effective values over that strain range"))
     f0, f1 = rep.fit_window
-    lines += ["", f"Folgar-Tucker C_I per closure. fitted: trajectory fit to each run's a2(t) over strain "
-              f"{f0 * g:.3g}-{f1 * g:.3g} ({TRAJECTORY_PERIODS:g} Jeffery periods; pyfold.report.fit_ci_trajectory); "
+    lines += ["", f"Folgar-Tucker C_I per closure. fitted (recommended): trajectory fit to each run's a2(t) over "
+              f"strain {f0 * g:.3g}-{f1 * g:.3g} ({rep.fit_periods:.2g} Jeffery periods of the particles' xi; "
+              "pyfold.report.fit_ci_trajectory), mean over the seeds whose fit is not on a bound; "
               "rate regr.: regression of da2/dt on the diffusion term over the stationary window "
               "(pyfold.ci_estimators.ci_rate_regression):",
-              f"  {'closure':<10} {'fitted C_I':>11} {'± error':>9} {'a2 RMS':>8}   {'rate regr.':>11} {'± error':>9}"]
+              f"  {'closure':<10} {'fitted C_I':>11} {'± error':>9} {'seeds':>5} {'a2 RMS':>8}   {'rate regr.':>11} "
+              f"{'± error':>9}"]
     for c in rep.closures:
         e = rep.ci[c]
         label = "exact*" if c == "exact" else c
         if c in rep.ci_fit:
             f = rep.ci_fit[c]
             rms = float(np.mean(rep.fit_rms[c]))
-            fitted = f"{f.mean:11.3e} {_fmt(f.error, '9.1e')} {rms:8.1e}"
+            fitted = f"{_fmt(f.mean, '11.3e')} {_fmt(f.error, '9.1e')} {f'{f.n}/{rep.n}':>5} {rms:8.1e}"
         else:
-            fitted = f"{'-':>11} {'':>9} {'':>8}"
+            fitted = f"{'-':>11} {'':>9} {'':>5} {'':>8}"
         lines.append(f"  {label:<10} {fitted}   {e.mean:+11.3e} {_fmt(e.error, '9.1e')}")
+    flagged = flagged_fit_lines(rep)
+    if flagged:
+        lines.append("  flagged per-seed values (a fit on its bound is a bound, not a measurement):")
+        lines += [f"    {x}" for x in flagged]
     if "exact" in rep.closures:
         lines.append("  * exact: the runs' own a4 (closure-free; no trajectory fit: that a4 exists only along the "
                      "simulated path)")
@@ -736,15 +1025,55 @@ def summary_lines(rep: Report) -> list[str]:
                   "window; pyfold.closure_check):",
                   f"  {'rank':<5}{'closure':<10} {'a4:D error':>11} {'± error':>9}   vs next"]
         for e in rep.ranking:
-            if math.isfinite(e.p_next):
-                gap = rep.ranking[e.rank].mean - e.mean  # ranking is sorted, e.rank is 1-based
-                verdict = (f"{'better' if e.better_than_next else 'not distinguishable'} by {gap:.1e} "
-                           f"(p = {e.p_next:.2g})")
-            else:
-                verdict = "" if e.rank == len(rep.ranking) else "no test (one value per closure)"
             err = rep.errors[e.name].error  # as in results.nc: the larger of across-seed and pooled
-            lines.append(f"  {e.rank:<5}{e.name:<10} {e.mean:11.3e} {_fmt(err, '9.1e')}   {verdict}")
+            lines.append(f"  {e.rank:<5}{e.name:<10} {e.mean:11.3e} {_fmt(err, '9.1e')}   {ranking_verdict(rep, e)}")
         lines.append(f"  significance: {rep.ranking_method}, level {RANK_LEVEL}")
+        lines.append(f"  {EQUIVALENCE_WORDS}")
+    departed = departure_lines(rep)
+    if departed:
+        lines += ["", "Folgar-Tucker at the fitted C_I against the simulation (largest |a2_FT - a2| of a component, "
+                  "mean of the seeds):"] + [f"  {x}" for x in departed]
+    return lines
+
+
+#: How the ranking's equivalence verdict reads (margin and why; pyfold.seed_checks).
+EQUIVALENCE_WORDS = (f"equivalence: two one-sided tests at level 0.05 (90 % interval of the paired difference) against "
+                     f"a margin of +-{EQUIVALENCE_MARGIN:g} in the a4:D error, i.e. {100 * EQUIVALENCE_MARGIN:g} % of "
+                     "||a4:D||: the closure enters Folgar-Tucker only through 2 xi a4:D, so errors closer than that "
+                     f"change the flow term by less than {100 * EQUIVALENCE_MARGIN:g} %, below the a2 misfit of any "
+                     "fitted C_I (pyfold.seed_checks.EQUIVALENCE_MARGIN)")
+
+
+def provenance_words(rep: Report) -> str:
+    """The physics model and strain range, short enough for a figure's title."""
+    if rep.provenance is None:
+        return ""
+    p = rep.provenance
+    words = f"{p.model}; {p.resolution}; strain {p.strain[0]:.3g}-{p.strain[1]:.3g}; {rep.n} seed(s)"
+    return words + ("; " + "; ".join(rep.warnings) if rep.warnings else "")
+
+
+def departure_note(rep: Report) -> list[str]:
+    """One line for the a2 figure: the closures whose Folgar-Tucker departs from the data past the fit window."""
+    g = rep.gamma_dot
+    gone = [(c, after, where) for c, (inside, after, where) in rep.departure.items()
+            if math.isfinite(after) and after > inside]
+    if not gone:
+        return []
+    return [f"past the fit window (strain > {rep.fit_window[1] * g:.3g}) Folgar-Tucker departs from the data: "
+            + ", ".join(f"{c} by up to {after:.2g} (strain {where:.3g})" for c, after, where in gone)]
+
+
+def departure_lines(rep: Report) -> list[str]:
+    """Where Folgar-Tucker departs from the simulation past the fit window, per closure."""
+    g = rep.gamma_dot
+    lines = []
+    for c, (inside, after, where) in rep.departure.items():
+        if math.isfinite(after):
+            lines.append(f"{c}: up to {inside:.2g} inside the fit window (strain <= {rep.fit_window[1] * g:.3g}); "
+                         f"past it up to {after:.2g} (at strain {where:.3g})"
+                         + (": Folgar-Tucker departs from the data beyond the fitted range" if after > inside
+                            else ""))
     return lines
 
 
@@ -756,34 +1085,48 @@ def summary_markdown(rep: Report, extra: Sequence[str] = ()) -> str:
           f"Error bars: {rep.error_kind}.", ""]
     if math.isfinite(rep.phi_beta):
         md += [f"Fibres: β = {rep.beta:.3g}, nL³ = {rep.n_l3:.3g}, φβ = {rep.phi_beta:.3g}, ξ = {rep.xi:.4f}.", ""]
+    if rep.provenance is not None:
+        md += [f"Physics: {rep.provenance.line()}.", ""]
+    md += [f"**{w}**" for w in rep.warnings] + ([""] if rep.warnings else [])
     md += ["## Steady state", "", "| seed | onset strain | stationary | window (strain) | message |", "|---|---|---|---|---|"]
     for r in rep.runs:
-        md.append(f"| {r.seed} | {r.onset_time * g:.4g} | {'yes' if r.stationary else 'no'} | "
+        md.append(f"| {r.seed} | {_fmt(r.onset_time * g, '.4g')} | {'yes' if r.stationary else 'no'} | "
                   f"{r.window[0] * g:.4g}–{r.window[1] * g:.4g} | {r.steady_message.replace('|', '/')} |")
     f0, f1 = rep.fit_window
     md += ["", "## C_I per closure", "",
-           f"Fitted: trajectory fit to each run's a2(t) over strain {f0 * g:.3g}–{f1 * g:.3g}; rate regression: over "
-           "the stationary window.", "",
-           "| closure | fitted C_I | ± error | a2 RMS | rate regression C_I | ± error |", "|---|---|---|---|---|---|"]
+           f"Fitted (recommended, `{RECOMMENDED_CI}` in results.nc): trajectory fit to each run's a2(t) over strain "
+           f"{f0 * g:.3g}–{f1 * g:.3g} ({rep.fit_periods:.2g} Jeffery periods), mean over the seeds not on a bound; "
+           "rate regression: over the stationary window.", "",
+           "| closure | fitted C_I | ± error | seeds | a2 RMS | rate regression C_I | ± error |",
+           "|---|---|---|---|---|---|---|"]
     for c in rep.closures:
         e = rep.ci[c]
         label = "exact (the runs' own a4, closure-free)" if c == "exact" else c
         if c in rep.ci_fit:
             f = rep.ci_fit[c]
-            fitted = f"{f.mean:.3e} | {_fmt(f.error)} | {float(np.mean(rep.fit_rms[c])):.1e}"
+            fitted = f"{_fmt(f.mean, '.3e')} | {_fmt(f.error)} | {f.n}/{rep.n} | {float(np.mean(rep.fit_rms[c])):.1e}"
         else:
-            fitted = "– | | "
+            fitted = "– | | | "
         md.append(f"| {label} | {fitted} | {e.mean:+.3e} | {_fmt(e.error)} |")
     for k, v in rep.correlations.items():
-        md.append(f"| correlation {k} at φβ = {rep.phi_beta:.3g} | {v:.3e} | | | | |")
+        md.append(f"| correlation {k} at φβ = {rep.phi_beta:.3g} | {v:.3e} | | | | | |")
+    flagged = flagged_fit_lines(rep)
+    if flagged:
+        md += ["", "Flagged per-seed values (a fit on its bound is a bound, not a measurement):", ""]
+        md += [f"* {x}" for x in flagged]
     md += [""] + [f"* {line}" for line in interpretation(rep)]
     if rep.judged:
         md += ["", "## Closure ranking (a4:D error against the runs' own a4)", "",
-               "| rank | closure | a4:D error | ± error | Holm p vs next |", "|---|---|---|---|---|"]
+               "| rank | closure | a4:D error | ± error | vs next: test, effect size, equivalence |",
+               "|---|---|---|---|---|"]
         for e in rep.ranking:
             md.append(f"| {e.rank} | {e.name} | {e.mean:.3e} | {_fmt(rep.errors[e.name].error)} | "
-                      f"{_fmt(e.p_next, '.2g')} |")
-        md += ["", f"Significance: {rep.ranking_method}, level {RANK_LEVEL}."]
+                      f"{ranking_verdict(rep, e)} |")
+        md += ["", f"Significance: {rep.ranking_method}, level {RANK_LEVEL}.", "", EQUIVALENCE_WORDS[0].upper()
+               + EQUIVALENCE_WORDS[1:] + "."]
+    departed = departure_lines(rep)
+    if departed:
+        md += ["", "## Folgar–Tucker past the fit window", ""] + [f"* {x}" for x in departed]
     if extra:
         md += ["", "## Also", "", "```", *extra, "```"]
     md += ["", "Figures: `a2_dns_vs_fitted_ft.png`, `closures_vs_dns.png`, `ci_vs_correlations.png`; "
@@ -826,18 +1169,22 @@ def write_report(rep: Report, out: Path, extra_summary: Sequence[str] = ()) -> l
     try:
         g = rep.gamma_dot
         dns = {r.seed: (r.t * g, r.a2) for r in rep.runs}
+        where = provenance_words(rep)
         plotting.plot_report_a2(dns, rep.prediction_t * g, rep.prediction, rep.prediction_ci,
-                                [r.window[0] * g for r in rep.runs], work / "a2_dns_vs_fitted_ft.png")
+                                [r.onset_time * g for r in rep.runs if math.isfinite(r.onset_time)],
+                                work / "a2_dns_vs_fitted_ft.png",
+                                fit_window=(rep.fit_window[0] * g, rep.fit_window[1] * g), provenance=where,
+                                notes=departure_note(rep))
         errors_t = {c: [(r.error_t * g, r.error_contracted[c]) for r in rep.runs] for c in rep.judged}
         # the C_I shown per closure: its trajectory fit; for the runs' own a4 the rate regression
         shown = {c: ((rep.ci_fit[c].mean, rep.ci_fit[c].error) if c in rep.ci_fit else (rep.ci[c].mean, rep.ci[c].error))
                  for c in rep.closures}
         plotting.plot_closure_report(errors_t, shown,
-                                     rep.correlations, rep.ranking, work / "closures_vs_dns.png")
+                                     rep.correlations, rep.ranking, work / "closures_vs_dns.png", provenance=where)
         plotting.plot_ci_vs_correlations(rep.phi_beta, shown,
-                                         work / "ci_vs_correlations.png")
+                                         work / "ci_vs_correlations.png", provenance=where)
         with atomic_output(work / "results.nc") as tmp:
-            results_dataset(rep).to_netcdf(tmp, engine="h5netcdf")
+            results_dataset(rep, out).to_netcdf(tmp, engine="h5netcdf")
         text = "\n".join(summary_lines(rep) + ([""] + list(extra_summary) if extra_summary else [])) + "\n"
         with atomic_output(work / "summary.txt") as tmp:
             tmp.write_text(text, encoding="utf-8")
@@ -861,5 +1208,5 @@ def report(paths: Sequence[str | Path], out: Path, closures: Sequence[str], allo
            force: bool = False, extra_summary: Sequence[str] = (), progress=None) -> tuple[Report, list[Path]]:
     """Check, measure and write: what ``pyfold report`` and ``pyfold main`` do."""
     check_report_folder(out, force=force)
-    rep = build_report(paths, closures, allow_failed=allow_failed, progress=progress)
+    rep = build_report(paths, closures, allow_failed=allow_failed, progress=progress, force=force)
     return rep, write_report(rep, out, extra_summary)

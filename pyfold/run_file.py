@@ -37,6 +37,7 @@ __all__ = [
     "RunSetup",
     "creator",
     "write_run_file",
+    "write_setup",
     "read_setup",
     "check_format",
     "fixed_string",
@@ -142,12 +143,7 @@ def write_run_file(path: str | Path, resolved: ResolvedScene, initial: InitialSt
                            ("created", datetime.now(timezone.utc).isoformat(timespec="seconds")),
                            ("command", command)):
             f.attrs[key] = fixed_string(value)
-        setup = f.create_group("setup")
-        seal(setup.create_dataset("scene_toml", data=fixed_string(resolved.toml)))
-        seal(setup.create_dataset("scene_json", data=fixed_string(resolved.scene_json())))
-        res = setup.create_group("resolved")
-        for name, (value, units, long_name) in resolved.resolved_datasets().items():
-            _dataset(res, name, value, units, long_name)
+        write_setup(f, resolved)
         init = f.create_group("initial")
         for name, units, long_name, dtype in (
             ("x", "m", "particle centres", np.float64), ("p", "1", "particle unit axes", np.float64),
@@ -157,6 +153,17 @@ def write_run_file(path: str | Path, resolved: ResolvedScene, initial: InitialSt
             ("xi", "1", "Jeffery shape factor", np.float64),
         ):
             _dataset(init, name, np.ascontiguousarray(getattr(initial, name), dtype=dtype), units, long_name)
+
+
+def write_setup(f: h5py.File, resolved: ResolvedScene) -> None:
+    """Create ``/setup`` in ``f``: the scene verbatim, the normalised scene and
+    ``/setup/resolved``, every dataset sealed with its checksum."""
+    setup = f.create_group("setup")
+    seal(setup.create_dataset("scene_toml", data=fixed_string(resolved.toml)))
+    seal(setup.create_dataset("scene_json", data=fixed_string(resolved.scene_json())))
+    res = setup.create_group("resolved")
+    for name, (value, units, long_name) in resolved.resolved_datasets().items():
+        _dataset(res, name, value, units, long_name)
 
 
 def _text(value) -> str:

@@ -11,6 +11,7 @@ resolved choices in ``attrs``.
 from __future__ import annotations
 
 import json
+import os
 import warnings
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
@@ -23,8 +24,9 @@ from pyfold.errors import DamagedRunWarning, InputError, PyfoldError, Unverified
 from pyfold.files import atomic_output
 from pyfold.integrity import Damage, DamagedRunError, refuse, tolerating_damage, verify_path
 from pyfold.run_file import check_format, read_setup
+from pyfold.xdmf_files import xdmf_data_path
 
-__all__ = ["open_run", "write_xdmf", "run_summary", "complete_counts", "AXIS_LABELS"]
+__all__ = ["open_run", "write_xdmf", "xdmf_data_path", "run_summary", "complete_counts", "AXIS_LABELS"]
 
 AXIS_LABELS = ("x", "y", "z")
 _INITIAL = {  # /initial dataset -> (variable name in the Dataset, dims after "particle")
@@ -151,7 +153,10 @@ def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
         (:func:`complete_counts`). ``attrs`` hold the root attributes (``status``,
         ``steps_done``, ``creator``, ...), ``scene`` (normalised scene, a dict as
         JSON text), ``scene_toml`` (verbatim), the resolved scalars
-        (``dim``, ``dt``, ``alpha``, ``regime``, ``hydrodynamics_reason``, ...) and
+        (``dim``, ``dt``, ``alpha``, ``regime``, ``hydrodynamics_reason``, ...),
+        ``velocity_gradient`` (the imposed ``G_ij`` [1/s], ``dim**2`` values row-major:
+        the default ``L`` of :func:`pyfold.fit.fit_parameters`), ``xi`` (the Jeffery shape
+        factor, when all particles share one) and
         ``integrity`` (:meth:`pyfold.integrity.Integrity.summary`: "verified: ...",
         "no checksums: not verified" for a format 1.0 file, or "damaged: ...").
 
@@ -250,41 +255,95 @@ def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
     for key, value in res.items():
         if isinstance(value, str) or np.ndim(value) == 0:
             attrs[key] = value.item() if hasattr(value, "item") else value
+    attrs.update(_model_attrs(res, dim))
     ds.attrs = attrs
     return ds
 
 
-def _hdf_item(h5name: str, dataset: str, dims: tuple[int, ...], number: str, precision: int,
-              selection: str = "") -> str:
-    """An XDMF DataItem reading ``dataset`` (optionally a ``selection``) of the HDF5 file.
+def _model_attrs(res, dim: int) -> dict[str, object]:
+    """What an orientation model needs from a run, as attributes: ``velocity_gradient``
+    (``G_ij = du_i/dx_j`` [1/s] of the ``dim`` x ``dim`` block, flattened row-major:
+    ``dim**2`` values, which :func:`pyfold.fit.fit_parameters` takes as its default ``L``)
+    and ``xi`` (the Jeffery shape factor, when every family has the same one)."""
+    out: dict[str, object] = {}
+    if "velocity_gradient" in res:
+        grad = np.asarray(res["velocity_gradient"], dtype=np.float64).reshape(3, 3)[:dim, :dim]
+        out["velocity_gradient"] = np.ascontiguousarray(grad).reshape(-1)
+    if "family_xi" in res:
+        xi = np.atleast_1d(np.asarray(res["family_xi"], dtype=np.float64))
+        if xi.size and np.all(xi == xi[0]):
+            out["xi"] = float(xi[0])
+    return out
+
+
+#: Per-particle arrays of ``/initial`` carried to every frame: name -> (XDMF NumberType, Precision).
+_XDMF_SCALARS = {"length": ("Float", 8), "radius": ("Float", 8), "shape": ("Int", 4), "family": ("Int", 4)}
+
+
+def _hdf_item(h5name: str, dataset: str, dims: tuple[int, ...], number: str, precision: int) -> str:
+    """An XDMF DataItem reading the whole ``dataset`` of the HDF5 file ``h5name``.
 
     The file name is XML-escaped (a ``&`` or ``<`` in it would make the XDMF invalid)."""
     return (f'<DataItem Dimensions="{" ".join(map(str, dims))}" NumberType="{number}" Precision="{precision}" '
-            f'Format="HDF">{escape(h5name)}:{dataset}{selection}</DataItem>')
+            f'Format="HDF">{escape(h5name)}:{dataset}</DataItem>')
 
 
-def _slab(h5name: str, dataset: str, index: int, full: tuple[int, ...]) -> str:
-    """One frame ``dataset[index]`` of a ``(frames, n, dim)`` dataset.
+def _frame_view(out: h5py.File, name: str, source: str, dataset: str, shape: tuple[int, ...],
+                index: int | None) -> None:
+    """A virtual dataset ``name`` of shape ``(n, 3)`` in ``out`` showing ``dataset[index]``
+    (or the whole ``(n, dim)`` dataset) of the run file ``source``, zero-padded to three
+    components; it holds no copy of the data, only the mapping."""
+    n, dim = shape[-2:]
+    layout = h5py.VirtualLayout(shape=(n, 3), dtype="f8")
+    src = h5py.VirtualSource(source, dataset, shape=shape, dtype="f8")
+    layout[:, :dim] = src[index] if index is not None else src
+    out.create_virtual_dataset(name, layout, fillvalue=0.0)
 
-    Written in the hyperslab form of XDMF 3's HDF items, ``file:/dataset|start:stride:
-    count:dims``, which ParaView's default reader (Xdmf3ReaderS) reads; the XDMF 2
-    form (a ``HyperSlab`` DataItem around the HDF item) is skipped by that reader
-    ("unrecognized array type"), leaving no particles on screen."""
-    frames, n, d = full
-    selection = f"|{index} 0 0:1 1 1:1 {n} {d}:{frames} {n} {d}"
-    return _hdf_item(h5name, dataset, (n, d), "Float", 8, selection)
+
+def _write_xdmf_data(tmp: Path, source: str, frames: list[tuple[float, str, int | None]],
+                     shapes: dict[str, tuple[int, ...]],
+                     initial: dict[str, np.ndarray]) -> None:
+    """The HDF5 file beside the XDMF: per frame ``/frame_K/x`` and ``/frame_K/p``
+    (virtual views of the run file's frames, three components), the vertex cells
+    ``/connectivity`` and the per-particle ``/glyph_scale`` and scalars."""
+    n = len(initial["length"])
+    with h5py.File(tmp, "w") as out:
+        out.attrs["long_name"] = "frames of a pyfold run file, one dataset each, for XDMF readers"
+        out.attrs["source"] = source
+        for k, (_, group, index) in enumerate(frames):
+            for name in ("x", "p"):
+                _frame_view(out, f"frame_{k}/{name}", source, group + name, shapes[group + name], index)
+        out["connectivity"] = np.arange(n, dtype=np.int64)
+        out["connectivity"].attrs["long_name"] = "one vertex cell per particle (point index)"
+        scale = np.stack([initial["length"], 2.0 * initial["radius"], 2.0 * initial["radius"]], axis=1)
+        out["glyph_scale"] = scale
+        out["glyph_scale"].attrs["long_name"] = ("glyph size along p and across it (length, 2 radius, 2 radius): "
+                                                 "a unit glyph along x scaled by components")
+        out["glyph_scale"].attrs["units"] = "m"
+        for name, (number, precision) in _XDMF_SCALARS.items():  # stored as the XDMF declares them
+            out[name] = np.asarray(initial[name], dtype=f"{'i' if number == 'Int' else 'f'}{precision}")
 
 
 def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
-    """Write an XDMF 3 file for ParaView beside a run file: one frame per snapshot.
+    """Write an XDMF 3 file for ParaView (and other XDMF readers) beside a run file:
+    one frame per snapshot.
 
-    Particles are points (their centres) carrying the axis ``p`` as a vector
-    attribute and ``length``, ``radius``, ``shape``, ``family`` as scalars;
-    ``scripts/paraview_fibres.py`` draws them as cylinders along their axes (the
-    ParaView Glyph recipe, checked in tests/cli/test_xdmf_paraview.py). Without
-    snapshots the one frame is ``/initial``. The HDF5 file is referred to by its
-    name, so keep both files together. Written for ParaView's default XDMF reader
-    (XDMF 3, Xdmf3ReaderS).
+    Particles are points at their centres, each in its own vertex cell (Polyvertex
+    topology, so that filters working on cells, such as Threshold, see them), carrying
+    the axis ``p`` (three components; zero third one in 2-D), ``glyph_scale`` =
+    (length, 2 radius, 2 radius) and ``length``, ``radius``, ``shape``, ``family``.
+    A Glyph filter with orientation ``p``, scale ``glyph_scale`` "by components" and
+    scale factor 1 draws each particle along its axis: a sphere glyph of radius 0.5
+    gives the ellipsoid of a spheroid (the sphere of a sphere), a cylinder glyph of
+    height 1 and radius 0.5, turned onto x, the cylinder of a fibre
+    (``scripts/paraview_fibres.py``). Without snapshots the one frame is ``/initial``.
+
+    Every array is a whole HDF5 dataset of ``OUT.xmf.h5`` (:func:`xdmf_data_path`),
+    the form that both ParaView's default reader (Xdmf3ReaderS) and its legacy XDMF
+    reader read (the first skips XDMF 2 ``HyperSlab`` items, the second cannot parse
+    XDMF 3's ``file:/dataset|start:stride:count:dims`` selections). The frames there
+    are HDF5 virtual datasets mapping onto the run file's ``/x`` and ``/p`` by its
+    relative name: no copy of the data; keep the three files together.
 
     Returns
     -------
@@ -293,7 +352,8 @@ def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
     """
     path = Path(path)
     xmf = Path(xmf) if xmf is not None else path.with_suffix(".xmf")
-    h5name = path.name
+    data = xdmf_data_path(xmf)
+    source = os.path.relpath(os.path.abspath(path), os.path.abspath(xmf.parent))  # the run file, from the data file
     try:
         f = h5py.File(path, "r")
     except OSError as exc:  # e.g. left unreadable by a full disk: a message, not a traceback
@@ -303,37 +363,52 @@ def write_xdmf(path: str | Path, xmf: str | Path | None = None) -> Path:
         if "initial" not in f or "x" not in f["initial"]:
             raise PyfoldError(f"{path}: no /initial/x to show")
         n, dim = f["initial"]["x"].shape
-        whole = complete_counts(f)["snapshot"]
-        if "x" in f and "p" in f and f["x"].ndim == 3 and whole > 0:
-            full_x, full_p = (tuple(int(s) for s in f[name].shape) for name in ("x", "p"))
+        initial = {}
+        for name in _XDMF_SCALARS:
             try:
-                times = f["snapshot_time"][()] if "snapshot_time" in f else np.arange(full_x[0], dtype=float)
+                initial[name] = f["initial"][name][()]
+            except (KeyError, OSError) as exc:
+                raise PyfoldError(f"{path}: /initial/{name} cannot be read ({exc}); no XDMF written") from None
+        whole = complete_counts(f)["snapshot"]
+        shapes = {"/initial/x": (n, dim), "/initial/p": (n, dim)}
+        if "x" in f and "p" in f and f["x"].ndim == 3 and whole > 0:
+            shapes.update({name: tuple(int(s) for s in f[name].shape) for name in ("/x", "/p")})
+            try:
+                times = f["snapshot_time"][()] if "snapshot_time" in f else np.arange(shapes["/x"][0], dtype=float)
             except OSError as exc:  # a chunk that fails its checksum: a message naming it, not a traceback
                 raise PyfoldError(f"{path}: /snapshot_time is damaged (cannot be read: {exc}); no XDMF written") from None
-            frames = [(float(times[k]), _slab(h5name, "/x", k, full_x), _slab(h5name, "/p", k, full_p))
-                      for k in range(whole)]
+            frames = [(float(times[k]), "/", k) for k in range(whole)]
         else:
-            frames = [(0.0, _hdf_item(h5name, "/initial/x", (n, dim), "Float", 8),
-                       _hdf_item(h5name, "/initial/p", (n, dim), "Float", 8))]
-    geometry = "XYZ" if dim == 3 else "XY"
-    scalars = "".join(
-        f'<Attribute Name="{name}" AttributeType="Scalar" Center="Node">'
-        f'{_hdf_item(h5name, "/initial/" + name, (n,), number, prec)}</Attribute>'
-        for name, number, prec in (("length", "Float", 8), ("radius", "Float", 8), ("shape", "Int", 4),
-                                   ("family", "Int", 4))
-    )
+            frames = [(0.0, "/initial/", None)]
+        lengths = f["setup/resolved/cell_lengths"][()] if "setup/resolved/cell_lengths" in f else None
+    h5name = data.name
+    cells = (f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1">'
+             f'{_hdf_item(h5name, "/connectivity", (n,), "Int", 8)}</Topology>')
+    per_particle = (f'<Attribute Name="glyph_scale" AttributeType="Vector" Center="Node">'
+                    f'{_hdf_item(h5name, "/glyph_scale", (n, 3), "Float", 8)}</Attribute>'
+                    + "".join(f'<Attribute Name="{name}" AttributeType="Scalar" Center="Node">'
+                              f'{_hdf_item(h5name, "/" + name, (n,), number, prec)}</Attribute>'
+                              for name, (number, prec) in _XDMF_SCALARS.items()))
     grids = []
-    for k, (t, geom, axes) in enumerate(frames):
+    for k, (t, _, _) in enumerate(frames):
         grids.append(
-            f'<Grid Name={quoteattr(f"snapshot {k}")} GridType="Uniform"><Time Value="{t!r}"/>'
-            f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1"/>'
-            f'<Geometry GeometryType="{geometry}">{geom}</Geometry>'
-            f'<Attribute Name="p" AttributeType="Vector" Center="Node">{axes}</Attribute>{scalars}</Grid>')
-    text = ('<?xml version="1.0" ?>\n<Xdmf Version="3.0"><Domain>'
-            '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">'
+            f'<Grid Name={quoteattr(f"snapshot {k}")} GridType="Uniform"><Time Value="{t!r}"/>{cells}'
+            f'<Geometry GeometryType="XYZ">{_hdf_item(h5name, f"/frame_{k}/x", (n, 3), "Float", 8)}</Geometry>'
+            f'<Attribute Name="p" AttributeType="Vector" Center="Node">'
+            f'{_hdf_item(h5name, f"/frame_{k}/p", (n, 3), "Float", 8)}</Attribute>{per_particle}</Grid>')
+    box = ("" if lengths is None else
+           f'<Information Name="cell_lengths" Value="{" ".join(repr(float(v)) for v in lengths)}"/>')
+    text = ('<?xml version="1.0" ?>\n<Xdmf Version="3.0"><Domain>' + box
+            + '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">'
             + "\n".join(grids) + "</Grid></Domain></Xdmf>\n")
-    with atomic_output(xmf) as tmp:  # whole or absent: a full disk leaves no 0-byte .xmf
-        tmp.write_text(text, encoding="utf-8")
+    with atomic_output(data) as tmp:  # whole or absent, like the .xmf that reads it
+        _write_xdmf_data(tmp, source, frames, shapes, initial)
+    try:
+        with atomic_output(xmf) as tmp:  # whole or absent: a full disk leaves no 0-byte .xmf
+            tmp.write_text(text, encoding="utf-8")
+    except BaseException:
+        data.unlink(missing_ok=True)  # no data file without the .xmf that explains it
+        raise
     return xmf
 
 

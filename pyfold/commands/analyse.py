@@ -5,7 +5,11 @@ cause): the closure names; the run file (a pyfold run with ``/setup`` and
 ``/initial``, at least two records, root ``status = "ok"`` unless
 ``--allow-failed``, every ``a2`` record an orientation tensor, a finite ``a4``,
 every dataset matching its checksum unless ``--allow-damaged``: see
-:func:`pyfold.runs.open_run`); and that ``--out`` can be created and written.
+:func:`pyfold.runs.open_run`); unless ``--force``, that the estimator applies (particles
+with an orientation, a strain of at least one Jeffery period:
+:func:`pyfold.provenance.applicability_problems`); and that ``--out`` can be created
+and written. Without ``--closures``, the default closures defined in the run's
+dimension are fitted (in 2-D those without IBOF/ORW3).
 
 The fits are :func:`pyfold.pipeline.fit_ci_per_closure` (fixed-step RK4 on padded
 record counts, :mod:`pyfold.fast_fit`, one closure per core at a time): their programs
@@ -17,6 +21,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pyfold import model_fit
 from pyfold.files import atomic_output, regular_file
 from pyfold.pipeline import DEFAULT_CLOSURES
 
@@ -24,8 +29,13 @@ from pyfold.pipeline import DEFAULT_CLOSURES
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run_file", metavar="RUN.h5", help="result of `pyfold run`")
     parser.add_argument("--out", default=None, help="folder for figures and results.nc (default: RUN_analysis/)")
-    parser.add_argument("--closures", default=",".join(DEFAULT_CLOSURES),
-                        help="comma-separated closures (default: %(default)s)")
+    parser.add_argument("--closures", default=None,
+                        help=f"comma-separated closures (default: {','.join(DEFAULT_CLOSURES)}, those defined in the "
+                             "run's dimension)")
+    parser.add_argument("--force", action="store_true",
+                        help="fit even when the estimator does not apply: particles without orientation (spheres, "
+                             "disks) or a strain shorter than one Jeffery period of the particles (refused by "
+                             "default, exit 2); the outputs then carry the warning")
     parser.add_argument("--allow-failed", action="store_true",
                         help="fit a run whose status is not \"ok\" (a blown-up or killed run): only the records "
                              "up to its last good state are used, with a warning")
@@ -33,12 +43,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="analyse the intact part of a run file whose checksums fail (refused by default, "
                              "exit 2 naming the damaged datasets): records from the first damaged chunk on and "
                              "other damaged datasets are left out, with a warning naming them")
+    model_fit.add_arguments(parser)  # --model, --params, --export: orientation models for moulding codes
 
 
 def run(args: argparse.Namespace) -> int:
     from pyfold.integrity import tolerate_damage
 
     with tolerate_damage(getattr(args, "allow_damaged", False)):
+        if getattr(args, "model", None) is not None:
+            default = ",".join(DEFAULT_CLOSURES)
+            if args.closures is None:  # left at its default: the model fit's own default closure
+                args.closures = default
+            return model_fit.run(args, default_closures=default)
         return _analyse(args)
 
 
@@ -47,13 +63,23 @@ def _analyse(args: argparse.Namespace) -> int:
 
     run_path = Path(args.run_file)
     regular_file(run_path, "RUN.h5")  # a folder, FIFO or device: refused before HDF5 opens it
-    closures = pipeline.check_closures(args.closures)
+    from pyfold import provenance
+    from pyfold.report import default_closures
+
+    closures = pipeline.check_closures(args.closures) if args.closures is not None else None
     ds = pipeline.open_checked_run(run_path, allow_failed=args.allow_failed)
-    closures = pipeline.check_closures(closures, dim=ds.sizes["i"])
+    dim = ds.sizes["i"]
+    closures = pipeline.check_closures(default_closures(dim) if closures is None else closures, dim=dim)
+    L = pipeline.velocity_gradient_of(run_path)
+    xi = pipeline.shape_factor_of(ds)
+    t = ds["time"].values
+    warnings = provenance.enforce(provenance.applicability_problems(run_path, t, L, xi), args.force,
+                                  "pyfold analyse")
+    where = provenance.provenance_of(run_path, t, L, xi)
     out = Path(args.out) if args.out else run_path.with_name(run_path.stem + "_analysis")
     pipeline.check_output_folder(out)
-    chain = pipeline.fit_and_compare(run_path, out, closures=closures, run=ds)
+    chain = pipeline.fit_and_compare(run_path, out, closures=closures, run=ds, provenance=where, warnings=warnings)
     with atomic_output(out / "results.nc") as tmp:
-        pipeline.results_dataset(chain).to_netcdf(tmp, engine="h5netcdf")
+        pipeline.results_dataset(chain, where).to_netcdf(tmp, engine="h5netcdf")
     print(f"pyfold analyse: figures and results.nc in {out}")
     return 0

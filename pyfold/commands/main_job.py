@@ -1,13 +1,16 @@
 """``pyfold main``: the bundled default job of the README.
 
 The default scene is simulated for several seeds (the scene's seed, seed + 1, ...),
-``--np`` runs at a time as separate processes, then :mod:`pyfold.report` measures,
-on the stationary part of every run, C_I per closure (rate regression with the
-closure's a4) and closure-free (with the runs' own a4), each with its ensemble
-error, beside the published correlations at the scene's phi beta, whether and
-when the steady state was reached, and the closures ranked by their a4:D error
-with paired significance tests (the same report as ``pyfold report`` on the run
-files). The small Stokes scene runs while the report is computed.
+``--np`` runs at a time as separate processes, then :mod:`pyfold.report` measures
+C_I per closure by trajectory fit (the recommended value; fits on a bound flagged and
+excluded) and by rate regression over the stationary part of every run, closure-free
+(with the runs' own a4), each with its ensemble error, beside the published
+correlations at the scene's phi beta, whether and when the steady state was reached,
+and the closures ranked by their a4:D error with paired significance tests, effect
+sizes and equivalence verdicts (the same report as ``pyfold report`` on the run
+files), every output naming the physics model, resolution and strain range. A scene
+shorter than one Jeffery period is reported with that warning in every output. The
+small Stokes scene runs while the report is computed.
 
 Every invocation writes a fresh, timestamped results folder under ``--out``
 (``run-YYYYmmdd-HHMMSS``), assembled in a hidden temporary folder and renamed
@@ -169,6 +172,18 @@ class _Jobs:
         self.logs = logs
         self.running: dict[str, tuple[subprocess.Popen, object, Path, float]] = {}
         self.done: dict[str, tuple[int, float]] = {}
+        self.last_report = time.monotonic()
+
+    def report_progress(self) -> None:
+        """Every progress interval (pyfold.progress), one line per running seed: its step,
+        strain and ETA, from the plain progress lines its `pyfold run` writes to its log."""
+        from pyfold.progress import default_interval, describe, latest_in_log
+
+        if time.monotonic() - self.last_report < default_interval():
+            return
+        self.last_report = time.monotonic()
+        for name, (_, _, log_path, _) in self.running.items():
+            print(f"pyfold main:   {describe(name, latest_in_log(log_path))}", flush=True)
 
     def start(self, name: str, scene: Path, out: Path) -> None:
         """Start `pyfold run` of ``scene`` with one rank (fold_run and the placement are
@@ -196,6 +211,7 @@ class _Jobs:
                         raise PyfoldError(f"`pyfold run` for {name} failed (exit {proc.returncode}):\n  "
                                           + "\n  ".join(tail))
                     return name
+            self.report_progress()
             time.sleep(0.2)
 
     def run_all(self, jobs: list[tuple[str, Path, Path]], say) -> None:
@@ -255,7 +271,9 @@ def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tupl
             say(f"2/3 small Stokes scene {STOKES_SCENE.name} (fibres coupled through the fluid), beside step 3")
             jobs.start("Stokes scene", STOKES_SCENE, outdir / "stokes_run.h5")
         say("3/3 report: steady state, C_I per closure, closure errors and ranking, Folgar-Tucker per closure")
-        rep = report.build_report(runs, closures, progress=lambda t: say(f"  {t}"))
+        # the simulations are done: a run shorter than the estimators need is reported with the
+        # warning in every output rather than thrown away
+        rep = report.build_report(runs, closures, progress=lambda t: say(f"  {t}"), force=True)
         extra = []
         if stokes:
             while jobs.running:

@@ -30,11 +30,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="results of `pyfold run`: one run, or several seeds of one scene")
     parser.add_argument("--out", default=None,
                         help="folder for the figures, results.nc and summary (default: <first RUN>_report/)")
-    parser.add_argument("--closures", default=",".join(DEFAULT_CLOSURES),
-                        help="comma-separated closures; 'exact' is the runs' own a4 (default: %(default)s)")
+    parser.add_argument("--closures", default=None,
+                        help="comma-separated closures; 'exact' is the runs' own a4 (default: "
+                             f"{','.join(DEFAULT_CLOSURES)}, those defined in the runs' dimension)")
     parser.add_argument("--allow-failed", action="store_true",
                         help="use runs whose status is not \"ok\" up to their last good state, with a warning")
-    parser.add_argument("--force", action="store_true", help="replace the report files already in --out")
+    parser.add_argument("--force", action="store_true",
+                        help="replace the report files already in --out; and report on runs the estimators do not "
+                             "fit (particles without orientation, strain shorter than one Jeffery period: refused "
+                             "by default, exit 2), the outputs then carrying the warning")
     parser.add_argument("--allow-damaged", action="store_true",
                         help="use the intact part of run files whose checksums fail (refused by default, exit 2 "
                              "naming the damaged datasets), with a warning naming them")

@@ -2,7 +2,8 @@
 
 Validate the scene completely -> write ``OUT.h5.partial`` (``/setup`` +
 ``/initial``) -> run ``fold_run`` on it (under ``mpirun -np N --oversubscribe``
-when N > 1) with a progress bar fed by its ``PROGRESS`` lines -> rename to
+when N > 1) with a progress bar fed by its ``PROGRESS`` lines (on a terminal; else
+plain progress lines every ``--progress-every`` seconds: :mod:`pyfold.progress`) -> rename to
 ``OUT.h5`` -> write ``OUT.xmf`` (ParaView) -> print a summary.
 
 Nothing is overwritten without ``--force``, and every refusal comes before any
@@ -13,9 +14,16 @@ work: ``-o`` must end in ``.h5`` (or ``.hdf5``, ``.nc``: the run also writes
 ``--force``). Even with ``--force`` an existing ``OUT.h5`` stays intact until
 the new file is complete (atomic rename).
 
+``-o``'s folder is created (with its parents) when missing, and removed again when
+the run is refused before it starts; a path through an existing file is refused.
+
 ``--resume`` continues ``OUT.h5.partial`` (or a failed ``OUT.h5``, whose
 ``status`` is not ``ok``) from its last checkpoint with ``fold_run --resume``,
-then finishes like a run (rename, ``OUT.xmf`` rewritten, summary). The file is
+then finishes like a run (rename, ``OUT.xmf`` rewritten, summary). Its scene must be
+the recorded one, or differ only by a larger ``numerics.t_end``: then the run (also a
+complete ``OUT.h5``) is extended to the new end, bit for bit as a run made in one go
+(:mod:`pyfold.extend`); any other difference is refused with exit 2 naming the key,
+and so is a complete run given no later end. The file is
 verified first (:func:`pyfold.integrity.verify_path`): a dataset that fails its
 checksum is refused with exit 2 naming it. A file another
 process holds open (a reader's HDF5 lock: an undone ``ds.close()``) is refused
@@ -74,6 +82,8 @@ from pyfold.command_line import command_line
 from pyfold.destination import LOCK_SUFFIX, acquire, check_name_length, lock_path, open_elsewhere, \
     refuse_input_as_output
 from pyfold.errors import InputError, PyfoldError
+from pyfold.progress import DEFAULT_INTERVAL, INTERVAL_ENV
+from pyfold.xdmf_files import xdmf_data_path
 
 #: Environment variable naming the fold_run executable explicitly.
 FOLD_RUN_ENV = "PYFOLD_FOLD_RUN"
@@ -103,7 +113,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="replace an existing OUT.h5 / OUT.xmf (only once the new run ends), or start again "
                              "over an interrupted OUT.h5.partial")
     parser.add_argument("--resume", action="store_true",
-                        help="continue OUT.h5.partial (or a failed OUT.h5) from its last checkpoint")
+                        help="continue OUT.h5.partial (or a failed OUT.h5) from its last checkpoint; with a scene "
+                             "that differs only by a larger numerics.t_end, extend the run (also a complete OUT.h5) "
+                             "to the new end")
+    parser.add_argument("--progress-every", type=float, default=None, metavar="SECONDS",
+                        help="when stderr is not a terminal (a log file, a batch job), a plain progress line "
+                             f"(step, strain, ETA, load) every SECONDS (default: ${INTERVAL_ENV} or "
+                             f"{DEFAULT_INTERVAL:g}; a progress bar on a terminal)")
 
 
 def usable_cores() -> int:
@@ -247,10 +263,13 @@ def _stream(pipe, sink: deque, echo) -> None:
 
 
 def _execute(command: list[str], env: dict[str, str], n_steps: int,
-             pass_fds: tuple[int, ...] = ()) -> tuple[int, list[str]]:
-    """Run fold_run in its own session; PROGRESS lines drive a rich progress bar,
-    other lines are shown. ``pass_fds`` are inherited by it (the destination's lock:
-    held as long as fold_run / mpirun lives, also if pyfold is killed).
+             pass_fds: tuple[int, ...] = (), strain_rate: float = 0.0,
+             progress_every: float | None = None) -> tuple[int, list[str]]:
+    """Run fold_run in its own session; its PROGRESS lines drive a rich progress bar
+    on a terminal, or plain progress lines every ``progress_every`` seconds
+    (:mod:`pyfold.progress`) when stderr is a file or a pipe; other lines are shown.
+    ``pass_fds`` are inherited by it (the destination's lock: held as long as
+    fold_run / mpirun lives, also if pyfold is killed).
 
     Any exception while it runs (KeyboardInterrupt, a signal turned into an
     exception by :mod:`pyfold.cli`) terminates its whole process group (mpirun and
@@ -259,48 +278,67 @@ def _execute(command: list[str], env: dict[str, str], n_steps: int,
     Returns the exit code and the last lines it printed (stdout and stderr).
     """
     from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     console = Console(stderr=True)
+    if console.is_terminal:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+        display = Progress(TextColumn("fold_run"), BarColumn(), TextColumn("{task.completed}/{task.total} steps"),
+                           TextColumn("t = {task.fields[t]}"), TimeElapsedColumn(), TimeRemainingColumn(),
+                           console=console, transient=False)
+        with display:
+            task = display.add_task("run", total=n_steps, t="0")
+            return _follow(command, env, pass_fds,
+                           lambda s: display.console.print(s, markup=False, highlight=False),
+                           lambda step, total, t: display.update(task, completed=step, total=total, t=f"{t:.6g}"))
+    from pyfold.progress import PlainProgress, default_interval
+
+    def say(text: str) -> None:
+        print(text, file=sys.stderr, flush=True)
+
+    interval = progress_every if progress_every is not None else default_interval()
+    with PlainProgress(say, n_steps, strain_rate, interval) as plain:
+        return _follow(command, env, pass_fds, say, plain.update)
+
+
+def _follow(command: list[str], env: dict[str, str], pass_fds: tuple[int, ...], show, on_progress
+            ) -> tuple[int, list[str]]:
+    """Start fold_run, pass its PROGRESS lines to ``on_progress(step, total, t)`` and
+    every other line to ``show``; see :func:`_execute`."""
     tail: deque[str] = deque(maxlen=40)
-    with Progress(TextColumn("fold_run"), BarColumn(), TextColumn("{task.completed}/{task.total} steps"),
-                  TextColumn("t = {task.fields[t]}"), TimeElapsedColumn(), TimeRemainingColumn(),
-                  console=console, transient=False) as progress:
-        task = progress.add_task("run", total=n_steps, t="0")
-        proc = None
-        err_thread = None
-        try:
-            proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                    bufsize=1, start_new_session=True, pass_fds=pass_fds)
+    proc = None
+    err_thread = None
+    try:
+        proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                bufsize=1, start_new_session=True, pass_fds=pass_fds)
+        with _LIVE_LOCK:
+            _LIVE.add(proc)
+        err_thread = threading.Thread(target=_stream, args=(proc.stderr, tail, show), daemon=True)
+        err_thread.start()
+        for line in iter(proc.stdout.readline, ""):
+            line = line.rstrip("\n")
+            fields = line.split()
+            if len(fields) == 4 and fields[0] == "PROGRESS":
+                try:
+                    on_progress(int(fields[1]), int(fields[2]), float(fields[3]))
+                    continue
+                except ValueError:
+                    pass
+            tail.append(line)
+            show(line)
+        rc = proc.wait()
+    except BaseException:
+        if proc is not None:
+            terminate_group(proc)
+        raise
+    finally:
+        if proc is not None:
+            if proc.returncode is not None and _group_alive(proc.pid):
+                terminate_group(proc)  # ranks left behind by an mpirun that exited
             with _LIVE_LOCK:
-                _LIVE.add(proc)
-            err_thread = threading.Thread(target=_stream, args=(proc.stderr, tail, lambda s: progress.console.print(
-                s, markup=False, highlight=False)), daemon=True)
-            err_thread.start()
-            for line in iter(proc.stdout.readline, ""):
-                line = line.rstrip("\n")
-                fields = line.split()
-                if len(fields) == 4 and fields[0] == "PROGRESS":
-                    try:
-                        progress.update(task, completed=int(fields[1]), total=int(fields[2]), t=f"{float(fields[3]):.6g}")
-                        continue
-                    except ValueError:
-                        pass
-                tail.append(line)
-                progress.console.print(line, markup=False, highlight=False)
-            rc = proc.wait()
-        except BaseException:
-            if proc is not None:
-                terminate_group(proc)
-            raise
-        finally:
-            if proc is not None:
-                if proc.returncode is not None and _group_alive(proc.pid):
-                    terminate_group(proc)  # ranks left behind by an mpirun that exited
-                with _LIVE_LOCK:
-                    _LIVE.discard(proc)
-            if err_thread is not None:
-                err_thread.join(timeout=10)
+                _LIVE.discard(proc)
+        if err_thread is not None:
+            err_thread.join(timeout=10)
     return rc, list(tail)
 
 
@@ -324,14 +362,28 @@ def _status(path: Path) -> str | None:
     return (status.decode(errors="replace") if isinstance(status, bytes) else str(status)).strip()
 
 
-def _check_output_folder(out: Path) -> None:
-    """``-o``'s folder must exist and take new files (probed: permissions, read-only mounts)."""
+def _check_output_folder(out: Path) -> list[Path]:
+    """``-o``'s folder is created with its parents when missing (as ``report --out`` and
+    ``main --out`` do) and must take new files (probed: permissions, read-only mounts).
+    A path through an existing file is refused. Returns the folders created, outermost
+    first (:func:`_remove_if_empty` takes them away again if the run never starts)."""
     folder = out.parent
+    created: list[Path] = []
     if not folder.is_dir():
         if folder.exists() or any(p.exists() and not p.is_dir() for p in folder.parents):
             raise InputError(f"-o: cannot write {out}: {next(p for p in [folder, *folder.parents] if p.exists())} "
                              "is a file, not a folder")
-        raise InputError(f"-o: cannot write {out}: the folder {folder} does not exist")
+        missing = [p for p in [folder, *folder.parents] if not p.exists()]
+        for path in reversed(missing):
+            try:
+                path.mkdir()
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                _remove_if_empty(created)
+                raise InputError(f"-o: cannot write {out}: cannot create the folder {path} "
+                                 f"({exc.strerror or exc}); choose a writable location") from None
+            created.append(path)
     try:
         fd, probe = tempfile.mkstemp(prefix=".pyfold-write-test-", dir=folder)
     except OSError as exc:
@@ -339,6 +391,16 @@ def _check_output_folder(out: Path) -> None:
                          f"({exc.strerror or exc}); choose a writable location") from None
     os.close(fd)
     os.unlink(probe)
+    return created
+
+
+def _remove_if_empty(folders: list[Path]) -> None:
+    """Remove the folders ``-o`` created (innermost first) that are still empty."""
+    for path in reversed(folders):
+        try:
+            path.rmdir()
+        except OSError:
+            return
 
 
 def _output_path(args: argparse.Namespace) -> Path:
@@ -371,7 +433,7 @@ def _plan_output(args: argparse.Namespace, out: Path) -> tuple[Path, Path, Path 
     """
     partial = out.with_name(out.name + PARTIAL_SUFFIX)
     xmf = out.with_suffix(".xmf")
-    for path in (out, partial, xmf):
+    for path in (out, partial, xmf, xdmf_data_path(xmf)):
         if path.exists() and not path.is_symlink() and not path.is_file():
             raise InputError(f"-o: {path} exists and is not a file")
 
@@ -384,27 +446,31 @@ def _plan_output(args: argparse.Namespace, out: Path) -> tuple[Path, Path, Path 
                                  "pass --force to allow that")
         elif os.path.lexists(out):
             status = None if out.is_symlink() else _status(out)
-            if not out.is_symlink() and (status is None or status == "ok"):
-                raise InputError(f"--resume: nothing to resume: {out} is "
-                                 + ("complete (status ok)" if status == "ok" else "not a run file with a status")
-                                 + f" and there is no {partial.name}")
-            resume_from = out  # failed: its XDMF beside it is the run's own
+            if not out.is_symlink() and status is None:
+                raise InputError(f"--resume: nothing to resume: {out} is not a run file with a status and there is "
+                                 f"no {partial.name}")
+            # failed, or complete (status ok: extended when the scene asks for a later end,
+            # pyfold.extend.plan); its XDMF beside it is the run's own
+            resume_from = out
         else:
             raise InputError(f"--resume: nothing to resume: neither {partial} nor a failed {out} exists")
         if resume_from.is_symlink():
             raise InputError(f"--resume: {_shown(resume_from)} is a symbolic link; a run continues only a regular "
                              f"file (never writing through a link): resume the file itself with -o "
                              f"{os.path.realpath(resume_from)}")
-        if os.path.lexists(xmf) and not args.force and resume_from is partial and not os.path.lexists(out):
-            raise InputError(f"-o: {_shown(xmf)} exists (the run writes its XDMF there); pass --force to replace it")
+        for view in (xmf, xdmf_data_path(xmf)):
+            if os.path.lexists(view) and not args.force and resume_from is partial and not os.path.lexists(out):
+                raise InputError(f"-o: {_shown(view)} exists (the run writes its XDMF there); pass --force to "
+                                 "replace it")
         return partial, xmf, resume_from
 
     if os.path.lexists(out) and not args.force:
         raise InputError(f"-o: {_shown(out)} exists; pass --force to replace it (it stays intact until the new run "
                          "is complete)")
-    if os.path.lexists(xmf) and not args.force:
-        raise InputError(f"-o: {_shown(xmf)} exists (the run writes its XDMF there, beside {out.name}); pass --force "
-                         "to replace it, or choose another -o")
+    for view in (xmf, xdmf_data_path(xmf)):
+        if os.path.lexists(view) and not args.force:
+            raise InputError(f"-o: {_shown(view)} exists (the run writes its XDMF there, beside {out.name}); pass "
+                             "--force to replace it, or choose another -o")
     if os.path.lexists(partial) and not args.force:
         raise InputError(f"-o: {_shown(partial)} exists: an interrupted run of {out.name}; pass --resume to continue "
                          "it from its last checkpoint, or --force to start again")
@@ -444,23 +510,31 @@ def run(args: argparse.Namespace) -> int:
     check_ranks(args.np, getattr(args, "oversubscribe", False))
     if not hasattr(args, "resume"):
         args.resume = False
+    if getattr(args, "progress_every", None) is not None:
+        from pyfold.progress import check_interval
+
+        check_interval(args.progress_every)
     out = _output_path(args)
-    _check_output_folder(out)
     check_name_length(out, (PARTIAL_SUFFIX, LOCK_SUFFIX), "-o")
-    partial = out.with_name(out.name + PARTIAL_SUFFIX)
-    refuse_input_as_output(Path(args.scene), (out, partial, out.with_suffix(".xmf"), lock_path(out)), "-o",
-                           "scene file")
-    argv = getattr(args, "argv", None) or ([args.scene, "-o", str(out), "--np", str(args.np)]
-                                          + (["--force"] if args.force else [])
-                                          + (["--resume"] if args.resume else []))
-    cli = command_line(["pyfold", "run", *argv])
-    with acquire(out, "-o", command=cli) as lock:
-        return _run_locked(args, out, cli, lock.fd)
+    created = _check_output_folder(out)
+    try:
+        partial = out.with_name(out.name + PARTIAL_SUFFIX)
+        refuse_input_as_output(Path(args.scene), (out, partial, out.with_suffix(".xmf"),
+                                                  xdmf_data_path(out.with_suffix(".xmf")), lock_path(out)),
+                               "-o", "scene file")
+        argv = getattr(args, "argv", None) or ([args.scene, "-o", str(out), "--np", str(args.np)]
+                                              + (["--force"] if args.force else [])
+                                              + (["--resume"] if args.resume else []))
+        cli = command_line(["pyfold", "run", *argv])
+        with acquire(out, "-o", command=cli) as lock:
+            return _run_locked(args, out, cli, lock.fd)
+    finally:
+        _remove_if_empty(created)  # a run that never started leaves no new empty folders
 
 
 def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | None) -> int:
     """The run, with the destination ``out`` locked (``lock_fd`` is given to fold_run)."""
-    from pyfold.scene import load_scene, read_scene_text
+    from pyfold.scene import load_scene
 
     partial, xmf, resume_from = _plan_output(args, out)
     resolved = load_scene(args.scene)
@@ -487,6 +561,8 @@ def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | No
             raise
         n_steps = resolved.n_steps
     else:
+        from pyfold.extend import plan as plan_extension
+        from pyfold.extend import rewrite_setup
         from pyfold.integrity import refuse, verify_path
         from pyfold.run_file import read_setup
 
@@ -496,22 +572,28 @@ def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | No
                "or start again with --force)")
         try:
             setup = read_setup(resume_from)
+            extension = plan_extension(resume_from, resolved, Path(args.scene), partial=resume_from == partial)
         except (OSError, KeyError) as exc:
             raise InputError(f"--resume: {resume_from} is not a readable run file: {exc}") from None
-        if setup.scene_toml != read_scene_text(args.scene):
-            print(f"pyfold run: warning: {args.scene} differs from the scene {resume_from} was made from; "
-                  "--resume continues the run recorded in the file", file=sys.stderr)
-        n_steps = int(setup.resolved.get("n_steps", resolved.n_steps))
+        n_steps = extension.resolved.n_steps if extension.extends else int(setup.resolved.get("n_steps",
+                                                                                              resolved.n_steps))
         reader = open_elsewhere(resume_from)
         if reader:
             raise InputError(f"--resume: {resume_from} is open in {reader}, which holds HDF5's lock on it; the file "
                              "is not damaged. Close it there (a dataset from pyfold.open_run: ds.close(); "
                              "an h5py.File: f.close()), then run this command again")
         if resume_from != partial:
-            os.replace(resume_from, partial)  # a failed OUT.h5: continued as OUT.h5.partial
-        print(f"pyfold run: resuming {partial} from its last checkpoint", file=sys.stderr)
+            os.replace(resume_from, partial)  # a failed or complete OUT.h5: continued as OUT.h5.partial
+        if extension.extends:
+            rewrite_setup(partial, extension.resolved)
+            resolved = extension.resolved
+            print(f"pyfold run: extending {partial} from t_end = {extension.recorded_t_end:g} to "
+                  f"{extension.t_end:g} ({n_steps} steps), from its last checkpoint", file=sys.stderr)
+        else:
+            print(f"pyfold run: resuming {partial} from its last checkpoint", file=sys.stderr)
     try:
-        rc, tail = _execute(command, env, n_steps, pass_fds=(lock_fd,) if lock_fd is not None else ())
+        rc, tail = _execute(command, env, n_steps, pass_fds=(lock_fd,) if lock_fd is not None else (),
+                            strain_rate=resolved.shear_rate, progress_every=getattr(args, "progress_every", None))
     except BaseException:
         if partial.exists():
             print(f"pyfold run: interrupted; the run so far is kept in {partial}; continue it with: {resume_hint}",

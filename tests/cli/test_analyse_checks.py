@@ -51,6 +51,17 @@ def _run(tmp_path, setup_only, status="ok", steps_done=20, a2=None) -> Path:
     return path
 
 
+@pytest.fixture(autouse=True, scope="module")
+def short_runs_allowed():
+    """These runs (strain 0.2) are shorter than the one Jeffery period a C_I estimate needs;
+    that refusal is tested in test_analyse_applicability.py, here the other checks are."""
+    from pyfold import provenance
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(provenance, "MIN_FIT_PERIODS", 0.0)
+        yield
+
+
 @pytest.fixture
 def no_fit(monkeypatch):
     """Any fit that starts raises FitStarted, recording the dataset it was given."""

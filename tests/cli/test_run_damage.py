@@ -137,7 +137,8 @@ def test_analyse_and_report_refuse_a_damaged_file(finished, tmp_path, case, comm
 def test_allow_damaged_reads_the_intact_part(finished, tmp_path, case, command, no_fit, capsys):
     path = _damaged_copy(finished, tmp_path, case)
     with pytest.raises(FitStarted):
-        main([command, str(path), "--closures", "exact", "--out", str(tmp_path / "out"), "--allow-damaged"])
+        main([command, str(path), "--closures", "exact", "--out", str(tmp_path / "out"), "--allow-damaged",
+              "--force"])  # --force: the run is shorter than one Jeffery period
     err = capsys.readouterr().err
     name, _, kept = CASES[case]
     assert f"pyfold {command}: warning:" in err and f"damaged: {name}:" in err

@@ -1,5 +1,5 @@
 """Run files: a valid scene goes into /setup and /initial and comes back unchanged;
-open_run labels fold_run's results; the XDMF file points at real datasets."""
+open_run labels fold_run's results; the XDMF file shows every frame as written."""
 from __future__ import annotations
 
 import json
@@ -111,34 +111,74 @@ def test_open_run_labels_dims_and_keeps_units(run_file, disks):
         ds.close()
 
 
-def test_xdmf_frames_point_at_existing_datasets(run_file, disks):
+def _xdmf_arrays(xmf: Path) -> list[list[tuple[str, tuple[int, ...], np.ndarray]]]:
+    """Per frame of ``xmf``: (element, Dimensions, values read from the HDF5 file named) of each HDF item."""
+    root = ET.parse(xmf).getroot()
+    frames = []
+    for grid in root.findall("./Domain/Grid/Grid"):
+        items = []
+        for parent in grid:
+            for item in parent.iter("DataItem"):
+                name, _, dataset = item.text.partition(":")
+                assert "|" not in dataset  # whole datasets: the form every XDMF reader reads
+                with h5py.File(xmf.parent / name) as f:
+                    values = f[dataset][()]
+                items.append((parent.get("Name", parent.tag), tuple(int(v) for v in item.get("Dimensions").split()),
+                              values))
+        frames.append(items)
+    return frames
+
+
+def test_xdmf_frames_show_each_snapshot_as_vertex_cells_padded_to_three_components(run_file, disks):
     _, initial = disks
-    _append(run_file, 2, 42, initial.p, initial.x)
+    n = len(initial.x)
+    x1, p1 = initial.x + 0.25, -initial.p  # a second frame unlike the first: each frame must be its own
+    append_results(run_file, 2, n, 1, [0.0, 0.5, 1.0], [0, 20], [0.0, 1.0],
+                   np.repeat((np.einsum("ni,nj->ij", initial.p, initial.p) / n)[None], 3, axis=0),
+                   np.stack([initial.x, x1]), np.stack([initial.p, p1]), [3.0, 2.0, 1.5])
     xmf = write_xdmf(run_file)
     assert xmf == run_file.with_suffix(".xmf")
     root = ET.parse(xmf).getroot()
-    frames = root.findall("./Domain/Grid/Grid")
-    assert [float(g.find("Time").get("Value")) for g in frames] == [0.0, 1.0]
+    grids = root.findall("./Domain/Grid/Grid")
+    assert [float(g.find("Time").get("Value")) for g in grids] == [0.0, 1.0]
+    for grid in grids:
+        topology = grid.find("Topology")
+        assert topology.get("TopologyType") == "Polyvertex" and topology.get("NumberOfElements") == str(n)
+        assert topology.get("NodesPerElement") == "1"
     with h5py.File(run_file) as f:
-        for item in root.iter("DataItem"):
-            if item.get("Format") == "HDF":
-                name, _, rest = item.text.partition(":")
-                dataset, _, selection = rest.partition("|")
-                assert name == run_file.name
-                dims = tuple(int(v) for v in item.get("Dimensions").split())
-                if not selection:
-                    assert f[dataset].shape == dims
-                    continue
-                # XDMF 3 hyperslab: start:stride:count:dims of the whole dataset
-                start, stride, count, whole = (tuple(int(v) for v in part.split()) for part in selection.split(":"))
-                assert whole == f[dataset].shape and stride == (1, 1, 1)
-                assert count == (1,) + dims and start[1:] == (0, 0) and start[0] < whole[0]
+        length, radius = f["initial/length"][()], f["initial/radius"][()]
+    for (x, p), items in zip([(initial.x, initial.p), (x1, p1)], _xdmf_arrays(xmf)):
+        got = {name: (dims, values) for name, dims, values in items}
+        for dims, values in got.values():
+            assert values.shape == dims  # the Dimensions declared are those of the dataset
+        np.testing.assert_array_equal(got["Topology"][1], np.arange(n))  # one vertex cell per particle
+        np.testing.assert_array_equal(got["Geometry"][1], np.column_stack([x, np.zeros(n)]))
+        np.testing.assert_array_equal(got["p"][1], np.column_stack([p, np.zeros(n)]))
+        np.testing.assert_array_equal(got["glyph_scale"][1], np.column_stack([length, 2 * radius, 2 * radius]))
+        np.testing.assert_array_equal(got["length"][1], length)
 
 
-def test_xdmf_without_snapshots_shows_the_initial_state(run_file):
-    root = ET.parse(write_xdmf(run_file)).getroot()
-    frames = root.findall("./Domain/Grid/Grid")
-    assert len(frames) == 1 and frames[0].find("Geometry/DataItem").text.endswith(":/initial/x")
+def test_xdmf_without_snapshots_shows_the_initial_state(run_file, disks):
+    _, initial = disks
+    xmf = write_xdmf(run_file)
+    (frame,) = _xdmf_arrays(xmf)
+    geometry = [values for name, _, values in frame if name == "Geometry"][0]
+    np.testing.assert_array_equal(geometry[:, :2], initial.x)
+
+
+def test_xdmf_refers_to_the_run_file_by_a_path_relative_to_the_xmf(run_file, disks, tmp_path):
+    _, initial = disks
+    elsewhere = tmp_path / "views" / "disks.xmf"
+    elsewhere.parent.mkdir()
+    write_xdmf(run_file, elsewhere)
+    moved = tmp_path.parent / (tmp_path.name + "-moved")
+    tmp_path.rename(moved)  # the three files moved together still find each other
+    try:
+        (frame,) = _xdmf_arrays(moved / "views" / "disks.xmf")
+        geometry = [values for name, _, values in frame if name == "Geometry"][0]
+        np.testing.assert_array_equal(geometry[:, :2], initial.x)
+    finally:
+        moved.rename(tmp_path)
 
 
 def test_open_run_refuses_other_files_and_major_versions(tmp_path, run_file):
