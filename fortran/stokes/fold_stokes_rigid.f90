@@ -47,9 +47,11 @@
 !> the velocity of the solution inside the body; rigid_fit reads it with weight 1 on the
 !> solid voxels and 0 elsewhere. The bulk stress is 2 eta_f E + <chi_s lambda>.
 !>
-!> One iteration: the multiplier of the direction scattered on the solid voxels, ncg r2c
-!> transforms, the Green operator per mode, ncg c2r transforms of the strain, the strain
-!> gathered on the solid voxels: 2 ncg = 10 real FFTs in 3-D (4 in 2-D). The velocity of
+!> One iteration, stencil form (3-D rotated differences, the default): the direction's
+!> corner force scattered in real space from the listed voxels, 3 r2c transforms, the
+!> Green operator per mode, 3 c2r transforms of the corner velocity, the strain gathered
+!> at the listed voxels: 6 real FFTs. Spectral form (spectral derivatives, 2-D): the ncg
+!> independent stress components forward and strain components back, 10 FFTs (4 in 2-D). The velocity of
 !> the solution accumulates in Fourier space along the iterations (x += alpha q), so no
 !> transform is spent on it. Warm start: the multiplier of the previous solve at the
 !> voxels that are still solid (a real-space field, unaffected by the change of lattice).
@@ -57,7 +59,7 @@
 !> the transforms and the dot products).
 module fold_stokes_rigid
    use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
-   use fold_kinds, only: dp, ip, msg_len
+   use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
    use fold_fft_backend, only: fft_backend_t
    use fold_grid, only: grid_total
@@ -131,9 +133,6 @@ contains
          return
       end if
       s%exact_rigidity = .true.
-      ! the stencil form belongs to the penalised operator
-      s%stencil_ok = .false.
-      s%stencil = .false.
       allocate (s%sol(3, 0), s%comp(0), s%lam(s%ncg, 0), s%res(s%ncg, 0), s%dir(s%ncg, 0), s%sdir(s%ncg, 0))
       allocate (s%lam_field(s%ncg, s%grid%n(1), s%grid%nl(2), s%grid%nl(3)))
       s%lam_field = 0.0_dp
@@ -183,6 +182,9 @@ contains
       ! of eps there by eta / eta_f)
       s%eta%r = s%set%eta_f
       s%multiplier_stress = 0.0_dp
+      ! the stencil form wherever it exists (3-D rotated differences, >= 1 z-plane per
+      ! rank); a negative stencil_fraction_max asks for the spectral form (tests)
+      s%stencil = s%stencil_ok .and. s%stencil_fraction_max >= 0.0_dp
       call solid_list(s, chi)
       eb = reduced(s, s%E)
 
@@ -241,6 +243,7 @@ contains
             write (errmsg, '(a,i0,a,es10.3)') "stokes_rigid_solve: CG breakdown at iteration ", it, &
                ", <p, S p> = ", pq
             s%iterations = it
+            if (s%stencil) call to_staggered(s, s%x)
             return
          end if
          alpha = rz/pq
@@ -260,6 +263,7 @@ contains
       end do
       s%iterations = it
       s%have_guess = .true.
+      if (s%stencil) call to_staggered(s, s%x)
 
       ! the multiplier as fields (next guess) and its mean, the particles' stress
       s%lam_field = 0.0_dp
@@ -372,9 +376,20 @@ contains
       end do
    end function dot_list
 
-   !> sdir = S dir on the solid voxels, and q = the staggered Fourier velocity
-   !> -A^-1 P B^H (chi_s dir) of the direction (unnormalised transforms, as s%x).
+   !> sdir = (Gamma + C) dir on the listed voxels, and q = the Fourier velocity
+   !> -A^-1 P B^H dir of the direction (unnormalised transforms; staggered as s%x in the
+   !> spectral form, unstaggered in the stencil form).
    subroutine apply_schur(s)
+      type(stokes_rigid_t), intent(inout) :: s
+      if (s%stencil) then
+         call apply_schur_stencil(s)
+      else
+         call apply_schur_spectral(s)
+      end if
+   end subroutine apply_schur
+
+   !> apply_schur by transforms of the ncg independent stress and strain components.
+   subroutine apply_schur_spectral(s)
       type(stokes_rigid_t), intent(inout) :: s
       integer(ip) :: c, v, i, j, k, fc, ncg
       real(dp) :: kv(3), scale, ik2
@@ -445,7 +460,169 @@ contains
             s%sdir(c, v) = -scale*s%work(fc)%r(s%sol(1, v), s%sol(2, v), s%sol(3, v)) + s%comp(v)*s%dir(c, v)
          end do
       end do
-   end subroutine apply_schur
+   end subroutine apply_schur_spectral
+
+   !> apply_schur in the stencil form (3-D rotated differences, fold_cg_kernels.f90.in
+   !> header): the corner force D^T tau scattered in real space from the listed voxels,
+   !> 3 r2c, the Green operator per mode on the unstaggered corner coefficients (P and
+   !> 1/|kv|^2 are real per mode, so they commute with the staggering phase), 3 c2r, the
+   !> strain D u gathered at the listed voxels: 6 transforms instead of 10. The corner
+   !> plane after the slab is exchanged with the next rank both ways (fold_stokes_fft's
+   !> hfirst/uhi and fover/frecv).
+   subroutine apply_schur_stencil(s)
+      type(stokes_rigid_t), intent(inout) :: s
+      integer(ip) :: c, v, i, j, k, i1, j1, nx, ny, nz
+      real(dp) :: t(3, 3), tt(3, 3), w(2, 2, 2), d(3, 3), gg(3, 3), kv(3), ik2, scale, ef
+      complex(dp) :: f(3)
+      nx = s%grid%n(1)
+      ny = s%grid%nl(2)
+      nz = s%grid%nl(3)
+      do c = 1, 3
+         s%work(c)%r = 0.0_dp
+      end do
+      s%fover = 0.0_dp
+      do v = 1, s%nsol
+         i = s%sol(1, v)
+         j = s%sol(2, v)
+         k = s%sol(3, v)
+         i1 = merge(1_ip, i + 1, i == nx)
+         j1 = merge(1_ip, j + 1, j == ny)
+         t = full(s%dir(:, v))
+         ! tt(c, l) = sum_b tau(c, b) aith(b, l); corner o gets sum_l s_l(o) tt(c, l)
+         tt = matmul(t, s%aith)
+         do c = 1, 3
+            w(1, :, :) = -tt(c, 1)
+            w(2, :, :) = tt(c, 1)
+            w(:, 1, :) = w(:, 1, :) - tt(c, 2)
+            w(:, 2, :) = w(:, 2, :) + tt(c, 2)
+            w(:, :, 1) = w(:, :, 1) - tt(c, 3)
+            w(:, :, 2) = w(:, :, 2) + tt(c, 3)
+            associate (fc => s%work(c)%r)
+               fc(i, j, k) = fc(i, j, k) + w(1, 1, 1)
+               fc(i1, j, k) = fc(i1, j, k) + w(2, 1, 1)
+               fc(i, j1, k) = fc(i, j1, k) + w(1, 2, 1)
+               fc(i1, j1, k) = fc(i1, j1, k) + w(2, 2, 1)
+               if (k < nz) then
+                  fc(i, j, k + 1) = fc(i, j, k + 1) + w(1, 1, 2)
+                  fc(i1, j, k + 1) = fc(i1, j, k + 1) + w(2, 1, 2)
+                  fc(i, j1, k + 1) = fc(i, j1, k + 1) + w(1, 2, 2)
+                  fc(i1, j1, k + 1) = fc(i1, j1, k + 1) + w(2, 2, 2)
+               else
+                  s%fover(i, j, c) = s%fover(i, j, c) + w(1, 1, 2)
+                  s%fover(i1, j, c) = s%fover(i1, j, c) + w(2, 1, 2)
+                  s%fover(i, j1, c) = s%fover(i, j1, c) + w(1, 2, 2)
+                  s%fover(i1, j1, c) = s%fover(i1, j1, c) + w(2, 2, 2)
+               end if
+            end associate
+         end do
+      end do
+      ! the force on the corner plane after the slab belongs to the next rank's first
+      call s%fft%z_halo(size(s%fover, kind=i8), s%fover, s%fover, s%frecv, s%hscr)
+      do c = 1, 3
+         s%work(c)%r(1:nx, :, 1) = s%work(c)%r(1:nx, :, 1) + s%frecv(1:nx, :, c)
+         call s%fft%r2c(s%work(c))
+      end do
+      ef = s%set%eta_f
+      do k = 1, s%fft%nsl(3)
+         do j = 1, s%fft%nsl(2)
+            do i = 1, s%fft%nxh
+               ik2 = s%ik2(i, j, k)
+               if (ik2 == 0.0_dp) then
+                  f = 0.0_dp
+               else
+                  kv = s%kv(:, i, j, k)
+                  f = [s%work(1)%c(i, j, k), s%work(2)%c(i, j, k), s%work(3)%c(i, j, k)]
+                  f = -(f - kv*sum(kv*f)*ik2)*(ik2/ef)
+               end if
+               s%q(i, j, k, :) = f
+               s%work(1)%c(i, j, k) = f(1)
+               s%work(2)%c(i, j, k) = f(2)
+               s%work(3)%c(i, j, k) = f(3)
+            end do
+         end do
+      end do
+      do c = 1, 3
+         call s%fft%c2r(s%work(c))
+         s%hfirst(:, :, c) = s%work(c)%r(:, :, 1)
+      end do
+      ! the next rank's first corner plane: the upper corners of this slab's last plane
+      call s%fft%z_halo(size(s%hfirst, kind=i8), s%hfirst, s%hfirst, s%hscr, s%uhi)
+      scale = 1.0_dp/real(grid_total(s%grid), dp)
+      do v = 1, s%nsol
+         i = s%sol(1, v)
+         j = s%sol(2, v)
+         k = s%sol(3, v)
+         i1 = merge(1_ip, i + 1, i == nx)
+         j1 = merge(1_ip, j + 1, j == ny)
+         do c = 1, 3
+            call lattice_differences(s%work(c)%r, s%uhi(:, :, c), d(c, :))
+         end do
+         ! physical gradient gg(c, b) = sum_l aith(b, l) d(c, l)
+         gg = matmul(d, transpose(s%aith))
+         t = 0.5_dp*(gg + transpose(gg))
+         s%sdir(:, v) = -scale*reduced(s, t) + s%comp(v)*s%dir(:, v)
+      end do
+   contains
+
+      !> The unscaled lattice differences (x, y, z) of one component at the centre (i, j, k)
+      !> from its eight corners (the upper z-plane from the next rank on the slab's last).
+      subroutine lattice_differences(uc, up, dd)
+         real(dp), intent(in) :: uc(:, :, :), up(:, :)
+         real(dp), intent(out) :: dd(3)
+         real(dp) :: v000, v100, v010, v110, v001, v101, v011, v111
+         v000 = uc(i, j, k)
+         v100 = uc(i1, j, k)
+         v010 = uc(i, j1, k)
+         v110 = uc(i1, j1, k)
+         if (k < nz) then
+            v001 = uc(i, j, k + 1)
+            v101 = uc(i1, j, k + 1)
+            v011 = uc(i, j1, k + 1)
+            v111 = uc(i1, j1, k + 1)
+         else
+            v001 = up(i, j)
+            v101 = up(i1, j)
+            v011 = up(i, j1)
+            v111 = up(i1, j1)
+         end if
+         dd(1) = ((v100 - v000) + (v110 - v010)) + ((v101 - v001) + (v111 - v011))
+         dd(2) = ((v010 + v110) - (v000 + v100)) + ((v011 + v111) - (v001 + v101))
+         dd(3) = ((v001 + v101) - (v000 + v100)) + ((v011 + v111) - (v010 + v110))
+      end subroutine lattice_differences
+
+      !> The full symmetric tensor of reduced components (3-D).
+      pure function full(r) result(m)
+         real(dp), intent(in) :: r(:)
+         real(dp) :: m(3, 3)
+         m(1, 1) = r(1)
+         m(2, 2) = r(2)
+         m(3, 3) = -(r(1) + r(2))
+         m(1, 2) = r(3)
+         m(2, 1) = r(3)
+         m(1, 3) = r(4)
+         m(3, 1) = r(4)
+         m(2, 3) = r(5)
+         m(3, 2) = r(5)
+      end function full
+
+   end subroutine apply_schur_stencil
+
+   !> u <- i phase u, per mode (the stencil form's unstaggered coefficients to the
+   !> staggered ones of s%x; fold_stokes_fft's tables ph1, ph23).
+   subroutine to_staggered(s, u)
+      type(stokes_rigid_t), intent(in) :: s
+      complex(dp), intent(inout) :: u(:, :, :, :)
+      integer(ip) :: i, j, k, c
+      do c = 1, s%dim
+         do k = 1, s%fft%nsl(3)
+            do j = 1, s%fft%nsl(2)
+               do i = 1, s%fft%nxh
+                  u(i, j, k, c) = s%ph1(i)*s%ph23(j + (k - 1)*s%fft%nsl(2))*u(i, j, k, c)
+               end do
+            end do
+         end do
+      end do
+   end subroutine to_staggered
 
    !> The polarisation's mean <tau> over the cell into s%multiplier_stress [Pa] and its
    !> dissipation <tau : eps> into s%multiplier_dissipation [Pa/s], with the strain on the
