@@ -13,9 +13,11 @@ module fold_stokes_bind_util
    public :: make_settings, make_backend, make_particles
 contains
    function make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, &
-                          plan_effort) result(set)
+                          plan_effort, rigidity) result(set)
       real(dp), intent(in) :: eta_f, kappa, tol
       integer(ip), intent(in) :: max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, plan_effort
+      !> fold_stokes_solver FOLD_RIGIDITY_*
+      integer(ip), intent(in) :: rigidity
       type(stokes_settings_t) :: set
       set%eta_f = eta_f
       set%kappa = kappa
@@ -30,6 +32,7 @@ contains
       set%warm_start = warm_start /= 0
       set%guess = max(1_ip, min(int(warm_start, ip), 2_ip))
       set%plan_effort = plan_effort
+      set%rigidity = rigidity
    end function make_settings
 
    subroutine make_backend(dim, n, effort, fft, stat, errmsg)
@@ -61,25 +64,28 @@ contains
 end module fold_stokes_bind_util
 
 subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa, tol, max_iter, derivative, mixing, &
-                                 plan_effort, u, stress, eta_eff, eta_diss, iterations, residual, history, stat, errmsg)
+                                 plan_effort, rigidity_code, u, stress, eta_eff, eta_diss, iterations, residual, history, &
+                                 stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
    use fold_fft_backend, only: fft_backend_t
-   use fold_stokes_fft
+   use fold_stokes_solver, only: stokes_solver_t
+   use fold_stokes_rigid, only: stokes_periodic_new
    use fold_stress, only: bulk_stress_t, bulk_stress
    use fold_stokes_bind_util, only: make_settings, make_backend
    implicit none
-   integer(ip), intent(in) :: dim, n1, n2, n3, max_iter, derivative, mixing, plan_effort
+   integer(ip), intent(in) :: dim, n1, n2, n3, max_iter, derivative, mixing, plan_effort, rigidity_code
    real(dp), intent(in) :: lattice(3, 3), g(3, 3), chi(n1, n2, n3), eta_f, kappa, tol
    real(dp), intent(out) :: u(n1, n2, n3, dim), stress(3, 3), eta_eff, eta_diss, residual, history(max_iter + 1)
    integer(ip), intent(out) :: iterations
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
    class(fft_backend_t), allocatable :: fft
-   type(stokes_fft_t) :: s
+   class(stokes_solver_t), allocatable :: s
    type(bulk_stress_t) :: b
    integer :: solve_stat, c
    character(len=msg_len) :: solve_msg
+   real(dp), pointer, contiguous :: f(:, :, :)
 
    u = 0.0_dp
    stress = 0.0_dp
@@ -90,19 +96,20 @@ subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa,
    iterations = 0
    call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
    if (stat /= FOLD_OK) return
-   call stokes_fft_init(s, fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, 1_ip, 0_ip, 0_ip, &
-                                              plan_effort), stat, errmsg)
+   call stokes_periodic_new(fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, 1_ip, 0_ip, 0_ip, &
+                                              plan_effort, rigidity_code), s, stat, errmsg)
    if (stat /= FOLD_OK) return
-   call stokes_fft_set_lattice(s, lattice, stat, errmsg)
+   call s%set_lattice(lattice, stat, errmsg)
    if (stat /= FOLD_OK) return
-   call stokes_fft_solve(s, chi, g, solve_stat, solve_msg)
+   call s%solve(chi, g, solve_stat, solve_msg)
    iterations = s%iterations
    residual = s%residual
    history(1:iterations + 1) = s%history(0:iterations)
    if (solve_stat == FOLD_OK .or. solve_stat == FOLD_NOT_CONVERGED) then
-      call stokes_fft_velocity(s)
+      call s%compute_velocity()
       do c = 1, dim
-         u(:, :, :, c) = s%vel(c)%r(1:n1, :, :)
+         f => s%velocity_field(int(c, ip))
+         u(:, :, :, c) = f(1:n1, :, :)
       end do
       call bulk_stress(s, chi, b, stat, errmsg)
       stress = b%sigma
@@ -111,12 +118,12 @@ subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa,
    end if
    stat = solve_stat
    errmsg = solve_msg
-   call stokes_fft_destroy(s)
+   call s%destroy()
 end subroutine fold_stokes_solve_chi
 
 subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offset, g, shape, radius, length, xi, x, p, &
                                        eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, &
-                                       plan_effort, chi, u, v, omega, rigidity, stress, sigma_p, scalars, &
+                                       plan_effort, rigidity_code, chi, u, v, omega, rigidity, stress, sigma_p, scalars, &
                                        iterations, history, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
@@ -126,7 +133,7 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    use fold_stokes_step
    use fold_stokes_bind_util, only: make_settings, make_backend, make_particles
    implicit none
-   integer(ip), intent(in) :: dim, n1, n2, n3, np, max_iter, derivative, mixing, subsamples, fibre_ends, plan_effort
+   integer(ip), intent(in) :: dim, n1, n2, n3, np, max_iter, derivative, mixing, subsamples, fibre_ends, plan_effort, rigidity_code
    integer(ip), intent(in) :: shape(np)
    real(dp), intent(in) :: lengths(3), shear_offset, g(3, 3), radius(np), length(np), xi(np), x(dim, np), p(dim, np)
    real(dp), intent(in) :: eta_f, kappa, tol
@@ -162,7 +169,7 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
    if (stat /= FOLD_OK) return
    call stokes_context_init(ctx, fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
-                                                    fibre_ends, 0_ip, plan_effort), stat, errmsg)
+                                                    fibre_ends, 0_ip, plan_effort, rigidity_code), stat, errmsg)
    if (stat /= FOLD_OK) return
    call stokes_rigid_velocities(ctx, cell, parts, rec, stat, errmsg)
    iterations = ctx%solver%iterations
@@ -186,7 +193,7 @@ end subroutine fold_stokes_solve_particles
 
 subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, scheme, shape, radius, length, xi, &
                              x0, p0, eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, &
-                             warm_start, plan_effort, x_hist, p_hist, records, stat, errmsg)
+                             warm_start, plan_effort, rigidity_code, x_hist, p_hist, records, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
    use fold_fft_backend, only: fft_backend_t
@@ -196,7 +203,7 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    use fold_stokes_bind_util, only: make_settings, make_backend, make_particles
    implicit none
    integer(ip), intent(in) :: dim, n1, n2, n3, np, nsteps, scheme, max_iter, derivative, mixing, subsamples
-   integer(ip), intent(in) :: fibre_ends, warm_start, plan_effort, shape(np)
+   integer(ip), intent(in) :: fibre_ends, warm_start, plan_effort, rigidity_code, shape(np)
    real(dp), intent(in) :: lengths(3), g(3, 3), t0, dt, radius(np), length(np), xi(np), x0(dim, np), p0(dim, np)
    real(dp), intent(in) :: eta_f, kappa, tol
    real(dp), intent(out) :: x_hist(dim, np, nsteps + 1), p_hist(dim, np, nsteps + 1)
@@ -222,7 +229,8 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
    if (stat /= FOLD_OK) return
    call stokes_context_init(ctx, fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
-                                                    fibre_ends, warm_start, plan_effort), stat, errmsg)
+                                                    fibre_ends, warm_start, plan_effort, rigidity_code), stat, &
+                                                    errmsg)
    if (stat /= FOLD_OK) return
    allocate (recs(max(nsteps, 1)))
    call stokes_march(ctx, cell, parts, t0, dt, nsteps, scheme, x_hist, p_hist, recs, stat, errmsg)

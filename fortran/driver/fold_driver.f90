@@ -61,7 +61,7 @@ module fold_driver
    use fold_jeffery_step, only: jeffery_stepper_t, jeffery_stepper_init, jeffery_step_velocities
    use fold_h5, only: h5_start, h5_stop
    use fold_run_file, only: run_setup_t, read_run_file, FOLD_HYDRO_STOKES
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_STOKES_HYPRE
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_STOKES_HYPRE, FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
                                stokes_rigid_velocities, stokes_context_lubrication
@@ -184,9 +184,15 @@ contains
                write (m2, '(i0,"x",i0,"x",i0)') setup%stokes_grid(1:3)
             end if
             m2 = trim(m2)//trim(merge(" (hypre)", " (fft)  ", setup%stokes%backend == FOLD_STOKES_HYPRE))
-            write (output_unit, '(a,a,a,i0,a,es9.2,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(m2), " on ", nranks, &
-               " rank(s), kappa ", setup%stokes%kappa, ", tol ", setup%stokes%tol, ", ", &
-               trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
+            if (setup%stokes%rigidity == FOLD_RIGIDITY_EXACT) then
+               write (output_unit, '(a,a,a,i0,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(m2), " on ", nranks, &
+                  " rank(s), exact rigidity, tol ", setup%stokes%tol, ", ", &
+                  trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
+            else
+               write (output_unit, '(a,a,a,i0,a,es9.2,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(m2), " on ", &
+                  nranks, " rank(s), kappa ", setup%stokes%kappa, ", tol ", setup%stokes%tol, ", ", &
+                  trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
+            end if
          end if
       end if
       if (setup%lubrication .and. .not. stokes .and. rank == 0) write (output_unit, '(a)') &
@@ -712,7 +718,7 @@ contains
       ! (fold_stokes_trust); FOLD_RUN_UNCHECKED_KAPPA set in the environment waives it, for
       ! the test of the run-time stress check only (tests/micro/test_stokes_trust.py)
       call get_environment_variable("FOLD_RUN_UNCHECKED_KAPPA", status=envstat)
-      if (envstat /= 0) then
+      if (envstat /= 0 .and. set%rigidity == FOLD_RIGIDITY_PENALTY) then
          call stokes_kappa_check(set, product(int(setup%stokes_grid, i8)), stat, errmsg)
          if (stat /= FOLD_OK) then
             errmsg = "/setup/resolved/stokes_kappa: "//trim(errmsg)

@@ -18,7 +18,8 @@ module fold_run_file
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
    use fold_particles, only: particle_set_t, particles_init, particles_check
    use fold_stokes_solver, only: stokes_settings_t, FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, &
-                                 FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE
+                                 FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE, &
+                                 FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT
    use fold_h5, only: hid_t, hsize_t, h5_open_file, h5_close_file, h5_exists, h5_shape, &
                       h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
    implicit none
@@ -242,6 +243,13 @@ contains
          call get_int(file, R//"stokes_fft_precision", int(FOLD_FFT_DOUBLE, i8), int(FOLD_FFT_SINGLE, i8), iv, &
                       stat, errmsg); if (stat /= FOLD_OK) return
          s%stokes%fft_precision = int(iv, ip)
+      end if
+      ! optional: run files written before the setting existed are penalised
+      s%stokes%rigidity = FOLD_RIGIDITY_PENALTY
+      if (h5_exists(file, R//"stokes_rigidity")) then
+         call get_int(file, R//"stokes_rigidity", int(FOLD_RIGIDITY_PENALTY, i8), int(FOLD_RIGIDITY_EXACT, i8), iv, &
+                      stat, errmsg); if (stat /= FOLD_OK) return
+         s%stokes%rigidity = int(iv, ip)
       end if
       s%stokes_solve_every = 1
       if (h5_exists(file, R//"stokes_solve_every")) then

@@ -176,12 +176,17 @@ contains
       end do
    contains
 
-      !> (eta - eta_f) / ((kappa - 1) eta_f chi) at the voxel of entry e (1 without contrast)
+      !> (eta - eta_f) / ((kappa - 1) eta_f chi) at the voxel of entry e (1 without contrast).
+      !> Under exact rigidity 1: the fit weights every voxel by the particle's coverage. (The
+      !> penalised weights vanish like 1/kappa on the partly covered voxels, which would
+      !> leave a thin particle without a fully covered voxel unmeasured in the limit.)
       real(dp) function penalty_weight(e)
          integer(i8), intent(in) :: e
          real(dp) :: chi
          chi = vox%chi(vox%ijk(1, e), vox%ijk(2, e), vox%ijk(3, e))
-         if (kappa > 1.0_dp .and. chi > 0.0_dp) then
+         if (solver%exact_rigidity) then
+            penalty_weight = 1.0_dp
+         else if (kappa > 1.0_dp .and. chi > 0.0_dp) then
             penalty_weight = (eta%r(vox%ijk(1, e), vox%ijk(2, e), vox%ijk(3, e)) - eta_f)/((kappa - 1.0_dp)*eta_f*chi)
          else
             penalty_weight = 1.0_dp

@@ -17,7 +17,7 @@ module fold_stokes_factory
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_STOKES_FFT, &
       FOLD_STOKES_HYPRE
-   use fold_stokes_fft, only: stokes_fft_new
+   use fold_stokes_rigid, only: stokes_periodic_new
    use fold_stokes_hypre, only: stokes_hypre_new
    implicit none
    private
@@ -78,7 +78,7 @@ contains
          errmsg = "grid: "//trim(errmsg)
          return
       end if
-      call stokes_fft_new(fft, set, solver, stat, errmsg)
+      call stokes_periodic_new(fft, set, solver, stat, errmsg)
    end subroutine create_fft
 
    !> hypre: staggered grid in slabs along the last axis over comm (fold_stokes_hypre).

@@ -22,7 +22,7 @@ module fold_stokes_step
    use fold_grid, only: shear_lattice
    use fold_voxelise, only: voxel_set_t, voxelise
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
-   use fold_stokes_fft, only: stokes_fft_new
+   use fold_stokes_rigid, only: stokes_periodic_new
    use fold_time_scheme, only: FOLD_EULER, FOLD_AB2, scheme_velocity
    use fold_rigid_fit, only: rigid_fit
    use fold_stress, only: bulk_stress_t, bulk_stress
@@ -75,7 +75,7 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       call stokes_context_destroy(ctx)
-      call stokes_fft_new(fft, set, ctx%solver, stat, errmsg)
+      call stokes_periodic_new(fft, set, ctx%solver, stat, errmsg)
    end subroutine stokes_context_init
 
    !> Take over a solver made by the factory.

@@ -10,11 +10,14 @@
 !> and, independently, from the dissipation <2 eta eps:eps> / (2 E:E); Hill's
 !> lemma makes the two equal for an exactly balanced field, so their difference
 !> measures the solver error. All sums are over voxel centres (volume weight dv).
+!> Under exact rigidity (fold_stokes_rigid) eta = eta_f everywhere and the particles'
+!> contribution is the polarisation's mean stress <tau> and dissipation <tau : eps>; the
+!> solid strain ratio is then taken over the rigid voxels (chi >= FOLD_RIGID_COVERAGE).
 module fold_stress
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_grid, only: grid_total
-   use fold_stokes_solver, only: stokes_solver_t
+   use fold_stokes_solver, only: stokes_solver_t, FOLD_RIGID_COVERAGE
    implicit none
    private
 
@@ -87,7 +90,12 @@ contains
                red(7:6 + s%nc) = red(7:6 + s%nc) + 2.0_dp*(et - ef)*eps(1:s%nc)
                red(13) = red(13) + 2.0_dp*et*diss
                pen = 0.0_dp
-               if (s%set%kappa > 1.0_dp) pen = (et - ef)/((s%set%kappa - 1.0_dp)*ef)
+               if (s%exact_rigidity) then
+                  ! the solid voxels, where the strain left is the rigidity error
+                  if (chi(i, j, k) >= FOLD_RIGID_COVERAGE) pen = 1.0_dp
+               else if (s%set%kappa > 1.0_dp) then
+                  pen = (et - ef)/((s%set%kappa - 1.0_dp)*ef)
+               end if
                red(14) = red(14) + pen*diss
                red(15) = red(15) + chi(i, j, k)
                red(16) = red(16) + pen
@@ -105,6 +113,12 @@ contains
          out%sigma_particles(a, b) = red(6 + c)
          out%sigma_particles(b, a) = red(6 + c)
       end do
+      if (s%exact_rigidity) then
+         ! the particles' stress and dissipation are the polarisation's (eta = eta_f everywhere)
+         out%sigma = out%sigma + s%multiplier_stress
+         out%sigma_particles = s%multiplier_stress
+         red(13) = red(13) + s%multiplier_dissipation
+      end if
       ee = sum(s%E**2)
       if (ee > 0.0_dp) then
          out%eta_eff = sum(out%sigma*s%E)/(2.0_dp*ee)

@@ -39,6 +39,9 @@ SCHEMES = {"euler": 1, "ab2": 2}
 FFT_PLANS = {"estimate": 0, "measure": 1}
 #: transforms of the CG operator (fold_stokes_solver FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE); fold_run only
 FFT_PRECISIONS = {"double": 0, "single": 1}
+#: rigidity of the particles (fold_stokes_solver FOLD_RIGIDITY_*): the seed's penalty kappa, or the
+#: constraint eps(u) = 0 on the voxels covered at least half, by a multiplier (fold_stokes_rigid; fft)
+RIGIDITIES = {"penalty": 0, "exact": 1}
 SHAPES = {"fibre": 1, "sphere": 2, "spheroid": 3}
 
 #: Unit round-off of single precision (fold_stokes_fft FOLD_SINGLE_ROUNDOFF).
@@ -135,6 +138,7 @@ DEFAULTS = {
     "initial_guess": "previous",
     "fft_plan": "measure",
     "fft_precision": "double",
+    "rigidity": "penalty",
 }
 
 
@@ -163,6 +167,8 @@ class StokesSettings:
         ``"extrapolate"`` (2 x_n − x_(n−1) of the last two).
     measure_plans : FFTW_MEASURE plans (seconds to make, faster transforms; repeated
         runs agree to the solver tolerance) or FFTW_ESTIMATE (bitwise reproducible).
+    rigidity : ``"penalty"`` (default; kappa in the solid) or ``"exact"`` (eps(u) = 0 on the
+        voxels covered at least half, by a multiplier; kappa unused; fold_stokes_rigid).
     backend : the Stokes backend, a word of :data:`BACKEND_CHOICES` (the bindings below
         solve periodic cells, for which ``"auto"`` is ``"fft"``: :func:`backend_for`).
 
@@ -181,6 +187,7 @@ class StokesSettings:
     guess: str = DEFAULTS["initial_guess"]
     measure_plans: bool = DEFAULTS["fft_plan"] == "measure"
     backend: str = DEFAULTS["backend"]
+    rigidity: str = DEFAULTS["rigidity"]
 
     def __post_init__(self) -> None:
         if not self.eta_f > 0:
@@ -192,7 +199,7 @@ class StokesSettings:
         if int(self.max_iter) < 1:
             raise InputError(f"max_iter: must be >= 1, got {self.max_iter}")
         for key, table in (("derivative", DERIVATIVES), ("mixing", MIXINGS), ("fibre_ends", FIBRE_ENDS),
-                           ("guess", GUESSES), ("backend", BACKEND_CHOICES)):
+                           ("guess", GUESSES), ("backend", BACKEND_CHOICES), ("rigidity", RIGIDITIES)):
             if getattr(self, key) not in table:
                 raise InputError(f"{key}: must be one of {sorted(table)}, got {getattr(self, key)!r}")
         if not 1 <= int(self.subsamples) <= 8:
@@ -205,7 +212,8 @@ class StokesSettings:
     def codes(self) -> dict:
         return dict(eta_f=float(self.eta_f), kappa=float(self.kappa), tol=float(self.tol),
                     max_iter=int(self.max_iter), derivative=DERIVATIVES[self.derivative],
-                    mixing=MIXINGS[self.mixing], plan_effort=int(self.measure_plans))
+                    mixing=MIXINGS[self.mixing], plan_effort=int(self.measure_plans),
+                    rigidity=RIGIDITIES[self.rigidity])
 
 
 @dataclass
@@ -338,7 +346,7 @@ def solve_chi(chi, lattice, G, settings: StokesSettings | None = None) -> FlowSo
     ext = load("_fold_stokes")
     u, stress, eta_eff, eta_diss, it, res, hist, stat, msg = ext.fold_stokes_solve_chi(
         dim, A, _matrix(G, "G"), chi3, c["eta_f"], c["kappa"], c["tol"], c["max_iter"], c["derivative"],
-        c["mixing"], c["plan_effort"])
+        c["mixing"], c["plan_effort"], c["rigidity"])
     checked(stat, msg)
     return FlowSolution(u=u, stress=stress, eta_eff=float(eta_eff), eta_dissipation=float(eta_diss),
                         iterations=int(it), residual=float(res), history=hist[: int(it) + 1].copy())
@@ -364,7 +372,7 @@ def solve_particles(particles: Particles, cell_lengths, grid, shear_rate: float 
         n[0], n[1], n[2], L, float(shear_offset), G, particles.shape, particles.radius, particles.length,
         particles.xi, np.asfortranarray(particles.x.T), np.asfortranarray(particles.p.T), c["eta_f"], c["kappa"],
         c["tol"], c["max_iter"], c["derivative"], c["mixing"], int(s.subsamples), FIBRE_ENDS[s.fibre_ends],
-        c["plan_effort"])
+        c["plan_effort"], c["rigidity"])
     checked(stat, msg)
     return FlowSolution(u=u, stress=stress, eta_eff=float(scal[1]), eta_dissipation=float(scal[2]),
                         iterations=int(it), residual=float(scal[0]), history=hist[: int(it) + 1].copy(), chi=chi,
@@ -397,7 +405,7 @@ def march(particles: Particles, cell_lengths, grid, dt: float, nsteps: int, shea
         particles.radius, particles.length, particles.xi, np.asfortranarray(particles.x.T),
         np.asfortranarray(particles.p.T), c["eta_f"], c["kappa"], c["tol"], c["max_iter"], c["derivative"],
         c["mixing"], int(s.subsamples), FIBRE_ENDS[s.fibre_ends], GUESSES[s.guess] if s.warm_start else 0,
-        c["plan_effort"])
+        c["plan_effort"], c["rigidity"])
     checked(stat, msg)
     return MarchResult(t=t0 + dt * np.arange(nsteps + 1), x=np.transpose(xh, (2, 1, 0)),
                        p=np.transpose(ph, (2, 1, 0)), iterations=rec[0].astype(int), residual=rec[1],

@@ -207,6 +207,8 @@ class ResolvedScene:
                                      "CG initial guess: 1 previous solution, 2 extrapolated from the last two"),
             "stokes_fft_precision": (np.int32(FFT_PRECISION_CODES[st.fft_precision]), "1",
                                      "precision of the CG operator's FFTs: 0 double, 1 single"),
+            "stokes_rigidity": (np.int32(stokes_codes.RIGIDITIES[st.rigidity]), "1",
+                                "rigidity of the particles: 0 penalty (kappa), 1 exact (multiplier on the solid voxels)"),
             "stokes_solve_every": (np.int32(st.solve_every), "1",
                                    "a Stokes solve every k-th step, velocities extrapolated linearly in between"),
             "time_scheme": (np.int32(TIME_SCHEME_CODES[num.time_scheme]), "1",
@@ -819,7 +821,15 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                          f"round-off of the transforms, (2 log2 N + 4) 2^-24 = {tol_min:.3g} on the "
                          f"{' x '.join(map(str, grid[:dim]))} grid; allowed: tolerance >= {tol_min:.3g} or "
                          f"fft_precision = 'double', got {st.tolerance:g}")
-    if grid is not None and grid_points <= st.max_grid_points:
+    if st.rigidity == "exact" and backend != "fft":
+        problems.add("numerics.stokes.rigidity",
+                     f"rigidity = 'exact' needs the fft backend (a periodic cell); the {backend} backend "
+                     f"is penalised only; allowed: rigidity = 'penalty' with this cell, got 'exact'")
+    if st.rigidity == "exact" and st.fft_precision != "double":
+        problems.add("numerics.stokes.fft_precision",
+                     "rigidity = 'exact' transforms in double precision only; allowed: fft_precision = 'double' "
+                     f"(or rigidity = 'penalty'), got {st.fft_precision!r}")
+    if grid is not None and grid_points <= st.max_grid_points and st.rigidity == "penalty":
         check_kappa(st, grid[:dim], grid_points, problems)
     voxel_text = ""
     if grid is not None and grid_points <= st.max_grid_points and good and G is not None and shear_flow:

@@ -221,6 +221,12 @@ class StokesSettings(_Table):
     #: transforms inside the double-precision CG, 1.3-1.4x cheaper iterations; fold_run refuses
     #: a tolerance below (2 log2 N + 4) 2^-24 for N voxels, docs/physics.md)
     fft_precision: Literal["double", "single"] = _STOKES["fft_precision"]
+    #: rigidity of the particles: "penalty" (the seed's viscosity kappa eta_f in the solid;
+    #: rigidity error ~ 1/kappa, CG iterations ~ sqrt(kappa)) or "exact" (eps(u) = 0 on the
+    #: voxels covered at least half, imposed by a multiplier, the others with the harmonic
+    #: mixing's kappa -> infinity viscosity; no kappa; the CG tolerance is the rigidity
+    #: error; fft backend, double precision; docs/physics.md#exact-rigidity)
+    rigidity: Literal["penalty", "exact"] = _STOKES["rigidity"]
     #: initial guess of each CG solve: "previous" (the last step's solution) or
     #: "extrapolate" (2 u_n - u_(n-1) of the last two solutions); measured by
     #: benchmarks/bench_stokes_step.py (2 % fewer iterations on the dense-fibre scene)

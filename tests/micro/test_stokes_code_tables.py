@@ -36,6 +36,7 @@ TABLES = {
     "time_scheme": (stokes.SCHEMES, "stokes/fold_time_scheme.f90", "FOLD_", {"euler": "EULER", "ab2": "AB2"}),
     "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_backend.f90", "FOLD_PLAN_", None),
     "fft_precision": (stokes.FFT_PRECISIONS, "stokes/fold_stokes_solver.f90", "FOLD_FFT_", None),
+    "rigidity": (stokes.RIGIDITIES, "stokes/fold_stokes_solver.f90", "FOLD_RIGIDITY_", None),
     "hydrodynamics": (HYDRODYNAMICS_CODES, "io/fold_run_file.f90", "FOLD_HYDRO_", None),
     "collisions": (COLLISION_CODES, "contact/fold_contacts.f90", "FOLD_CONTACT_", None),
     "on_contact_cap": (ON_CAP_CODES, "contact/fold_contacts.f90", "FOLD_ON_CAP_", None),
