@@ -160,7 +160,11 @@ def _coordinate(values: list) -> np.ndarray:
 
 def _point_report(root: Path, point: dict[str, Any], paths: list[Path], closures: Sequence[str] | None,
                   write: bool) -> dict[str, tuple[float, float]]:
-    """C_I per closure (mean, error) of one point's runs; its report written under ``reports/``."""
+    """C_I per closure (mean, error) of one point's runs; its report written under ``reports/``.
+
+    The runs are paid for, so a point shorter than the estimators need (or without
+    orientation) is reported anyway, as ``pyfold main`` does: the report's warnings
+    (:func:`pyfold.provenance.applicability_problems`) stand in every output it writes."""
     from pyfold import report
     from pyfold.pipeline import DEFAULT_CLOSURES
 
@@ -169,7 +173,7 @@ def _point_report(root: Path, point: dict[str, Any], paths: list[Path], closures
         out = root / REPORTS / point_label(point)
         rep, _ = report.report(paths, out, chosen, force=True)
     else:
-        rep = report.build_report(paths, chosen)
+        rep = report.build_report(paths, chosen, force=True)
     return {c: (float(m.mean), float(m.error)) for c, m in rep.ci.items()}
 
 
