@@ -98,7 +98,7 @@ from pyfold.command_line import command_line  # noqa: E402
 from pyfold.kinematics import aspect_ratio_to_xi  # noqa: E402
 from pyfold.native.geometry import Cell, jeffery_advance  # noqa: E402
 from pyfold.native.stokes import StokesSettings, march, solve_particles  # noqa: E402
-from pyfold.run_file import creator  # noqa: E402
+from pyfold.run_input import creator  # noqa: E402
 
 VOXELS_PER_DIAMETER = 1.0 / (BETA * CELLS_PER_LENGTH)  # x n: the diameter is 1/(beta CELLS_PER_LENGTH)
 FIELDS = ["sweep", "scheme", "n", "voxels_per_diameter", "kappa", "tol", "dt", "ntheta", "T", "rel_err_jeffery",

@@ -34,7 +34,7 @@ __all__ = [
 def __getattr__(name: str):
     # Lazy: `pyfold.open_run` without importing xarray/h5py at `import pyfold`.
     if name == "open_run":
-        from pyfold.runs import open_run
+        from pyfold.run_results import open_run
 
         return open_run
     raise AttributeError(f"module 'pyfold' has no attribute {name!r}")

@@ -45,7 +45,7 @@ class PyfoldWarning(UserWarning):
 
 class DamagedRunWarning(PyfoldWarning):
     """A run file read with ``allow_damaged``: the named damaged datasets are left out
-    or cut (pyfold.runs.open_run)."""
+    or cut (pyfold.run_results.open_run)."""
 
 
 class UnverifiedRunWarning(PyfoldWarning):

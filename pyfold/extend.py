@@ -106,7 +106,7 @@ def plan(run_path: Path, resolved: ResolvedScene, scene_path: Path, partial: boo
         a ``t_end`` not beyond the recorded one, an end step off the record or snapshot
         interval, or no checkpoints.
     """
-    from pyfold.run_file import read_setup
+    from pyfold.run_input import read_setup
 
     setup = read_setup(run_path)
     recorded = setup.resolved
@@ -189,7 +189,7 @@ def _check_complete(run_path: Path, scene_path: Path, extension: Extension, step
 
 def rewrite_setup(path: Path, resolved: ResolvedScene) -> None:
     """Replace ``/setup`` of ``path`` by that of ``resolved`` (sealed) and set ``status = running``."""
-    from pyfold.run_file import fixed_string, write_setup
+    from pyfold.run_input import fixed_string, write_setup
 
     try:
         with h5py.File(path, "a") as f:

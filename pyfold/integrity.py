@@ -14,10 +14,10 @@ Every dataset of a run file (format_version >= 1.1) carries a checksum:
   :data:`RESULT_NAMES` (a damaged link name);
 * ``/checkpoint`` and ``/checkpoint_shadow`` carry their own ``checksum`` dataset,
   verified by ``fold_run --resume`` (fortran/io/fold_output.f90); they are not
-  read by :func:`pyfold.runs.open_run`.
+  read by :func:`pyfold.run_results.open_run`.
 
 Root attributes are covered by consistency, not by a checksum: ``format`` and
-``format_version`` by :func:`pyfold.run_file.check_format` (and a 1.0 file whose
+``format_version`` by :func:`pyfold.run_input.check_format` (and a 1.0 file whose
 datasets carry checksums is refused), ``status`` must be ``ok``, ``running`` or
 ``failed...``, and a finished run (``status = "ok"``) must have ``records_complete``
 / ``snapshots_complete`` equal to the lengths of its records / snapshots and (when
@@ -91,7 +91,7 @@ _TOLERATE: contextvars.ContextVar[bool] = contextvars.ContextVar("pyfold_tolerat
 
 @contextlib.contextmanager
 def tolerate_damage(enabled: bool = True):
-    """Within this block, :func:`pyfold.runs.open_run` and :func:`pyfold.run_file.read_setup`
+    """Within this block, :func:`pyfold.run_results.open_run` and :func:`pyfold.run_input.read_setup`
     read the intact part of a damaged run file (as with ``allow_damaged=True``) instead of
     refusing it: ``pyfold analyse --allow-damaged`` and ``pyfold report --allow-damaged``."""
     token = _TOLERATE.set(bool(enabled))
@@ -401,7 +401,7 @@ def _check_counts(f: h5py.File, report: Integrity) -> None:
 
 def verify_file(f: h5py.File, version: str) -> Integrity:
     """Verify every dataset of an open run file (``version``: its format_version, from
-    :func:`pyfold.run_file.check_format`): read it whole, compare its checksum, and
+    :func:`pyfold.run_input.check_format`): read it whole, compare its checksum, and
     check the root attributes (module doc). Never raises for damage: it is listed in
     the result."""
     checksummed = has_checksums(version)
@@ -435,7 +435,7 @@ def verify_file(f: h5py.File, version: str) -> Integrity:
 def verify_path(path: str | Path) -> Integrity:
     """:func:`verify_file` of a run file by path; raises :class:`InputError` when it is
     not a readable pyfold run file."""
-    from pyfold.run_file import check_format
+    from pyfold.run_input import check_format
 
     path = Path(path)
     try:

@@ -5,7 +5,7 @@ parameters to the run's ``a2(t)`` with :func:`pyfold.fit.fit_parameters`
 (Levenberg-Marquardt through the ODE solve, linearised standard errors, bounds of
 :data:`pyfold.fit.DEFAULT_BOUNDS`), for each closure of ``--closures`` (default here
 ``ibof``: a moulding code runs a closure, not the simulation's own ``a4``), under the
-run's own velocity gradient and Jeffery shape factor ``xi`` (:func:`pyfold.runs.open_run`).
+run's own velocity gradient and Jeffery shape factor ``xi`` (:func:`pyfold.run_results.open_run`).
 
 Fitted parameters (:data:`MODEL_FITS`; ``--params`` names others):
 
@@ -101,7 +101,7 @@ class ModelFit:
 
 def fit_model(ds, model: str, closure: str, params: tuple[str, ...] | None = None) -> ModelFit:
     """Fit ``model`` (a :data:`MODEL_FITS` name) with ``closure`` to the run ``ds`` (from
-    :func:`pyfold.runs.open_run`: its ``velocity_gradient`` and ``xi`` attributes are used)."""
+    :func:`pyfold.run_results.open_run`: its ``velocity_gradient`` and ``xi`` attributes are used)."""
     import pyfold.models as models
     from pyfold.fit import fit_parameters
 

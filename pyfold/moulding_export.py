@@ -96,7 +96,7 @@ def fit_entry(fit: ModelFit) -> dict:
 
 def document(fits: list[dict], source: dict) -> dict:
     """The whole export (see the module docstring)."""
-    from pyfold.run_file import creator
+    from pyfold.run_input import creator
 
     return {"format": FORMAT, "format_version": FORMAT_VERSION, "creator": creator(), "source": source,
             "fits": fits}

@@ -150,8 +150,8 @@ def open_checked_run(run_path: Path, allow_failed: bool = False, command: str = 
     """
     import h5py
 
-    from pyfold.run_file import check_format
-    from pyfold.runs import open_run
+    from pyfold.run_input import check_format
+    from pyfold.run_results import open_run
 
     run_path = Path(run_path)
     try:
@@ -250,7 +250,7 @@ def run_scene(scene: Path, out: Path, ranks: int = 1, log=None):
 
 def velocity_gradient_of(run_path: Path) -> np.ndarray:
     """The imposed velocity gradient ``L_ij = ∂u_i/∂x_j`` [1/s] stored in a run file."""
-    from pyfold.run_file import read_setup
+    from pyfold.run_input import read_setup
 
     G = np.asarray(read_setup(run_path).resolved["velocity_gradient"], dtype=np.float64)
     return G
@@ -512,7 +512,7 @@ def _figures(ds: xr.Dataset, fits: xr.Dataset, errors: xr.Dataset, L: np.ndarray
 
 def stokes_summary(run_path: Path) -> str:
     """Summary lines of a Stokes run: effective viscosity and solver records."""
-    from pyfold.runs import open_run
+    from pyfold.run_results import open_run
 
     from pyfold.provenance import provenance_of
 

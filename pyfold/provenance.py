@@ -95,7 +95,7 @@ def _text(value) -> str:
 
 def provenance_of(run_path: Path, t: np.ndarray, L: np.ndarray, xi: float) -> Provenance:
     """The :class:`Provenance` of one run file over its record times ``t`` [s]."""
-    from pyfold.run_file import read_setup
+    from pyfold.run_input import read_setup
 
     res = read_setup(run_path).resolved
     gamma_dot = shear_rate_of(L)
@@ -127,7 +127,7 @@ def provenance_of(run_path: Path, t: np.ndarray, L: np.ndarray, xi: float) -> Pr
 def has_no_orientation(run_path: Path, xi: float) -> bool:
     """True when the particles have no orientation dynamics: every family a sphere (a disk
     in 2-D), or ``|xi|`` at round-off of 0."""
-    from pyfold.run_file import read_setup
+    from pyfold.run_input import read_setup
 
     shapes = np.atleast_1d(read_setup(run_path).resolved.get("family_shape", [1]))
     return bool(np.all(shapes.astype(int) == SPHERE_SHAPE) or abs(float(xi)) < NO_ORIENTATION_XI)

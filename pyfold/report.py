@@ -104,7 +104,7 @@ def scene_fingerprint(run_path: Path) -> dict[str, object]:
     and every resolved value in ``/setup/resolved`` (``resolved/<name>``), without the
     seed and the free texts (:data:`SEED_KEYS`). The verbatim TOML is not compared
     (comments and layout may differ)."""
-    from pyfold.run_file import read_setup
+    from pyfold.run_input import read_setup
 
     setup = read_setup(run_path)
     keys = _flatten(setup.scene)
@@ -134,7 +134,7 @@ def check_same_scene(paths: Sequence[Path]) -> list[int]:
         (e.g. ``particles[0].count``) and both values; or two runs with the same seed
         (the same realisation twice would shrink the error bars falsely).
     """
-    from pyfold.run_file import read_setup
+    from pyfold.run_input import read_setup
 
     reference = scene_fingerprint(paths[0])
     for path in paths[1:]:
@@ -474,7 +474,7 @@ def _fibre_concentration(ds: xr.Dataset, run_path: Path, dim: int) -> tuple[floa
     """``(beta, n L^3, phi beta)`` of the run's single fibre family (NaN where undefined:
     2-D, or not one family of fibres); ``phi beta`` by :func:`pyfold.correlations.phi_beta`."""
     from pyfold.correlations import phi_beta
-    from pyfold.run_file import read_setup
+    from pyfold.run_input import read_setup
 
     res = read_setup(run_path).resolved
     shapes = np.atleast_1d(res["family_shape"])

@@ -1,4 +1,6 @@
-"""The HDF5 run file: what ``pyfold run`` hands to ``fold_run``.
+"""The input part of an HDF5 run file, what ``pyfold run`` hands to ``fold_run``: its writer
+(:func:`write_run_file`, :func:`write_setup`) and the reader of ``/setup`` (:func:`read_setup`,
+:func:`check_format`). The results ``fold_run`` appends are read by :mod:`pyfold.run_results`.
 
 Python writes the root attributes, ``/setup`` (the scene verbatim, the
 normalised scene, and ``/setup/resolved``: every number Fortran needs, with

@@ -1,5 +1,8 @@
-"""Reading run files: :func:`open_run` (labelled xarray view), :func:`write_xdmf` (ParaView)
-and :func:`run_summary`.
+"""Reading the results of a run file: :func:`open_run` (labelled xarray view),
+:func:`run_summary`, :func:`write_xdmf` (the particles for ParaView).
+
+The input part of a run file (root attributes, ``/setup``, ``/initial``) is written and
+read by :mod:`pyfold.run_input`.
 
 The results ``fold_run`` appends at the root of a run file are netCDF-compatible
 (HDF5 dimension scales, micro contract): ``time``, tensor indices ``i, j, k, l``,
@@ -23,7 +26,7 @@ import xarray as xr
 from pyfold.errors import DamagedRunWarning, InputError, PyfoldError, UnverifiedRunWarning
 from pyfold.files import atomic_output
 from pyfold.integrity import Damage, DamagedRunError, refuse, tolerating_damage, verify_path
-from pyfold.run_file import check_format, read_setup
+from pyfold.run_input import check_format, read_setup
 from pyfold.xdmf_files import xdmf_data_path
 
 __all__ = ["open_run", "write_xdmf", "xdmf_data_path", "run_summary", "complete_counts", "AXIS_LABELS"]

@@ -1,7 +1,7 @@
 """Names of the files that describe a run file for XDMF readers (ParaView).
 
 ``OUT.xmf`` (XML) and the HDF5 file it reads its arrays from, ``OUT.xmf.h5``;
-:func:`pyfold.runs.write_xdmf` writes both. Kept free of heavy imports: ``pyfold
+:func:`pyfold.run_results.write_xdmf` writes both. Kept free of heavy imports: ``pyfold
 run`` checks these names before it starts.
 """
 from __future__ import annotations

@@ -15,7 +15,7 @@ display: without one, run it under ``xvfb-run`` as above (Debian's ``xvfb``
 package). In the ParaView GUI, *View → Python Shell → Run Script* on this file after
 opening ``OUT.xmf`` glyphs the active source.
 
-The recipe. ``OUT.xmf`` (``pyfold.runs.write_xdmf``) gives one vertex cell per
+The recipe. ``OUT.xmf`` (``pyfold.run_results.write_xdmf``) gives one vertex cell per
 particle at its centre with the axis ``p`` (three components, zero third one in
 2-D), ``glyph_scale`` = (length, 2 radius, 2 radius), ``length``, ``radius``,
 ``shape`` (1 fibre, 2 sphere, 3 spheroid) and ``family``. The Glyph filter turns the
@@ -110,7 +110,7 @@ def particle_glyphs(source, resolution: int = RESOLUTION) -> dict:
     missing = [name for name in ("p", "glyph_scale", "shape") if source.PointData[name] is None]
     if missing:
         raise ValueError(f"the source has no point array {', '.join(missing)}: open the .xmf that pyfold run "
-                         "writes (rewrite an older one with pyfold.runs.write_xdmf)")
+                         "writes (rewrite an older one with pyfold.run_results.write_xdmf)")
     return {"fibres": fibre_glyphs(_threshold(source, FIBRE, FIBRE), resolution),
             "round": ellipsoid_glyphs(_threshold(source, SPHERE, SPHEROID), resolution)}
 

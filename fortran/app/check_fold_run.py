@@ -1,7 +1,7 @@
 """meson test: fold_run on 1 and 2 MPI ranks, exit codes of bad and blowing-up runs.
 
 Usage: check_fold_run.py FOLD_RUN MPIEXEC. Writes its run files into a temporary
-directory (h5py), in the layout pyfold/run_file.py writes. Scene: the seed's 2-D
+directory (h5py), in the layout pyfold/run_input.py writes. Scene: the seed's 2-D
 Couette disks (cell 1.5 x 1, R = 0.075, 42 disks = 49 % area, gamma_dot = 1,
 dt = 0.05, alpha = 0.005), 40 steps with the collision strategy: contact-heavy.
 """

@@ -5,7 +5,7 @@ cause): the closure names; the run file (a pyfold run with ``/setup`` and
 ``/initial``, at least two records, root ``status = "ok"`` unless
 ``--allow-failed``, every ``a2`` record an orientation tensor, a finite ``a4``,
 every dataset matching its checksum unless ``--allow-damaged``: see
-:func:`pyfold.runs.open_run`); unless ``--force``, that the estimator applies (particles
+:func:`pyfold.run_results.open_run`); unless ``--force``, that the estimator applies (particles
 with an orientation, a strain of at least one Jeffery period:
 :func:`pyfold.provenance.applicability_problems`); and that ``--out`` can be created
 and written. Without ``--closures``, the default closures defined in the run's

@@ -59,7 +59,7 @@ the results up to the last good state and ``status = "failed: ..."`` is kept
 as ``OUT.h5``. A complete run whose ``OUT.xmf`` cannot be written (a full disk)
 keeps ``OUT.h5``, the result, with no ``OUT.xmf`` (never a half-written one:
 :func:`pyfold.files.atomic_output`), prints the summary and exits 1 naming the
-cause; ``python -c "from pyfold.runs import write_xdmf; write_xdmf('OUT.h5')"``
+cause; ``python -c "from pyfold.run_results import write_xdmf; write_xdmf('OUT.h5')"``
 writes it once there is space.
 """
 from __future__ import annotations
@@ -545,7 +545,7 @@ def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | No
     resume_hint = command_line(["pyfold", "run", Path(args.scene), "-o", Path(out), "--resume"])
 
     if resume_from is None:
-        from pyfold.run_file import write_run_file
+        from pyfold.run_input import write_run_file
         from pyfold.scene.initial import initial_state
 
         initial = initial_state(resolved)
@@ -564,7 +564,7 @@ def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | No
         from pyfold.extend import plan as plan_extension
         from pyfold.extend import rewrite_setup
         from pyfold.integrity import refuse, verify_path
-        from pyfold.run_file import read_setup
+        from pyfold.run_input import read_setup
 
         # Every dataset is verified before fold_run continues the file: it reads back only
         # /setup, /initial and the checkpoint, and would carry a damaged record into an "ok" run.
@@ -623,7 +623,7 @@ def _finish(args: argparse.Namespace, out: Path, partial: Path, xmf: Path, rc: i
             resume_hint: str, renamed: bool) -> int:
     """After fold_run: the status of a crash, the rename to ``out`` (unless ``renamed``),
     the XDMF, and the summary or the failure."""
-    from pyfold.runs import run_summary, write_xdmf
+    from pyfold.run_results import run_summary, write_xdmf
 
     if not renamed:
         if rc != 0:
@@ -668,7 +668,7 @@ def _mark_failed(path: Path, rc: int, cause: str = "") -> None:
     ``fold_run: failed: ...`` line from stderr when there is one."""
     import h5py
 
-    from pyfold.run_file import fixed_string
+    from pyfold.run_input import fixed_string
 
     try:
         with h5py.File(path, "a") as f:

@@ -38,7 +38,7 @@ import numpy as np
 
 from pyfold.native.geometry import ORIENT_GIVEN, ORIENT_ISOTROPIC, ORIENT_PLANAR
 from pyfold.errors import InputError, PyfoldError
-from pyfold.run_file import InitialState
+from pyfold.run_input import InitialState
 from pyfold.scene.normalise import ResolvedScene
 
 #: Random positions tried per particle before it is left to the relaxation sweeps.

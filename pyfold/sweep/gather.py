@@ -36,7 +36,7 @@ def point_label(point: dict[str, Any]) -> str:
 
 
 def _run_summary(path: Path) -> dict[str, np.ndarray]:
-    from pyfold.runs import open_run
+    from pyfold.run_results import open_run
 
     with open_run(path) as ds:
         a2 = np.asarray(ds["a2"].values, float)

@@ -94,7 +94,7 @@ from scipy import stats
 from pyfold import pipeline
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.ensemble import ensemble_mean, holm, paired_difference
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 
 # Parameters

@@ -161,7 +161,7 @@ from pyfold.errors import InadmissibleOrientationWarning, InputError
 from pyfold.fit import fit_parameters
 from pyfold.report import fit_ci_trajectory
 from pyfold.models import FolgarTucker, solve_batch
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 from pyfold.steady_state import detect_steady_state
 

@@ -135,7 +135,7 @@ from pyfold.command_line import check_single_line, job_line, write_job_file
 from pyfold.correlations import (CORRELATIONS, FOLGAR_TUCKER_1984, PUBLISHED_RANGE, n_l2d, phi_beta)
 from pyfold.ensemble import ensemble_mean, paired_difference
 from pyfold.errors import InputError, PyfoldError
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 from pyfold.steady_state import blocking_stderr, detect_steady_state
 

@@ -110,8 +110,8 @@ from pyfold.closures import get_closure
 from pyfold.correlations import PUBLISHED_RANGE, correlations_at
 from pyfold.ensemble import ensemble_mean, paired_difference
 from pyfold.errors import InputError, PyfoldError
-from pyfold.run_file import read_setup
-from pyfold.runs import open_run
+from pyfold.run_input import read_setup
+from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 
 # Parameters

@@ -43,7 +43,7 @@ from pyfold import pipeline
 from pyfold.ci_estimators import ci_rate_regression, ci_steady_state_match
 from pyfold.fit import fit_parameters
 from pyfold.models import FolgarTucker
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 from pyfold.steady_state import detect_steady_state
 
 # Parameters

@@ -60,7 +60,7 @@ import xarray as xr
 
 from pyfold.command_line import command_line
 from pyfold.native.stokes import Particles, StokesSettings, solve_particles
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 
 # Parameters

@@ -73,7 +73,7 @@ import xarray as xr
 
 from pyfold.command_line import command_line
 from pyfold.ensemble import ensemble_mean
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 
 # Parameters
 

@@ -91,7 +91,7 @@ from pyfold.command_line import command_line  # noqa: E402
 from pyfold.ensemble import ensemble_mean, paired_difference  # noqa: E402
 from pyfold.native.stokes import StokesSettings, solve_particles  # noqa: E402
 from pyfold.report import fit_ci_trajectory  # noqa: E402
-from pyfold.run_file import creator  # noqa: E402
+from pyfold.run_input import creator  # noqa: E402
 from pyfold.scene import hydrodynamics_evidence as he  # noqa: E402
 from pyfold.scene.sheared_fibres import sheared_fibres  # noqa: E402
 

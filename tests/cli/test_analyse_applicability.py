@@ -23,7 +23,7 @@ from pyfold import report as report_module
 from pyfold.cli import main
 from pyfold.closures import available
 from pyfold.pipeline import DEFAULT_CLOSURES
-from pyfold.run_file import write_run_file
+from pyfold.run_input import write_run_file
 from pyfold.scene import load_scene
 from pyfold.scene.initial import initial_state
 

@@ -15,7 +15,7 @@ from conftest import base_scene, write_scene
 from pyfold import pipeline
 from pyfold.cli import main
 from pyfold.errors import InputError
-from pyfold.run_file import write_run_file
+from pyfold.run_input import write_run_file
 from pyfold.scene import load_scene
 from pyfold.scene.initial import initial_state
 

@@ -11,7 +11,7 @@ from pyfold.cli import main
 from pyfold.fit import fit_parameters
 from pyfold.models import FolgarTucker
 from pyfold.moulding_export import read_export
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 
 
 #: The model behind the synthetic records: RSC with IBOF (Wang, O'Gara & Tucker 2008).

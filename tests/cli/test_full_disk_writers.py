@@ -25,8 +25,8 @@ from pyfold.cli import main
 from pyfold.commands import run as run_command
 from pyfold.errors import PyfoldError
 from pyfold.files import atomic_output
-from pyfold.run_file import write_run_file
-from pyfold.runs import write_xdmf
+from pyfold.run_input import write_run_file
+from pyfold.run_results import write_xdmf
 from pyfold.scene import load_scene
 from pyfold.scene.initial import initial_state
 

@@ -20,7 +20,7 @@ import xarray as xr
 
 from pyfold import provenance
 from pyfold.cli import main
-from pyfold.run_file import write_run_file
+from pyfold.run_input import write_run_file
 from pyfold.scene import load_scene
 from pyfold.scene.initial import initial_state
 from pyfold.scene.sheared_fibres import sheared_fibres

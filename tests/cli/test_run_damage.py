@@ -29,8 +29,8 @@ from pyfold import report as report_module
 from pyfold.cli import main
 from pyfold.errors import DamagedRunWarning, InputError, UnverifiedRunWarning
 from pyfold.integrity import CHECKSUM_ATTR, RESULT_NAMES, DamagedRunError, verify_path
-from pyfold.run_file import fixed_string
-from pyfold.runs import open_run
+from pyfold.run_input import fixed_string
+from pyfold.run_results import open_run
 
 ROOT = Path(__file__).resolve().parents[2]
 RECORDS = 151  # t_end 1.5, a record every step (dt = 0.01)
@@ -261,7 +261,7 @@ def test_random_flips_change_nothing_read_or_are_refused(finished, tmp_path):
 def test_xdmf_of_a_damaged_snapshot_time_is_a_message_and_no_file(finished, tmp_path):
     """write_xdmf reads /snapshot_time: a chunk failing its Fletcher32 checksum is named, no .xmf is left."""
     from pyfold.errors import PyfoldError
-    from pyfold.runs import write_xdmf
+    from pyfold.run_results import write_xdmf
 
     _, src = finished
     path = tmp_path / "run.h5"

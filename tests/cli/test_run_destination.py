@@ -96,7 +96,7 @@ def test_two_concurrent_runs_one_completes_the_other_refused_naming_it(scene, tm
 
 
 def test_concurrent_resume_refused_while_the_first_completes(scene, tmp_path, fake_fold_run):
-    from pyfold.run_file import write_run_file
+    from pyfold.run_input import write_run_file
     from pyfold.scene import load_scene
     from pyfold.scene.initial import initial_state
 
@@ -260,9 +260,9 @@ def test_the_scene_is_never_an_output(tmp_path, fake_fold_run, capsys, how):
 def test_sigterm_after_the_final_rename_is_not_a_failure(scene, tmp_path, fake_fold_run, monkeypatch, capsys):
     """SIGTERM arriving once OUT.h5 is complete and in place (here: while its XDMF is
     written): exit 0 with the XDMF and summary finished, not 143."""
-    import pyfold.runs
+    import pyfold.run_results
 
-    original = pyfold.runs.write_xdmf
+    original = pyfold.run_results.write_xdmf
     sent = []
 
     def write_xdmf_signalled(path, xmf=None):
@@ -272,7 +272,7 @@ def test_sigterm_after_the_final_rename_is_not_a_failure(scene, tmp_path, fake_f
             time.sleep(1.0)
         return original(path, xmf)
 
-    monkeypatch.setattr(pyfold.runs, "write_xdmf", write_xdmf_signalled)
+    monkeypatch.setattr(pyfold.run_results, "write_xdmf", write_xdmf_signalled)
     out = tmp_path / "late.h5"
     assert main(["run", str(scene), "-o", str(out)]) == 0
     assert sent
@@ -307,7 +307,7 @@ def test_output_name_beyond_name_max_refused(scene, tmp_path, fake_fold_run, cap
 def test_resume_of_a_file_open_in_a_reader_names_the_reader(scene, tmp_path, fake_fold_run, capsys):
     """A run file held open by a reader (an xarray dataset from pyfold.open_run not yet
     closed) is locked, not damaged: --resume says so, names the remedy, leaves it as it is."""
-    from pyfold.run_file import fixed_string, write_run_file
+    from pyfold.run_input import fixed_string, write_run_file
     from pyfold.scene import load_scene
     from pyfold.scene.initial import initial_state
 

@@ -16,7 +16,7 @@ import pytest
 from conftest import base_scene, write_scene
 
 from pyfold.cli import main
-from pyfold.run_file import fixed_string
+from pyfold.run_input import fixed_string
 
 #: Explicit intervals (steps of dt = 0.01: records every 5, snapshots every 10, checkpoints every 5).
 INTERVALS = {"interval": 0.05, "snapshot_interval": 0.1, "checkpoint_interval": 0.05}
@@ -92,7 +92,7 @@ def test_extending_a_killed_run_equals_a_run_made_in_one_go(tmp_path, capsys, re
     assert main(["run", str(long), "-o", str(full)]) == 0, capsys.readouterr().err
     assert main(["run", str(short), "-o", str(out)]) == 0, capsys.readouterr().err
     from pyfold.scene import load_scene
-    from pyfold.run_file import write_setup
+    from pyfold.run_input import write_setup
 
     with h5py.File(out, "a") as f:  # what the run of 0.3 left when killed at step 25: a checkpoint at 20
         assert int(f["/checkpoint/step"][()]) == 20

@@ -13,8 +13,8 @@ import pytest
 import pyfold
 from _fake_results import append_results
 from pyfold.errors import InputError
-from pyfold.run_file import FORMAT_VERSION, fixed_string, read_setup, write_run_file
-from pyfold.runs import write_xdmf
+from pyfold.run_input import FORMAT_VERSION, fixed_string, read_setup, write_run_file
+from pyfold.run_results import write_xdmf
 from pyfold.scene import load_scene
 from pyfold.scene.initial import initial_state
 
@@ -202,7 +202,7 @@ def test_open_run_refuses_a_malformed_format_version(run_file, version):
 
 
 def test_gap_summary_shows_a_negative_gap_as_negative_even_with_alpha_zero():
-    from pyfold.runs import gap_summary
+    from pyfold.run_results import gap_summary
 
     huge = np.finfo(np.float64).max  # a record with no pair in range
     text = gap_summary(np.array([huge, 1e-3, -4e-14]), alpha=0.0)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from conftest import base_scene, write_scene
-from pyfold import runs
+from pyfold import run_results
 from pyfold.cli import main
 from pyfold.errors import PyfoldError
 from pyfold.xdmf_files import xdmf_paths
@@ -45,14 +45,14 @@ def test_failed_xmf_write_leaves_no_data_file(scene, tmp_path, fake_fold_run, mo
     xmf, data = xdmf_paths(out)
     xmf.unlink()
     data.unlink()
-    real = runs.atomic_output
+    real = run_results.atomic_output
 
     def failing_for_xmf(path):
         if str(path).endswith(".xmf"):
             raise PyfoldError(f"cannot write {path}: No space left on device (ENOSPC)")
         return real(path)
 
-    monkeypatch.setattr(runs, "atomic_output", failing_for_xmf)
+    monkeypatch.setattr(run_results, "atomic_output", failing_for_xmf)
     with pytest.raises(PyfoldError, match="ENOSPC"):
-        runs.write_xdmf(out)
+        run_results.write_xdmf(out)
     assert not xmf.exists() and not data.exists()

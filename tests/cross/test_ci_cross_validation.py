@@ -30,7 +30,7 @@ from pyfold import pipeline, report
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.correlations import PUBLISHED_RANGE
 from pyfold.ensemble import ensemble_mean, paired_difference
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 
 SEEDS = (21, 22, 23, 24)

@@ -31,7 +31,7 @@ import pytest
 
 from pyfold import pipeline
 from pyfold.ci_estimators import ci_rate_regression
-from pyfold.runs import open_run
+from pyfold.run_results import open_run
 
 SCENE = """
 title = "concentrated fibres, contacts {collisions}"

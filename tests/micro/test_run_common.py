@@ -1,6 +1,6 @@
 """Shared helpers of the fold_run tests: write run files with h5py, run fold_run.
 
-The run files follow the layout of pyfold/run_file.py (/setup/resolved + /initial, root
+The run files follow the layout of pyfold/run_input.py (/setup/resolved + /initial, root
 attributes); they are written directly here so that the executable can be tested
 independently of the scene layer. The executable is found exactly as ``pyfold run``
 finds it (:func:`pyfold.commands.run.find_fold_run`).

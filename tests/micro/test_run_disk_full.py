@@ -161,7 +161,7 @@ def test_write_xdmf_of_an_unreadable_file_is_an_error_not_a_traceback(tmp_path):
     """``pyfold run`` writes the XDMF after a failed run too: a file HDF5 cannot open
     (as a full disk can leave it) gives a PyfoldError with the cause."""
     from pyfold.errors import PyfoldError
-    from pyfold.runs import write_xdmf
+    from pyfold.run_results import write_xdmf
 
     path = tmp_path / "broken.h5"
     path.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)

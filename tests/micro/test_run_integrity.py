@@ -227,7 +227,7 @@ def test_random_sigkills_resume_bitwise_or_refuse(tmp_path):
 
 def _scene_run_file(tmp, name, t_end):
     """A run file made by the scene layer (open_run needs /setup/scene_*)."""
-    from pyfold.run_file import write_run_file as write_scene_run_file
+    from pyfold.run_input import write_run_file as write_scene_run_file
     from pyfold.scene import load_scene
     from pyfold.scene.initial import initial_state
 
@@ -252,7 +252,7 @@ def test_a_torn_last_record_is_dropped_by_open_run_and_by_resume(tmp_path):
     """Killed while appending the record of step 14 (checkpoint at step 10): some
     record datasets are one longer than others, records_complete says 7."""
     import pyfold
-    from pyfold.runs import write_xdmf
+    from pyfold.run_results import write_xdmf
 
     require_fold_run()
     full = _scene_run_file(tmp_path, "full", 0.2)

@@ -433,7 +433,7 @@ def test_coarse_grid_warning_is_kept_in_the_run_file_and_its_summary(tmp_path, c
     require_fold_run()
     import pyfold
     from pyfold.cli import main
-    from pyfold.runs import run_summary
+    from pyfold.run_results import run_summary
 
     scene = _scene(tmp_path, "coarse", **{"numerics.stokes": {"cells_per_diameter": 2, "fft_plan": FFT_PLAN},
                                           "numerics.t_end": 0.05, "output.snapshot_interval": 0.05,
