@@ -10,10 +10,10 @@ Question
 Method
     Each repeat: a fresh, empty cache folder (``PYFOLD_JAX_CACHE``), then one child
     process running what ``pyfold analyse`` runs (pyfold/commands/analyse.py: the
-    checks, ``pipeline.fit_and_compare`` with its figures, the results file) (cold),
+    checks, ``trajectory_fit.fit_and_compare`` with its figures, the results file) (cold),
     then another child on the same cache (warm). A child times its stages: the
-    imports, opening and checking the run (``pipeline.open_checked_run``), the fits
-    (``pyfold.fast_fit.fit_ci_rk4`` through ``pipeline.fit_ci_per_closure``), the
+    imports, opening and checking the run (``run_checks.open_checked_run``), the fits
+    (``pyfold.fast_fit.fit_ci_rk4`` through ``trajectory_fit.fit_ci_per_closure``), the
     closure errors (computed beside the fits, so the two overlap), the figures and the
     results file; each in wall time and in the process's CPU time (all threads). The
     parent reports for each of cold / warm the median over ``--repeats`` of the
@@ -61,19 +61,19 @@ def child(run_path: str, out: str) -> None:
         stages[name], cpu[name] = time.perf_counter() - t, time.process_time() - c
         return time.perf_counter(), time.process_time()
 
-    from pyfold import pipeline
+    from pyfold import run_checks, trajectory_fit
     from pyfold.commands import analyse  # noqa: F401  (the command's import cost counted here)
 
     t, c = mark("imports", t0, c0)
     path = Path(run_path)
-    closures = pipeline.check_closures(",".join(pipeline.DEFAULT_CLOSURES))
-    ds = pipeline.open_checked_run(path)
-    closures = pipeline.check_closures(closures, dim=ds.sizes["i"])
-    pipeline.check_output_folder(Path(out))
+    closures = run_checks.check_closures(",".join(run_checks.DEFAULT_CLOSURES))
+    ds = run_checks.open_checked_run(path)
+    closures = run_checks.check_closures(closures, dim=ds.sizes["i"])
+    run_checks.check_output_folder(Path(out))
     t, c = mark("open_and_check", t, c)
-    chain = pipeline.fit_and_compare(path, Path(out), closures=closures, run=ds, quiet=True)
+    chain = trajectory_fit.fit_and_compare(path, Path(out), closures=closures, run=ds, quiet=True)
     t, c = mark("fit_errors_figures", t, c)
-    pipeline.results_dataset(chain).to_netcdf(Path(out) / "results.nc", engine="h5netcdf")
+    trajectory_fit.results_dataset(chain).to_netcdf(Path(out) / "results.nc", engine="h5netcdf")
     mark("results_file", t, c)
     stages.update({f"  {k}": v for k, v in chain.seconds.items()})
     stages["in_process"], cpu["in_process"] = time.perf_counter() - t0, time.process_time() - c0

@@ -142,19 +142,19 @@ def describe(fit: ModelFit) -> str:
 
 def run(args: argparse.Namespace, default_closures: str) -> int:
     """``pyfold analyse RUN.h5 --model ...``: check everything, fit, print, export."""
-    from pyfold import pipeline
+    from pyfold import run_checks
     from pyfold.files import regular_file
     from pyfold.moulding_export import check_export_path, run_source, write_export
 
     models = check_models(args.model)
     params = check_params(args.params, models)
     closures_text = DEFAULT_MODEL_CLOSURE if args.closures == default_closures else args.closures
-    closures = pipeline.check_closures(closures_text)
+    closures = run_checks.check_closures(closures_text)
     export = check_export_path(args.export) if args.export else None
     run_path = Path(args.run_file)
     regular_file(run_path, "RUN.h5")
-    ds = pipeline.open_checked_run(run_path, allow_failed=args.allow_failed)  # the analyse checks
-    closures = pipeline.check_closures(closures, dim=int(ds.sizes["i"]))
+    ds = run_checks.open_checked_run(run_path, allow_failed=args.allow_failed)  # the analyse checks
+    closures = run_checks.check_closures(closures, dim=int(ds.sizes["i"]))
     fits = []
     for model in models:
         for closure in closures:

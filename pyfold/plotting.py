@@ -31,13 +31,13 @@ CORRELATION_STYLES = ("--", "-.", ":", (0, (5, 1, 1, 1)))
 
 def closure_colour(name: str) -> str:
     """The one colour of a closure in every figure of ``pyfold analyse`` and ``pyfold report``:
-    the default closures first (:data:`pyfold.pipeline.DEFAULT_CLOSURES`), then the other
+    the default closures first (:data:`pyfold.run_checks.DEFAULT_CLOSURES`), then the other
     registered ones alphabetically, on matplotlib's 20-colour qualitative map."""
     from matplotlib import colormaps
     from matplotlib.colors import to_hex
 
     from pyfold.closures import CLOSURES
-    from pyfold.pipeline import DEFAULT_CLOSURES
+    from pyfold.run_checks import DEFAULT_CLOSURES
 
     if name == "exact":
         return to_hex(EXACT_COLOUR)

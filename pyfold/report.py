@@ -514,15 +514,6 @@ def _rank_one_run(run: RunAnalysis, judged: Sequence[str]) -> list:
     return rows
 
 
-def default_closures(dim: int) -> tuple[str, ...]:
-    """:data:`pyfold.pipeline.DEFAULT_CLOSURES` defined in dimension ``dim`` (in 2-D the
-    orthotropic fits IBOF/ORW3 are not defined: the others are used instead of failing)."""
-    from pyfold.closures import available
-    from pyfold.pipeline import DEFAULT_CLOSURES
-
-    return tuple(c for c in DEFAULT_CLOSURES if c == "exact" or c in available(dim))
-
-
 def fit_flags(values: Sequence[float]):
     """:func:`pyfold.seed_checks.flag_fits` for :func:`fit_ci_trajectory`: it searches
     ``s = sqrt(C_I)`` with absolute tolerance ``xatol`` (1e-4), so a value within
@@ -555,7 +546,7 @@ def measure_redistribution(runs: Sequence[RunAnalysis], early_end: float) -> dic
 
 def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, allow_failed: bool = False,
                  progress=None, force: bool = False) -> Report:
-    """Check the runs (each by :func:`pyfold.pipeline.open_checked_run`, and that they are
+    """Check the runs (each by :func:`pyfold.run_checks.open_checked_run`, and that they are
     one scene) and measure everything the report shows.
 
     Raises
@@ -566,9 +557,9 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
         ``force``, runs whose particles have no orientation or shorter than the
         estimators need (:func:`pyfold.provenance.applicability_problems`).
 
-    ``closures`` None: :func:`default_closures` of the runs' dimension.
+    ``closures`` None: :func:`pyfold.run_checks.default_closures` of the runs' dimension.
     """
-    from pyfold import pipeline
+    from pyfold import run_checks
     from pyfold.correlations import correlations_at
     from pyfold.ensemble import EnsembleMean, ensemble_mean, rank_paired
 
@@ -582,14 +573,14 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
                                    shear_rate_of)
 
     if closures is not None:
-        closures = pipeline.check_closures(closures)
-    datasets = [pipeline.open_checked_run(p, allow_failed=allow_failed, command="pyfold report") for p in paths]
+        closures = run_checks.check_closures(closures)
+    datasets = [run_checks.open_checked_run(p, allow_failed=allow_failed, command="pyfold report") for p in paths]
     seeds = check_same_scene(paths)
     dim = int(datasets[0].sizes["i"])
-    closures = pipeline.check_closures(default_closures(dim) if closures is None else closures, dim=dim)
+    closures = run_checks.check_closures(run_checks.default_closures(dim) if closures is None else closures, dim=dim)
     judged = tuple(c for c in closures if c != "exact")
-    L = pipeline.velocity_gradient_of(paths[0])[:dim, :dim]
-    xi = pipeline.shape_factor_of(datasets[0])
+    L = run_checks.velocity_gradient_of(paths[0])[:dim, :dim]
+    xi = run_checks.shape_factor_of(datasets[0])
     problems = []
     for p, ds in zip(paths, datasets):
         problems += applicability_problems(p, np.asarray(ds["time"].values), L, xi)
@@ -716,10 +707,10 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
     """The report's numbers as one Dataset (written as results.nc into ``out``).
 
     Every variable and coordinate has ``long_name`` and ``units``
-    (:func:`pyfold.pipeline.check_described`); the C_I to use is ``ci_recommended`` (the
+    (:func:`pyfold.run_checks.check_described`); the C_I to use is ``ci_recommended`` (the
     trajectory fit, also named by the attribute ``recommended_ci``); ``ci_rate_regression``
     is the closure-free diagnostic and its closure counterparts."""
-    from pyfold.pipeline import check_described
+    from pyfold.run_checks import check_described
     from pyfold.seed_checks import EQUIVALENCE_MARGIN, FLAG_MEANINGS
 
     seeds = [r.seed for r in rep.runs]
@@ -1134,10 +1125,42 @@ def summary_markdown(rep: Report, extra: Sequence[str] = ()) -> str:
     return "\n".join(md) + "\n"
 
 
+#: Per-record solver diagnostics of a Stokes run that the main job's summary reports; each is a
+#: variable fold_run writes (``fortran/io/fold_output.f90``; a test checks the names
+#: against a real run, so a renamed record cannot drop out of the summary unseen).
+STOKES_SUMMARY_RECORDS: tuple[str, ...] = ("stokes_iterations", "stokes_residual", "rigidity_max")
+
+
+def stokes_summary(run_path: Path) -> str:
+    """Summary lines of a Stokes run: effective viscosity and solver records."""
+    from pyfold import run_checks
+    from pyfold.provenance import provenance_of
+    from pyfold.run_results import open_run
+
+    ds = open_run(run_path)
+    lines = [f"Stokes run {run_path.name}: status {ds.attrs.get('status', '?')}"]
+    if "time" in ds.dims and ds.sizes["time"] > 1 and "particle_xi" in ds:
+        xi = float(np.max(np.abs(np.asarray(ds["particle_xi"].values))))
+        lines.append("  " + provenance_of(run_path, np.asarray(ds["time"].values), run_checks.velocity_gradient_of(run_path),
+                                          xi).line())
+    if "effective_viscosity" in ds:
+        eta = np.asarray(ds["effective_viscosity"].values)
+        eta_f = float(ds.attrs.get("viscosity", 1.0))
+        lines.append(f"  effective viscosity / fluid viscosity: mean {np.nanmean(eta) / eta_f:.4f} "
+                     f"(min {np.nanmin(eta) / eta_f:.4f}, max {np.nanmax(eta) / eta_f:.4f})")
+    missing = [name for name in STOKES_SUMMARY_RECORDS if name not in ds]
+    if missing:
+        raise PyfoldError(f"{run_path}: not a complete Stokes run file, records {missing} are missing")
+    for name in STOKES_SUMMARY_RECORDS:
+        values = np.asarray(ds[name].values)
+        lines.append(f"  {name}: median {np.nanmedian(values):.3g}, max {np.nanmax(values):.3g}")
+    return "\n".join(lines)
+
+
 def check_report_folder(out: Path, force: bool = False) -> Path:
     """Refuse to replace report files in ``out`` without ``force``; make sure it can be
-    written (:func:`pyfold.pipeline.check_output_folder`), before any analysis."""
-    from pyfold import pipeline
+    written (:func:`pyfold.run_checks.check_output_folder`), before any analysis."""
+    from pyfold import run_checks
 
     out = Path(out)
     if out.is_dir() and not force:
@@ -1145,7 +1168,7 @@ def check_report_folder(out: Path, force: bool = False) -> Path:
         if present:
             raise InputError(f"--out: {out} already holds a report ({', '.join(present)}); give another --out, or "
                              "--force to replace those files")
-    return pipeline.check_output_folder(out)
+    return run_checks.check_output_folder(out)
 
 
 def write_report(rep: Report, out: Path, extra_summary: Sequence[str] = ()) -> list[Path]:

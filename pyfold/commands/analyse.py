@@ -11,7 +11,7 @@ with an orientation, a strain of at least one Jeffery period:
 and written. Without ``--closures``, the default closures defined in the run's
 dimension are fitted (in 2-D those without IBOF/ORW3).
 
-The fits are :func:`pyfold.pipeline.fit_ci_per_closure` (fixed-step RK4 on padded
+The fits are :func:`pyfold.trajectory_fit.fit_ci_per_closure` (fixed-step RK4 on padded
 record counts, :mod:`pyfold.fast_fit`, one closure per core at a time): their programs
 are kept, exported and compiled, in the per-user JAX cache (:mod:`pyfold._jax`), so only
 the first analysis on a machine traces and compiles them.
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from pyfold import model_fit
 from pyfold.files import atomic_output, regular_file
-from pyfold.pipeline import DEFAULT_CLOSURES
+from pyfold.run_checks import DEFAULT_CLOSURES
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,27 +59,26 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _analyse(args: argparse.Namespace) -> int:
-    from pyfold import pipeline
+    from pyfold import run_checks, trajectory_fit
 
     run_path = Path(args.run_file)
     regular_file(run_path, "RUN.h5")  # a folder, FIFO or device: refused before HDF5 opens it
     from pyfold import provenance
-    from pyfold.report import default_closures
 
-    closures = pipeline.check_closures(args.closures) if args.closures is not None else None
-    ds = pipeline.open_checked_run(run_path, allow_failed=args.allow_failed)
+    closures = run_checks.check_closures(args.closures) if args.closures is not None else None
+    ds = run_checks.open_checked_run(run_path, allow_failed=args.allow_failed)
     dim = ds.sizes["i"]
-    closures = pipeline.check_closures(default_closures(dim) if closures is None else closures, dim=dim)
-    L = pipeline.velocity_gradient_of(run_path)
-    xi = pipeline.shape_factor_of(ds)
+    closures = run_checks.check_closures(run_checks.default_closures(dim) if closures is None else closures, dim=dim)
+    L = run_checks.velocity_gradient_of(run_path)
+    xi = run_checks.shape_factor_of(ds)
     t = ds["time"].values
     warnings = provenance.enforce(provenance.applicability_problems(run_path, t, L, xi), args.force,
                                   "pyfold analyse")
     where = provenance.provenance_of(run_path, t, L, xi)
     out = Path(args.out) if args.out else run_path.with_name(run_path.stem + "_analysis")
-    pipeline.check_output_folder(out)
-    chain = pipeline.fit_and_compare(run_path, out, closures=closures, run=ds, provenance=where, warnings=warnings)
+    run_checks.check_output_folder(out)
+    chain = trajectory_fit.fit_and_compare(run_path, out, closures=closures, run=ds, provenance=where, warnings=warnings)
     with atomic_output(out / "results.nc") as tmp:
-        pipeline.results_dataset(chain, where).to_netcdf(tmp, engine="h5netcdf")
+        trajectory_fit.results_dataset(chain, where).to_netcdf(tmp, engine="h5netcdf")
     print(f"pyfold analyse: figures and results.nc in {out}")
     return 0

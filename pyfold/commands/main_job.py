@@ -33,7 +33,7 @@ from pathlib import Path
 
 
 from pyfold.errors import InputError, PyfoldError
-from pyfold.pipeline import DEFAULT_CLOSURES
+from pyfold.run_checks import DEFAULT_CLOSURES
 
 def _bundled_scenes() -> Path:
     """data/scenes of the source tree (editable install), or pyfold/scenes of a wheel."""
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
 
         closures = tuple(c for c in DEFAULT_CLOSURES if c == "exact" or c in available(dim))
     else:
-        from pyfold.pipeline import check_closures
+        from pyfold.run_checks import check_closures
 
         closures = check_closures(args.closures, dim)
     if args.out == "":
@@ -160,7 +160,7 @@ def with_seed(text: str, seed: int) -> str:
 
 
 class _Jobs:
-    """Child processes ``pyfold run`` (:func:`pyfold.pipeline.run_scene` with a log), at most
+    """Child processes ``pyfold run`` (:func:`pyfold.commands.run.run_scene` with a log), at most
     ``slots`` at a time, each with a log file.
 
     The children run in their own sessions; on an error or a signal in the main job
@@ -188,12 +188,12 @@ class _Jobs:
     def start(self, name: str, scene: Path, out: Path) -> None:
         """Start `pyfold run` of ``scene`` with one rank (fold_run and the placement are
         serial per run: the parallelism is over seeds)."""
-        from pyfold import pipeline
+        from pyfold.commands import run as run_command
 
         log_path = self.logs / f"{name.replace(' ', '_')}.log"
         log = open(log_path, "w", encoding="utf-8")
         try:
-            proc = pipeline.run_scene(scene, out, ranks=1, log=log)
+            proc = run_command.run_scene(scene, out, ranks=1, log=log)
         except BaseException:
             log.close()
             raise
@@ -240,7 +240,7 @@ class _Jobs:
 
 def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tuple[str, ...]) -> None:
     """Simulate the seeds, report on them (and run the Stokes scene meanwhile)."""
-    from pyfold import pipeline, report
+    from pyfold import report
     from pyfold.scene import load_scene
 
     def say(text: str) -> None:
@@ -278,7 +278,7 @@ def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tupl
         if stokes:
             while jobs.running:
                 jobs.wait_one()
-            extra = [pipeline.stokes_summary(outdir / "stokes_run.h5")]
+            extra = [report.stokes_summary(outdir / "stokes_run.h5")]
         else:
             extra = ["Stokes scene: skipped (it runs with the bundled default scene only)"]
         extra.append(f"main job: {n_seeds} seeds, {jobs.slots} processes at a time; "

@@ -2,7 +2,7 @@
 
 The runs must be one scene apart from the seed (compared on the scene and resolved
 values stored in each run's ``/setup``); each is checked as ``pyfold analyse``
-checks it (:func:`pyfold.pipeline.open_checked_run`: status ``"ok"`` unless
+checks it (:func:`pyfold.run_checks.open_checked_run`: status ``"ok"`` unless
 ``--allow-failed``, records that are orientation tensors, every dataset matching its
 checksum unless ``--allow-damaged``, ...). Everything is
 checked before any analysis, exit status 2 naming the file and the cause.
@@ -22,7 +22,7 @@ import shlex
 from pathlib import Path
 
 from pyfold.errors import InputError
-from pyfold.pipeline import DEFAULT_CLOSURES
+from pyfold.run_checks import DEFAULT_CLOSURES
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

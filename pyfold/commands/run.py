@@ -532,6 +532,30 @@ def run(args: argparse.Namespace) -> int:
         _remove_if_empty(created)  # a run that never started leaves no new empty folders
 
 
+def run_scene(scene: Path, out: Path, ranks: int = 1, log=None):
+    """Run a scene with the direct simulation (``pyfold run``); returns the result file.
+
+    With ``log`` (a file open for writing), ``pyfold run`` is started instead as a child
+    Python process in its own session, its output going to ``log``, and the
+    :class:`subprocess.Popen` is returned at once: the caller waits for it and stops it
+    (SIGTERM: ``pyfold run`` then stops its fold_run and keeps the partial file). The
+    main job runs its seeds this way, several at a time.
+    """
+    if log is not None:
+        argv = [sys.executable, "-m", "pyfold.cli", "run", str(scene), "-o", str(out), "--np", str(ranks)]
+        return subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                start_new_session=True)
+    from pyfold.cli import main as cli_main
+
+    argv = ["run", str(scene), "-o", str(out), "--np", str(ranks)]
+    status = cli_main(argv)
+    if status == 2:
+        raise InputError(f"scene {scene} was rejected (see the message above)")
+    if status != 0:
+        raise PyfoldError(f"the direct simulation of {scene} failed (status {status}); partial results in {out}")
+    return out
+
+
 def _run_locked(args: argparse.Namespace, out: Path, cli: str, lock_fd: int | None) -> int:
     """The run, with the destination ``out`` locked (``lock_fd`` is given to fold_run)."""
     from pyfold.scene import load_scene

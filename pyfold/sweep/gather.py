@@ -166,7 +166,7 @@ def _point_report(root: Path, point: dict[str, Any], paths: list[Path], closures
     orientation) is reported anyway, as ``pyfold main`` does: the report's warnings
     (:func:`pyfold.provenance.applicability_problems`) stand in every output it writes."""
     from pyfold import report
-    from pyfold.pipeline import DEFAULT_CLOSURES
+    from pyfold.run_checks import DEFAULT_CLOSURES
 
     chosen = ",".join(closures) if closures is not None else ",".join(DEFAULT_CLOSURES)
     if write:
@@ -182,7 +182,7 @@ def check_closures(text: str) -> tuple[str, ...]:
     names = tuple(c.strip() for c in text.split(",") if c.strip())
     if not names:
         return ()
-    from pyfold.pipeline import check_closures as check
+    from pyfold.run_checks import check_closures as check
 
     try:
         return tuple(check(names))

@@ -91,7 +91,7 @@ import numpy as np
 import xarray as xr
 from scipy import stats
 
-from pyfold import pipeline
+from pyfold import run_checks
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.ensemble import ensemble_mean, holm, paired_difference
 from pyfold.run_results import open_run
@@ -202,8 +202,8 @@ def analyse_run(path: Path) -> dict:
     t = np.asarray(ds["time"].values, dtype=np.float64)
     a2 = np.asarray(ds["a2"].values, dtype=np.float64)
     a4 = np.asarray(ds["a4"].values, dtype=np.float64)
-    L = pipeline.velocity_gradient_of(path)
-    xi = pipeline.shape_factor_of(ds)
+    L = run_checks.velocity_gradient_of(path)
+    xi = run_checks.shape_factor_of(ds)
     n_fibres = int(ds.sizes["particle"])
     beta_e = math.sqrt((1.0 + xi) / (1.0 - xi))
     period = 2.0 * math.pi * (beta_e + 1.0 / beta_e)  # γ̇ = 1/s

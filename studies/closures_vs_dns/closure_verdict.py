@@ -146,7 +146,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from pyfold import pipeline
+from pyfold import run_checks
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.closure_check import (
     COMPONENTS,
@@ -296,8 +296,8 @@ def judge_run(info: dict, closures: tuple[str, ...], ci_method: str = "trajector
     """Closure errors, C_I per closure (rate regression, or a trajectory fit), sampling floor of one run."""
     path = info["path"]
     ds = open_run(path)
-    L = pipeline.velocity_gradient_of(path)
-    xi = pipeline.shape_factor_of(ds)
+    L = run_checks.velocity_gradient_of(path)
+    xi = run_checks.shape_factor_of(ds)
     t = np.asarray(ds["time"].values, dtype=np.float64)
     a2 = np.asarray(ds["a2"].values, dtype=np.float64)
     a4 = np.asarray(ds["a4"].values, dtype=np.float64)
@@ -691,7 +691,7 @@ def main() -> None:
     if args.out is None:
         args.out = Path("out/closures_vs_dns") / ("given_runs" if args.runs else "") / (
             {"fit": "ci_fit", "regression": "ci_regression"}.get(args.ci, ""))
-    closures = tuple(c for c in pipeline.check_closures(args.closures, dim=3) if c != "exact")
+    closures = tuple(c for c in run_checks.check_closures(args.closures, dim=3) if c != "exact")
     if "fec" not in closures:
         raise InputError("--closures: fec is needed (the verdict compares every closure with it)")
     spec = sweep_spec(args.large, args.seeds, args.t_end)

@@ -438,7 +438,7 @@ def check_run(path: Path, case: Case, out: Outcome) -> tuple[list[str], str]:
     import h5py
 
     from pyfold.errors import InputError
-    from pyfold.pipeline import check_orientation_records
+    from pyfold.run_checks import check_orientation_records
 
     broken: list[str] = []
     with h5py.File(path, "r") as f:

@@ -129,7 +129,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from pyfold import pipeline
+from pyfold import run_checks
 from pyfold.ci_estimators import ci_rate_regression, ci_steady_state_match
 from pyfold.command_line import check_single_line, job_line, write_job_file
 from pyfold.correlations import (CORRELATIONS, FOLGAR_TUCKER_1984, PUBLISHED_RANGE, n_l2d, phi_beta)
@@ -223,8 +223,8 @@ def analyse_run(path: Path, t_end: float, closures_a4: dict) -> dict:
     t = ds["time"].values
     keep = t <= t_end + 1e-9
     t, a2, a4 = t[keep], ds["a2"].values[keep], ds["a4"].values[keep]
-    L = pipeline.velocity_gradient_of(path)
-    xi = pipeline.shape_factor_of(ds)
+    L = run_checks.velocity_gradient_of(path)
+    xi = run_checks.shape_factor_of(ds)
     beta_e = math.sqrt((1.0 + xi) / (1.0 - xi))
     period = 2.0 * math.pi * (beta_e + 1.0 / beta_e)
     signal = np.stack([a2[:, 0, 0], a2[:, 1, 1], a2[:, 2, 2], a2[:, 0, 1]], axis=1)

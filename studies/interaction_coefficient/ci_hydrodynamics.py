@@ -102,7 +102,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from pyfold import pipeline
+from pyfold import run_checks
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.sweep import store as sweep_store
 from pyfold.command_line import check_single_line, job_line
@@ -189,8 +189,8 @@ def write_scenes(study: Study, runs: Path, ranks: int) -> None:
 # Solver: estimates from one run
 def analyse_run(path: Path) -> dict:
     ds = open_run(path)
-    L = pipeline.velocity_gradient_of(path)
-    xi = pipeline.shape_factor_of(ds)  # Cox beta_e, recorded in /initial/xi; the same in both models
+    L = run_checks.velocity_gradient_of(path)
+    xi = run_checks.shape_factor_of(ds)  # Cox beta_e, recorded in /initial/xi; the same in both models
     t, a2, a4 = ds["time"].values, ds["a2"].values, ds["a4"].values
     a4_ibof = np.asarray(get_closure("ibof", 3)(a2))
     regs = {"own_a4": ci_rate_regression(t, a2, a4, L, xi), "ibof": ci_rate_regression(t, a2, a4_ibof, L, xi)}
@@ -325,7 +325,7 @@ def main() -> None:
         path = paths["stokes", seed]
         ds = open_run(path)
         r["reg_xi_measured"] = ci_rate_regression(r["t"], r["a2"], ds["a4"].values,
-                                                  pipeline.velocity_gradient_of(path), xi_measured)
+                                                  run_checks.velocity_gradient_of(path), xi_measured)
 
     # Save
     result = _dataset(study, rows, seeds, check, xi_measured)

@@ -39,7 +39,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from pyfold import pipeline
+from pyfold import run_checks
+from pyfold.commands import run as run_command
 from pyfold.ci_estimators import ci_rate_regression, ci_steady_state_match
 from pyfold.fit import fit_parameters
 from pyfold.models import FolgarTucker
@@ -89,13 +90,13 @@ METHODS = (
 def simulate(seed: int, t_end: float, folder: Path) -> Path:
     scene = folder / f"seed_{seed}.toml"
     scene.write_text(SCENE.format(side=SIDE, count=COUNT, t_end=t_end, seed=seed, interval=INTERVAL))
-    return pipeline.run_scene(scene, folder / f"seed_{seed}.h5")
+    return run_command.run_scene(scene, folder / f"seed_{seed}.h5")
 
 
 def estimates(run_path: Path) -> dict:
     ds = open_run(run_path)
-    L = pipeline.velocity_gradient_of(run_path)
-    xi = pipeline.shape_factor_of(ds)
+    L = run_checks.velocity_gradient_of(run_path)
+    xi = run_checks.shape_factor_of(ds)
     t, a2, a4 = ds["time"].values, ds["a2"].values, ds["a4"].values
     out: dict = {"t": t, "a2": a2, "xi": xi}
     steady = detect_steady_state(t, a2)

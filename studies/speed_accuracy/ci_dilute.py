@@ -71,7 +71,7 @@ def run(study: ch.Study, out: Path, simulate: bool = True) -> Path:
         r = rows["stokes", seed]
         path = ch.run_paths(runs, "stokes", seed)[1]
         r["reg_xi_measured"] = ch.ci_rate_regression(r["t"], r["a2"], ch.open_run(path)["a4"].values,
-                                                     ch.pipeline.velocity_gradient_of(path), xi_measured)
+                                                     ch.run_checks.velocity_gradient_of(path), xi_measured)
     ds = ch._dataset(study, rows, seeds, check, xi_measured)
     ds.attrs["question"] = "C_I with Stokes hydrodynamics + contacts vs contacts only, dilute scene, same seeds"
     nc = out / "ci_hydrodynamics.nc"

@@ -266,7 +266,7 @@ def ensure_ci_runs(out: Path) -> None:
 def ci_per_run(h5: Path, cost: Path) -> dict:
     r = ch.analyse_run(h5, cost)
     return dict(ci=r["regs"]["own_a4"].ci, stderr=r["regs"]["own_a4"].stderr, cpu=r["cpu_s"], wall=r["wall_s"],
-                t=r["t"], a2=r["a2"], xi=r["xi"], L=ch.pipeline.velocity_gradient_of(h5))
+                t=r["t"], a2=r["a2"], xi=r["xi"], L=ch.run_checks.velocity_gradient_of(h5))
 
 
 def contacts_only_dt_runs(study: ch.Study, dts, out: Path) -> dict:

@@ -18,11 +18,12 @@ import pytest
 
 from _fake_results import append_results
 from conftest import base_scene, write_scene
-from pyfold import pipeline
+
 from pyfold import report as report_module
+from pyfold import run_checks, trajectory_fit
 from pyfold.cli import main
 from pyfold.closures import available
-from pyfold.pipeline import DEFAULT_CLOSURES
+from pyfold.run_checks import DEFAULT_CLOSURES
 from pyfold.run_input import write_run_file
 from pyfold.scene import load_scene
 from pyfold.scene.initial import initial_state
@@ -46,7 +47,7 @@ def no_fit(monkeypatch):
         seen["closures"] = tuple(closures)
         raise FitStarted()
 
-    monkeypatch.setattr(pipeline, "fit_ci_per_closure", fit)
+    monkeypatch.setattr(trajectory_fit, "fit_ci_per_closure", fit)
     monkeypatch.setattr(report_module, "analyse_run", analyse_run)
     return seen
 
@@ -117,7 +118,7 @@ def test_in_2d_the_default_closures_are_those_defined_there(tmp_path, no_fit, ca
     chosen = no_fit["closures"]
     assert chosen == tuple(c for c in DEFAULT_CLOSURES if c == "exact" or c in available(2))
     assert "ibof" not in chosen and "orw3" not in chosen and len(chosen) >= 3
-    assert report_module.default_closures(3) == DEFAULT_CLOSURES
+    assert run_checks.default_closures(3) == DEFAULT_CLOSURES
     # named explicitly, a closure not defined in 2-D is still refused, naming the allowed ones
     assert main(["analyse", str(run), "--closures", "ibof", "--out", str(tmp_path / "o2"), "--force"]) == 2
     err = capsys.readouterr().err

@@ -12,7 +12,7 @@ import pytest
 
 from _fake_results import append_results
 from conftest import base_scene, write_scene
-from pyfold import pipeline
+from pyfold import run_checks, trajectory_fit
 from pyfold.cli import main
 from pyfold.errors import InputError
 from pyfold.run_input import write_run_file
@@ -71,7 +71,7 @@ def no_fit(monkeypatch):
         seen["time"] = np.asarray(ds["time"].values)
         raise FitStarted()
 
-    monkeypatch.setattr(pipeline, "fit_ci_per_closure", fit)
+    monkeypatch.setattr(trajectory_fit, "fit_ci_per_closure", fit)
     return seen
 
 
@@ -160,15 +160,15 @@ def test_inadmissible_a2_refused_naming_the_first_bad_record(case, edit, expecte
 
 
 def test_orientation_tolerance_follows_precision_and_particle_count():
-    assert pipeline.orientation_tolerance(np.float64, 8) == 1e-10
-    assert pipeline.orientation_tolerance(np.float64, 10**7) == pytest.approx(10 * 10**7 * 2.220446049250313e-16)
-    assert pipeline.orientation_tolerance(np.float32, 8) == pytest.approx(80 * 1.1920929e-07)
+    assert run_checks.orientation_tolerance(np.float64, 8) == 1e-10
+    assert run_checks.orientation_tolerance(np.float64, 10**7) == pytest.approx(10 * 10**7 * 2.220446049250313e-16)
+    assert run_checks.orientation_tolerance(np.float32, 8) == pytest.approx(80 * 1.1920929e-07)
     # round-off of a real mean of unit dyads passes
     rng = np.random.default_rng(1)
     p = rng.normal(size=(100_000, 3))
     p /= np.linalg.norm(p, axis=1)[:, None]
     a2 = np.einsum("ni,nj->ij", p, p) / len(p)
-    pipeline.check_orientation_records(a2[None], np.zeros(1), len(p))
+    run_checks.check_orientation_records(a2[None], np.zeros(1), len(p))
 
 
 def test_unwritable_out_refused_before_any_fit(tmp_path, setup_only, no_fit, capsys):
@@ -201,12 +201,12 @@ def test_unknown_closure_refused_before_opening_the_run(tmp_path, capsys):
 
 def test_check_closures_is_the_one_rule_for_names():
     """`pyfold main` should call this before simulating (pyfold/commands/main_job.py)."""
-    assert pipeline.check_closures("exact, IBOF ,orw3,ibof") == ("exact", "ibof", "orw3")
-    assert pipeline.check_closures(["exact", "fec"], dim=2) == ("exact", "fec")
+    assert run_checks.check_closures("exact, IBOF ,orw3,ibof") == ("exact", "ibof", "orw3")
+    assert run_checks.check_closures(["exact", "fec"], dim=2) == ("exact", "fec")
     for text, expected in [("bogus", "unknown closure 'bogus'; allowed: exact, "), (",", "give at least one closure name"),
                            ("ibof,nope,bad", "unknown closures 'nope', 'bad'"), ("nat1", "NAT1")]:
         with pytest.raises(InputError, match="--closures: ") as info:
-            pipeline.check_closures(text)
+            run_checks.check_closures(text)
         assert expected in str(info.value)
     with pytest.raises(InputError, match="closure not defined 'ibof' in 2-D"):
-        pipeline.check_closures("exact,ibof", dim=2)
+        run_checks.check_closures("exact,ibof", dim=2)

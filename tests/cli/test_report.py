@@ -20,7 +20,7 @@ import xarray as xr
 
 from pyfold import report
 from pyfold.cli import main
-from pyfold.pipeline import DEFAULT_CLOSURES
+from pyfold.run_checks import DEFAULT_CLOSURES
 from pyfold.run_input import fixed_string
 from pyfold.scene.sheared_fibres import sheared_fibres
 

@@ -11,7 +11,7 @@ from matplotlib.colors import to_hex
 from matplotlib.figure import Figure
 from matplotlib.image import imread
 
-from pyfold import pipeline, plotting
+from pyfold import plotting, run_checks, trajectory_fit
 from pyfold.ensemble import RankedEntry
 
 MODEL = "Jeffery kinematics + contacts (collision strategy), no hydrodynamic interactions; strain 0-400"
@@ -72,7 +72,7 @@ def test_report_figures_colour_each_closure_alike_and_label_the_fits(tmp_path, c
     assert "trajectory fit" in ylabel and "exact: rate regression" in ylabel
     assert all("trajectory-fitted" in line.get_label() for line in _lines(a2_fig, "FT "))
     # distinct colours for distinct closures
-    names = ["exact", *pipeline.DEFAULT_CLOSURES[1:]]
+    names = ["exact", *run_checks.DEFAULT_CLOSURES[1:]]
     assert len({plotting.closure_colour(c) for c in names}) == len(names)
 
 
@@ -109,7 +109,7 @@ def test_no_text_is_cut_off(tmp_path, captured):
 
 def test_analyse_figures_use_the_same_colours_and_labels(tmp_path, monkeypatch):
     figs = []
-    monkeypatch.setattr(pipeline, "_save_figure", lambda fig, path: figs.append(fig))
+    monkeypatch.setattr(trajectory_fit, "_save_figure", lambda fig, path: figs.append(fig))
     t = np.linspace(0.0, 10.0, 21)
     a2 = np.tile(np.diag([0.6, 0.2, 0.2]), (21, 1, 1))
     ds = xr.Dataset({"a2": (("time", "i", "j"), a2)}, coords={"time": t})
@@ -122,7 +122,7 @@ def test_analyse_figures_use_the_same_colours_and_labels(tmp_path, monkeypatch):
                         coords={"closure": ["ibof", "fec"]})
     L = np.zeros((3, 3))
     L[0, 1] = 1.0
-    pipeline._figures(ds, fits, errors, L, tmp_path, [MODEL])
+    trajectory_fit._figures(ds, fits, errors, L, tmp_path, [MODEL])
     a2_fig, closure_fig = figs
     for name in ("ibof", "fec"):
         colour = plotting.closure_colour(name)

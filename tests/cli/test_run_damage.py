@@ -24,8 +24,8 @@ import pytest
 
 from _corrupt import data_offset, data_ranges, flip
 from conftest import base_scene, write_scene
-from pyfold import pipeline
 from pyfold import report as report_module
+from pyfold import run_checks, trajectory_fit
 from pyfold.cli import main
 from pyfold.errors import DamagedRunWarning, InputError, UnverifiedRunWarning
 from pyfold.integrity import CHECKSUM_ATTR, RESULT_NAMES, DamagedRunError, verify_path
@@ -94,7 +94,7 @@ def no_fit(monkeypatch):
         seen["vars"] = set(ds.variables)
         raise FitStarted()
 
-    monkeypatch.setattr(pipeline, "fit_ci_per_closure", fit)
+    monkeypatch.setattr(trajectory_fit, "fit_ci_per_closure", fit)
     monkeypatch.setattr(report_module, "analyse_run", lambda path, ds, *a, **k: fit(ds))
     return seen
 
@@ -252,7 +252,7 @@ def test_random_flips_change_nothing_read_or_are_refused(finished, tmp_path):
         assert not differ, f"byte {offset}: {differ[:5]} changed silently"
         with warnings.catch_warnings():  # and pyfold analyse's own checks of the file pass it
             warnings.simplefilter("ignore")
-            assert pipeline.open_checked_run(path).sizes["time"] == RECORDS
+            assert run_checks.open_checked_run(path).sizes["time"] == RECORDS
         outcomes["same"] += 1
     # the flips in the data of what open_run reads are refused: not all outcomes are "same"
     assert outcomes["refused"] >= 10, outcomes

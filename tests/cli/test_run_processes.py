@@ -50,12 +50,12 @@ def no_real_mpirun(tmp_path, monkeypatch):
 @pytest.fixture
 def no_simulation(monkeypatch):
     """`pyfold main` must refuse before it simulates anything."""
-    import pyfold.pipeline
+    import pyfold.commands.run
 
     def refuse(*args, **kwargs):
         raise AssertionError("the simulation was started")
 
-    monkeypatch.setattr(pyfold.pipeline, "run_scene", refuse)
+    monkeypatch.setattr(pyfold.commands.run, "run_scene", refuse)
 
 
 # --np bounds ------------------------------------------------------------------------

@@ -26,7 +26,8 @@ import math
 import numpy as np
 import pytest
 
-from pyfold import pipeline, report
+from pyfold import report, run_checks
+from pyfold.commands import run as run_command
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.correlations import PUBLISHED_RANGE
 from pyfold.ensemble import ensemble_mean, paired_difference
@@ -47,10 +48,10 @@ def ensemble(tmp_path_factory):
         scene = sheared_fibres(BETA, N_L3, seed, T_END, alpha_over_d=ALPHA_OVER_D)
         path = folder / f"s{seed}.toml"
         path.write_text(scene.toml, encoding="utf-8")
-        run = pipeline.run_scene(path, folder / f"s{seed}.h5")
+        run = run_command.run_scene(path, folder / f"s{seed}.h5")
         ds = open_run(run)
         out.append(dict(t=ds["time"].values, a2=ds["a2"].values, a4=ds["a4"].values,
-                        L=pipeline.velocity_gradient_of(run)[:3, :3], xi=pipeline.shape_factor_of(ds)))
+                        L=run_checks.velocity_gradient_of(run)[:3, :3], xi=run_checks.shape_factor_of(ds)))
         ds.close()
     return out
 

@@ -29,7 +29,8 @@ from pathlib import Path
 
 import pytest
 
-from pyfold import pipeline
+from pyfold import run_checks
+from pyfold.commands import run as run_command
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.run_results import open_run
 
@@ -65,10 +66,10 @@ snapshot_interval = 100.0
 def _regression(folder: Path, collisions: str):
     scene = folder / f"{collisions}.toml"
     scene.write_text(SCENE.format(collisions=collisions), encoding="utf-8")
-    run = pipeline.run_scene(scene, folder / f"{collisions}.h5")
+    run = run_command.run_scene(scene, folder / f"{collisions}.h5")
     ds = open_run(run)
     return ci_rate_regression(ds["time"].values, ds["a2"].values, ds["a4"].values,
-                              pipeline.velocity_gradient_of(run), pipeline.shape_factor_of(ds))
+                              run_checks.velocity_gradient_of(run), run_checks.shape_factor_of(ds))
 
 
 @pytest.fixture(scope="module")

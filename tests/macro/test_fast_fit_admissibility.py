@@ -139,7 +139,7 @@ def test_fit_leaving_the_orientation_tensors_is_reported_failed_with_time_and_ca
 
 
 def test_summary_table_prints_failed_instead_of_a_ci():
-    from pyfold.pipeline import summary_table
+    from pyfold.trajectory_fit import summary_table
 
     fits = xr.Dataset(
         {

@@ -1,7 +1,7 @@
 """How the RK4 fit of pyfold analyse is run must not change what it finds.
 
 pyfold.fast_fit runs its fit programs through serialised exports in the per-user
-cache (pyfold._jax.exported_call) and pyfold.pipeline runs the closures' fits side
+cache (pyfold._jax.exported_call) and pyfold.trajectory_fit runs the closures' fits side
 by side in threads. Both only change where the same program comes from and when it
 runs: the fitted values must be the ones of a fresh trace run one closure at a time,
 to the last bit (the same floating-point operations in the same order).
@@ -55,12 +55,12 @@ def test_fit_through_an_export_file_equals_the_fit_of_a_fresh_trace(data, tmp_pa
 
 
 def test_fits_side_by_side_equal_the_fits_one_after_the_other(data, monkeypatch):
-    from pyfold import pipeline
+    from pyfold import trajectory_fit
 
     run = data.assign(a4=(("time", "i", "j", "k", "l"), np.zeros((TIMES.size,) + (3,) * 4)))
-    monkeypatch.setattr(pipeline, "_cores", lambda: 1)
-    serial = pipeline.fit_ci_per_closure(run, SHEAR, CLOSURES, XI)
-    monkeypatch.setattr(pipeline, "_cores", lambda: 2)
-    threaded = pipeline.fit_ci_per_closure(run, SHEAR, CLOSURES, XI)
+    monkeypatch.setattr(trajectory_fit, "_cores", lambda: 1)
+    serial = trajectory_fit.fit_ci_per_closure(run, SHEAR, CLOSURES, XI)
+    monkeypatch.setattr(trajectory_fit, "_cores", lambda: 2)
+    threaded = trajectory_fit.fit_ci_per_closure(run, SHEAR, CLOSURES, XI)
     assert list(threaded["closure"].values) == list(CLOSURES)
     xr.testing.assert_identical(threaded, serial)

@@ -121,12 +121,12 @@ def test_open_run_gives_the_wall_shear_stress_only_for_a_cell_with_walls(sphere_
 
 def test_main_job_stokes_summary_reports_every_record_it_names(sphere_run):
     # the summary names its records in one tuple; each must be a variable of a real run
-    from pyfold import pipeline
+    from pyfold import report
 
     ds, out = sphere_run
-    assert set(pipeline.STOKES_SUMMARY_RECORDS) <= set(ds.data_vars)
-    text = pipeline.stokes_summary(out)
-    for name in pipeline.STOKES_SUMMARY_RECORDS:
+    assert set(report.STOKES_SUMMARY_RECORDS) <= set(ds.data_vars)
+    text = report.stokes_summary(out)
+    for name in report.STOKES_SUMMARY_RECORDS:
         assert f"  {name}: median" in text, text
 
 
