@@ -43,6 +43,7 @@ __all__ = [
     "read_setup",
     "check_format",
     "fixed_string",
+    "attr_text",
 ]
 
 FORMAT = "pyfold.run"
@@ -168,16 +169,21 @@ def write_setup(f: h5py.File, resolved: ResolvedScene) -> None:
         _dataset(res, name, value, units, long_name)
 
 
-def _text(value) -> str:
+def attr_text(value) -> str:
+    """An HDF5 attribute or scalar dataset value as ``str``: bytes decoded as UTF-8 (an
+    invalid byte becomes U+FFFD, so a damaged text is reported, not raised on), a 0-d
+    array by its element."""
     if isinstance(value, bytes | np.bytes_):
-        return value.decode("utf-8")
+        return bytes(value).decode("utf-8", errors="replace")
+    if isinstance(value, np.ndarray) and value.shape == ():
+        return attr_text(value[()])
     return str(value)
 
 
 def check_format(f: h5py.File, path: str | Path) -> str:
     """Refuse a file that is not a pyfold run file or has an unknown major version."""
-    fmt = _text(f.attrs.get("format", b""))
-    version = _text(f.attrs.get("format_version", b""))
+    fmt = attr_text(f.attrs.get("format", b""))
+    version = attr_text(f.attrs.get("format_version", b""))
     if fmt != FORMAT:
         raise InputError(f"{path}: not a pyfold run file (format attribute {fmt!r}, expected {FORMAT!r})")
     if not re.fullmatch(r"[0-9]+\.[0-9]+", version):

@@ -26,6 +26,7 @@ import xarray as xr
 from pyfold.errors import DamagedRunWarning, InputError, PyfoldError, UnverifiedRunWarning
 from pyfold.files import atomic_output
 from pyfold.integrity import Damage, DamagedRunError, refuse, tolerating_damage, verify_path
+from pyfold.run_input import attr_text as _text
 from pyfold.run_input import check_format, read_setup
 from pyfold.xdmf_files import xdmf_data_path
 
@@ -41,14 +42,6 @@ _INITIAL = {  # /initial dataset -> (variable name in the Dataset, dims after "p
     "length": ("particle_length", ()),
     "xi": ("particle_xi", ()),
 }
-
-
-def _text(value) -> str:
-    if isinstance(value, bytes | np.bytes_):
-        return bytes(value).decode("utf-8", errors="replace")
-    if isinstance(value, np.ndarray) and value.shape == ():
-        return _text(value[()])
-    return str(value)
 
 
 def _attr(value):
