@@ -92,21 +92,15 @@ contains
          write (errmsg, '(a,es10.3)') "cell_list: interaction range must be > 0, got ", rc
          return
       end if
+      cl%rc = rc
+      cl%nb = 1
+      cl%w = 1.0_dp
       if (nmax <= 1) then
          ! at most one particle: there is no pair, so no minimum image to make unique.
          ! A particle never interacts with its own periodic images (a rigid particle
          ! and its images move together), so any particle size is allowed: one bin.
-         cl%rc = rc
-         cl%nb = 1
-         cl%w = 1.0_dp
          if (.not. cell_deforming(cell)) cl%w(1:cell%dim) = cell%lengths(1:cell%dim)
-         allocate (cl%head(1), cl%next(max(nmax, 0)))
-         cl%head = 0
-         cl%next = 0
-         stat = FOLD_OK
-         return
-      end if
-      if (cell_deforming(cell)) then
+      else if (cell_deforming(cell)) then
          ! bins along the reduced lattice vectors; the 1e-9 margin keeps a pair at
          ! distance exactly rc within the stencil despite round-off in f
          do d = 1, cell%dim
@@ -120,34 +114,24 @@ contains
                return
             end if
          end do
-         cl%rc = rc
-         cl%nb = 1
-         cl%w = 1.0_dp
          do d = 1, cell%dim
             cl%nb(d) = max(1, int(cell%thickness(d)/(rc*(1.0_dp + 1.0e-9_dp))))
             cl%w(d) = 1.0_dp/cl%nb(d)
          end do
-         allocate (cl%head(product(cl%nb)), cl%next(max(nmax, 0)))
-         cl%head = 0
-         cl%next = 0
-         stat = FOLD_OK
-         return
+      else
+         do d = 1, cell%dim
+            if (d == 2 .and. cell%walls) cycle
+            if (.not. (cell%lengths(d) > 2.0_dp*rc)) then
+               write (errmsg, '(a,i0,a,es10.3,a,es10.3,a)') "cell_list: cell edge ", d, " (", cell%lengths(d), &
+                  ") must exceed twice the interaction range (2*", rc, "): enlarge the cell or shrink the particles"
+               return
+            end if
+         end do
+         do d = 1, cell%dim
+            cl%nb(d) = max(1, int(cell%lengths(d)/rc))
+            cl%w(d) = cell%lengths(d)/cl%nb(d)
+         end do
       end if
-      do d = 1, cell%dim
-         if (d == 2 .and. cell%walls) cycle
-         if (.not. (cell%lengths(d) > 2.0_dp*rc)) then
-            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a)') "cell_list: cell edge ", d, " (", cell%lengths(d), &
-               ") must exceed twice the interaction range (2*", rc, "): enlarge the cell or shrink the particles"
-            return
-         end if
-      end do
-      cl%rc = rc
-      cl%nb = 1
-      cl%w = 1.0_dp
-      do d = 1, cell%dim
-         cl%nb(d) = max(1, int(cell%lengths(d)/rc))
-         cl%w(d) = cell%lengths(d)/cl%nb(d)
-      end do
       allocate (cl%head(product(cl%nb)), cl%next(max(nmax, 0)))
       cl%head = 0
       cl%next = 0
@@ -197,6 +181,21 @@ contains
       k = 1 + ib(1) + cl%nb(1)*(ib(2) + cl%nb(2)*ib(3))
    end function bin_index
 
+   !> Append the particles of bin b to cand(nc+1:), in list order.
+   pure subroutine append_bin(cl, b, cand, nc)
+      type(cell_list_t), intent(in) :: cl
+      integer, intent(in) :: b
+      integer(ip), intent(inout) :: cand(:)
+      integer(ip), intent(inout) :: nc
+      integer(ip) :: k
+      k = cl%head(b)
+      do while (k > 0)
+         nc = nc + 1
+         cand(nc) = k
+         k = cl%next(k)
+      end do
+   end subroutine append_bin
+
    !> Insert particle k at position x (any image).
    pure subroutine cell_list_insert(cl, cell, k, x)
       type(cell_list_t), intent(inout) :: cl
@@ -235,7 +234,7 @@ contains
       real(dp), intent(in) :: xq(:)
       integer(ip), intent(inout) :: cand(:)
       integer(ip), intent(out) :: nc
-      integer :: ib(3), jy, jz, jx, jxlo, jxhi, b, k, iy_lo, iy_hi, iz_lo, iz_hi, jyw, jzw, jxw, lo(3), hi(3), d
+      integer :: ib(3), jy, jz, jx, jxlo, jxhi, b, iy_lo, iy_hi, iz_lo, iz_hi, jyw, jzw, jxw, lo(3), hi(3), d
       real(dp) :: xw(3), shift
 
       nc = 0
@@ -256,12 +255,7 @@ contains
             do jy = lo(2), hi(2)
                do jx = lo(1), hi(1)
                   b = bin_index(cl, [modulo(jx, cl%nb(1)), modulo(jy, cl%nb(2)), modulo(jz, cl%nb(3))])
-                  k = cl%head(b)
-                  do while (k > 0)
-                     nc = nc + 1
-                     cand(nc) = k
-                     k = cl%next(k)
-                  end do
+                  call append_bin(cl, b, cand, nc)
                end do
             end do
          end do
@@ -305,12 +299,7 @@ contains
             do jx = jxlo, jxhi
                jxw = modulo(jx, cl%nb(1))
                b = bin_index(cl, [jxw, jyw, jzw])
-               k = cl%head(b)
-               do while (k > 0)
-                  nc = nc + 1
-                  cand(nc) = k
-                  k = cl%next(k)
-               end do
+               call append_bin(cl, b, cand, nc)
             end do
          end do
       end do
