@@ -181,6 +181,21 @@ contains
       k = 1 + ib(1) + cl%nb(1)*(ib(2) + cl%nb(2)*ib(3))
    end function bin_index
 
+   !> Bins searched along one axis: the query's bin ib and its two neighbours (`around`;
+   !> wrapped or skipped by the caller), else the whole row 0 .. nb - 1.
+   pure subroutine bin_span(around, ib, nb, lo, hi)
+      logical, intent(in) :: around
+      integer, intent(in) :: ib, nb
+      integer, intent(out) :: lo, hi
+      if (around) then
+         lo = ib - 1
+         hi = ib + 1
+      else
+         lo = 0
+         hi = nb - 1
+      end if
+   end subroutine bin_span
+
    !> Append the particles of bin b to cand(nc+1:), in list order.
    pure subroutine append_bin(cl, b, cand, nc)
       type(cell_list_t), intent(in) :: cl
@@ -244,12 +259,7 @@ contains
          lo = 0
          hi = 0
          do d = 1, cell%dim
-            if (cl%nb(d) >= 3) then
-               lo(d) = ib(d) - 1
-               hi(d) = ib(d) + 1
-            else
-               hi(d) = cl%nb(d) - 1
-            end if
+            call bin_span(cl%nb(d) >= 3, ib(d), cl%nb(d), lo(d), hi(d))
          end do
          do jz = lo(3), hi(3)
             do jy = lo(2), hi(2)
@@ -261,20 +271,8 @@ contains
          end do
          return
       end if
-      if (cl%nb(2) >= 3 .or. cell%walls) then
-         iy_lo = ib(2) - 1
-         iy_hi = ib(2) + 1
-      else
-         iy_lo = 0
-         iy_hi = cl%nb(2) - 1
-      end if
-      if (cell%dim == 3 .and. cl%nb(3) >= 3) then
-         iz_lo = ib(3) - 1
-         iz_hi = ib(3) + 1
-      else
-         iz_lo = 0
-         iz_hi = cl%nb(3) - 1
-      end if
+      call bin_span(cl%nb(2) >= 3 .or. cell%walls, ib(2), cl%nb(2), iy_lo, iy_hi)
+      call bin_span(cell%dim == 3 .and. cl%nb(3) >= 3, ib(3), cl%nb(3), iz_lo, iz_hi)
       do jy = iy_lo, iy_hi
          shift = 0.0_dp
          jyw = jy
