@@ -29,21 +29,28 @@ contains
       end if
    end subroutine make_cell
 
-   !> Cell (make_cell) and a particle set of n particles at centres x with axes p; the
-   !> caller sets the other particle fields.
-   subroutine make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg)
+   !> Cell (make_cell) and a particle set of n particles at centres x with axes p, and the
+   !> shapes, radii, lengths and shape factors given (the others keep particles_init's values).
+   subroutine make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg, &
+                       shape, radius, length, xi)
       integer(ip), intent(in) :: dim, n, walls
       real(dp), intent(in) :: lengths(3), G(3, 3), shear_offset, t, x(dim, n), p(dim, n)
       type(cell_t), intent(out) :: cell
       type(particle_set_t), intent(out) :: parts
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      integer(ip), intent(in), optional :: shape(n)
+      real(dp), intent(in), optional :: radius(n), length(n), xi(n)
       call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
       if (stat /= FOLD_OK) return
       call particles_init(parts, dim, n, stat, errmsg)
       if (stat /= FOLD_OK) return
       parts%x = x
       parts%p = p
+      if (present(shape)) parts%shape = shape
+      if (present(radius)) parts%radius = radius
+      if (present(length)) parts%length = length
+      if (present(xi)) parts%xi = xi
    end subroutine make_set
 end module fold_geometry_bind_util
 
@@ -147,11 +154,9 @@ subroutine fold_geo_place(dim, n, lengths, walls, shear_offset, G, t, shape, rad
    p = 0.0_dp
    n_rsa = 0
    sweeps_used = 0
-   call make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg)
+   call make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg, &
+                 shape=shape, radius=radius, length=length)
    if (stat /= FOLD_OK) return
-   parts%shape = shape
-   parts%radius = radius
-   parts%length = length
    call place_particles(cell, parts, alpha, seed, orient_mode, axis, max_attempts, relax_sweeps, &
                         n_rsa, sweeps_used, stat, errmsg)
    x = parts%x
@@ -175,9 +180,8 @@ subroutine fold_geo_jeffery(dim, n, lengths, walls, G, x, p, xi, v, omega, stat,
    type(particle_set_t) :: parts
    v = 0.0_dp
    omega = 0.0_dp
-   call make_set(dim, n, lengths, walls, G, 0.0_dp, 0.0_dp, x, p, cell, parts, stat, errmsg)
+   call make_set(dim, n, lengths, walls, G, 0.0_dp, 0.0_dp, x, p, cell, parts, stat, errmsg, xi=xi)
    if (stat /= FOLD_OK) return
-   parts%xi = xi
    call jeffery_velocities(cell, parts, stat, errmsg)
    v = parts%v
    omega = parts%omega
@@ -221,9 +225,8 @@ subroutine fold_geo_jeffery_advance(dim, n, nout, lengths, walls, G, x, p, xi, d
       errmsg = "jeffery_advance: need every >= 1, nout >= 1, dt > 0"
       return
    end if
-   call make_set(dim, n, lengths, walls, G, 0.0_dp, 0.0_dp, x, p, cell, parts, stat, errmsg)
+   call make_set(dim, n, lengths, walls, G, 0.0_dp, 0.0_dp, x, p, cell, parts, stat, errmsg, xi=xi)
    if (stat /= FOLD_OK) return
-   parts%xi = xi
    xhist(:, :, 1) = x
    phist(:, :, 1) = p
    do iout = 2, nout
@@ -276,11 +279,9 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, t,
    push = 0.0_dp
    list_builds = 0
    list_pairs = 0
-   call make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg)
+   call make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg, &
+                 shape=shape, radius=radius, length=length)
    if (stat /= FOLD_OK) return
-   parts%shape = shape
-   parts%radius = radius
-   parts%length = length
    parts%v = v
    parts%omega = omega
    cfg%mode = mode
