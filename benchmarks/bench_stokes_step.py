@@ -49,6 +49,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from pyfold.scene.sheared_fibres import sheared_fibres_toml
+
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Speed settings: name -> ([numerics.stokes] overrides, what it tests). The first is the
@@ -83,44 +85,12 @@ SETTINGS: dict[str, tuple[dict, str]] = {
 
 
 def scene_text(size: float, count: int, cells_per_diameter: int, steps: int, stokes: dict, seed: int) -> str:
-    def val(v):
-        return f'"{v}"' if isinstance(v, str) else repr(v)
-
-    extra = "\n".join(f"{k} = {val(v)}" for k, v in stokes.items())
     dt = 0.01
-    return f"""title = "bench_stokes_step"
-[cell]
-dim = 3
-size = [{size}, {size}, {size}]
-[flow]
-type = "simple_shear"
-rate = 1.0
-[[particles]]
-name = "fibres"
-shape = "fibre"
-radius = 0.05
-aspect_ratio = 10.0
-count = {count}
-orientation = "isotropic"
-[model]
-hydrodynamics = "stokes"
-collisions = "strategy"
-[numerics]
-dt = {dt}
-t_end = {dt * steps!r}
-seed = {seed}
-time_scheme = "ab2"
-[numerics.stokes]
-cells_per_diameter = {cells_per_diameter}
-kappa = 1e3
-max_grid_points = 4000000
-max_iterations = 20000
-{extra}
-[output]
-interval = {dt}
-snapshot_interval = {dt}
-checkpoint_interval = 0
-"""
+    return sheared_fibres_toml(
+        title="bench_stokes_step", side=size, count=count, radius=0.05, dt=dt, t_end=dt * steps, seed=seed,
+        interval=dt, snapshot_interval=dt, checkpoint_interval=0, hydrodynamics="stokes", collisions="strategy",
+        time_scheme="ab2", stokes={"cells_per_diameter": cells_per_diameter, "kappa": 1e3,
+                                   "max_grid_points": 4000000, "max_iterations": 20000, **stokes})
 
 
 def run_setting(workdir: Path, name: str, text: str, fold_run: Path, reuse: bool = False) -> dict:

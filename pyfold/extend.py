@@ -36,6 +36,7 @@ import h5py
 import numpy as np
 
 from pyfold.errors import InputError, PyfoldError
+from pyfold.fingerprint import setup_keys
 
 if TYPE_CHECKING:
     from pyfold.scene import ResolvedScene
@@ -45,27 +46,6 @@ T_END_KEYS = ("numerics.t_end", "resolved/t_end", "resolved/n_steps", "resolved/
 #: Scene key of each resolved interval (steps) that defaults to a fraction of ``t_end``.
 INTERVALS = {"output_every": "interval", "snapshot_every": "snapshot_interval",
              "checkpoint_every": "checkpoint_interval"}
-
-
-def _flatten(value, prefix: str = "") -> dict[str, object]:
-    out: dict[str, object] = {}
-    if isinstance(value, dict):
-        for key, item in value.items():
-            out.update(_flatten(item, f"{prefix}.{key}" if prefix else str(key)))
-    elif isinstance(value, (list, tuple)):
-        for k, item in enumerate(value):
-            out.update(_flatten(item, f"{prefix}[{k}]"))
-    else:
-        out[prefix] = value
-    return out
-
-
-def _fingerprint(scene: dict, resolved: dict) -> dict[str, object]:
-    keys = _flatten(scene)
-    for name, value in resolved.items():
-        arr = np.asarray(value)
-        keys[f"resolved/{name}"] = arr.tolist() if arr.dtype.kind in "fiub" else value
-    return keys
 
 
 def _same(a, b) -> bool:
@@ -110,8 +90,8 @@ def plan(run_path: Path, resolved: ResolvedScene, scene_path: Path, partial: boo
 
     setup = read_setup(run_path)
     recorded = setup.resolved
-    old = _fingerprint(setup.scene, recorded)
-    new = _fingerprint(json.loads(resolved.scene_json()),
+    old = setup_keys(setup.scene, recorded)
+    new = setup_keys(json.loads(resolved.scene_json()),
                        {k: v for k, (v, _, _) in resolved.resolved_datasets().items()})
     ignored = set(T_END_KEYS) | {f"output.{key}" for key in INTERVALS.values()} | {f"resolved/{k}" for k in INTERVALS}
     for key in sorted(set(old) | set(new)):

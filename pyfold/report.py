@@ -85,32 +85,16 @@ SEED_KEYS = ("numerics.seed", "title", "description", "resolved/seed")
 # --------------------------------------------------------------------------- one scene
 
 
-def _flatten(value, prefix: str = "") -> dict[str, object]:
-    """Nested dicts/lists as ``{"a.b[0].c": leaf}``."""
-    out: dict[str, object] = {}
-    if isinstance(value, dict):
-        for key, item in value.items():
-            out.update(_flatten(item, f"{prefix}.{key}" if prefix else str(key)))
-    elif isinstance(value, (list, tuple)):
-        for k, item in enumerate(value):
-            out.update(_flatten(item, f"{prefix}[{k}]"))
-    else:
-        out[prefix] = value
-    return out
-
-
 def scene_fingerprint(run_path: Path) -> dict[str, object]:
     """What makes the scene of a run: the normalised scene stored in ``/setup/scene_json``
     and every resolved value in ``/setup/resolved`` (``resolved/<name>``), without the
     seed and the free texts (:data:`SEED_KEYS`). The verbatim TOML is not compared
     (comments and layout may differ)."""
+    from pyfold.fingerprint import setup_keys
     from pyfold.run_input import read_setup
 
     setup = read_setup(run_path)
-    keys = _flatten(setup.scene)
-    for name, value in setup.resolved.items():
-        arr = np.asarray(value)
-        keys[f"resolved/{name}"] = arr.tolist() if arr.dtype.kind in "fiub" else value
+    keys = setup_keys(setup.scene, setup.resolved)
     return {k: v for k, v in keys.items() if k not in SEED_KEYS}
 
 

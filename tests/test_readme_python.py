@@ -12,22 +12,16 @@ import re
 from pathlib import Path
 
 import pytest
-import tomli_w
 
 from pyfold.cli import main
+from pyfold.scene.sheared_fibres import sheared_fibres_toml
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
-SCENE = {
-    "title": "README run",
-    "cell": {"dim": 3, "size": [4.0, 4.0, 4.0]},
-    "flow": {"type": "simple_shear", "rate": 1.0},
-    "particles": [{"name": "fibres", "shape": "fibre", "length": 1.0, "radius": 0.05, "count": 8}],
-    "model": {"alpha": 0.005},
-    "numerics": {"dt": 0.01, "t_end": 1.0, "seed": 3},
-    "output": {"interval": 0.05, "snapshot_interval": 0.5},
-}
+#: 8 fibres (beta = 10) in a periodic 4^3 cell, simple shear, to t = 1.
+SCENE = sheared_fibres_toml(title="README run", side=4.0, count=8, radius=0.05, dt=0.01, t_end=1.0, seed=3,
+                            interval=0.05, snapshot_interval=0.5, alpha=0.005)
 
 
 def python_blocks() -> list[str]:
@@ -42,7 +36,7 @@ def test_readme_has_python_blocks():
 def run_folder(tmp_path_factory):
     folder = tmp_path_factory.mktemp("readme")
     scene = folder / "scene.toml"
-    scene.write_text(tomli_w.dumps(SCENE), encoding="utf-8")
+    scene.write_text(SCENE, encoding="utf-8")
     os.environ.pop("PYFOLD_FOLD_RUN", None)
     assert main(["run", str(scene), "-o", str(folder / "run.h5")]) == 0
     return folder

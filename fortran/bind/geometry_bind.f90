@@ -3,7 +3,7 @@
 ! building the derived types from arrays and calling one library routine.
 ! pyfold/native/geometry.py checks shapes and turns stat/errmsg into exceptions.
 
-!> Cell from flat arguments (shared by every entry below).
+!> Cell and particles from flat arguments (shared by every entry below).
 module fold_geometry_bind_util
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
@@ -11,7 +11,7 @@ module fold_geometry_bind_util
    use fold_particles, only: particle_set_t, particles_init
    implicit none
    private
-   public :: make_cell, make_parts
+   public :: make_cell, make_set
 contains
    !> Shear cells take the Lees-Edwards offset as given; deforming cells are set to time t.
    subroutine make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
@@ -29,20 +29,29 @@ contains
       end if
    end subroutine make_cell
 
-   subroutine make_parts(dim, n, shape, radius, length, x, p, parts, stat, errmsg)
-      integer(ip), intent(in) :: dim, n, shape(n)
-      real(dp), intent(in) :: radius(n), length(n), x(dim, n), p(dim, n)
+   !> Cell (make_cell) and a particle set of n particles at centres x with axes p, and the
+   !> shapes, radii, lengths and shape factors given (the others keep particles_init's values).
+   subroutine make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg, &
+                       shape, radius, length, xi)
+      integer(ip), intent(in) :: dim, n, walls
+      real(dp), intent(in) :: lengths(3), G(3, 3), shear_offset, t, x(dim, n), p(dim, n)
+      type(cell_t), intent(out) :: cell
       type(particle_set_t), intent(out) :: parts
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      integer(ip), intent(in), optional :: shape(n)
+      real(dp), intent(in), optional :: radius(n), length(n), xi(n)
+      call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
+      if (stat /= FOLD_OK) return
       call particles_init(parts, dim, n, stat, errmsg)
       if (stat /= FOLD_OK) return
-      parts%shape = shape
-      parts%radius = radius
-      parts%length = length
       parts%x = x
       parts%p = p
-   end subroutine make_parts
+      if (present(shape)) parts%shape = shape
+      if (present(radius)) parts%radius = radius
+      if (present(length)) parts%length = length
+      if (present(xi)) parts%xi = xi
+   end subroutine make_set
 end module fold_geometry_bind_util
 
 subroutine fold_geo_min_image(dim, n, lengths, walls, shear_offset, G, t, dx, dxo, stat, errmsg)
@@ -130,7 +139,7 @@ subroutine fold_geo_place(dim, n, lengths, walls, shear_offset, G, t, shape, rad
    use fold_cell, only: cell_t
    use fold_particles, only: particle_set_t
    use fold_placement, only: place_particles
-   use fold_geometry_bind_util, only: make_cell, make_parts
+   use fold_geometry_bind_util, only: make_set
    implicit none
    integer(ip), intent(in) :: dim, n, walls, shape(n), orient_mode(n), max_attempts, relax_sweeps
    real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), t, radius(n), length(n), axis(dim, n), alpha
@@ -145,9 +154,8 @@ subroutine fold_geo_place(dim, n, lengths, walls, shear_offset, G, t, shape, rad
    p = 0.0_dp
    n_rsa = 0
    sweeps_used = 0
-   call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
-   if (stat /= FOLD_OK) return
-   call make_parts(dim, n, shape, radius, length, x, p, parts, stat, errmsg)
+   call make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg, &
+                 shape=shape, radius=radius, length=length)
    if (stat /= FOLD_OK) return
    call place_particles(cell, parts, alpha, seed, orient_mode, axis, max_attempts, relax_sweeps, &
                         n_rsa, sweeps_used, stat, errmsg)
@@ -159,9 +167,9 @@ subroutine fold_geo_jeffery(dim, n, lengths, walls, G, x, p, xi, v, omega, stat,
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
    use fold_cell, only: cell_t
-   use fold_particles, only: particle_set_t, particles_init
+   use fold_particles, only: particle_set_t
    use fold_kinematics, only: jeffery_velocities
-   use fold_geometry_bind_util, only: make_cell
+   use fold_geometry_bind_util, only: make_set
    implicit none
    integer(ip), intent(in) :: dim, n, walls
    real(dp), intent(in) :: lengths(3), G(3, 3), x(dim, n), p(dim, n), xi(n)
@@ -172,13 +180,8 @@ subroutine fold_geo_jeffery(dim, n, lengths, walls, G, x, p, xi, v, omega, stat,
    type(particle_set_t) :: parts
    v = 0.0_dp
    omega = 0.0_dp
-   call make_cell(dim, lengths, walls, G, 0.0_dp, 0.0_dp, cell, stat, errmsg)
+   call make_set(dim, n, lengths, walls, G, 0.0_dp, 0.0_dp, x, p, cell, parts, stat, errmsg, xi=xi)
    if (stat /= FOLD_OK) return
-   call particles_init(parts, dim, n, stat, errmsg)
-   if (stat /= FOLD_OK) return
-   parts%x = x
-   parts%p = p
-   parts%xi = xi
    call jeffery_velocities(cell, parts, stat, errmsg)
    v = parts%v
    omega = parts%omega
@@ -203,9 +206,9 @@ subroutine fold_geo_jeffery_advance(dim, n, nout, lengths, walls, G, x, p, xi, d
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_cell, only: cell_t, cell_wrap, cell_advance
-   use fold_particles, only: particle_set_t, particles_init
+   use fold_particles, only: particle_set_t
    use fold_kinematics, only: jeffery_velocities, rigid_update
-   use fold_geometry_bind_util, only: make_cell
+   use fold_geometry_bind_util, only: make_set
    implicit none
    integer(ip), intent(in) :: dim, n, nout, walls, every
    real(dp), intent(in) :: lengths(3), G(3, 3), x(dim, n), p(dim, n), xi(n), dt
@@ -222,13 +225,8 @@ subroutine fold_geo_jeffery_advance(dim, n, nout, lengths, walls, G, x, p, xi, d
       errmsg = "jeffery_advance: need every >= 1, nout >= 1, dt > 0"
       return
    end if
-   call make_cell(dim, lengths, walls, G, 0.0_dp, 0.0_dp, cell, stat, errmsg)
+   call make_set(dim, n, lengths, walls, G, 0.0_dp, 0.0_dp, x, p, cell, parts, stat, errmsg, xi=xi)
    if (stat /= FOLD_OK) return
-   call particles_init(parts, dim, n, stat, errmsg)
-   if (stat /= FOLD_OK) return
-   parts%x = x
-   parts%p = p
-   parts%xi = xi
    xhist(:, :, 1) = x
    phist(:, :, 1) = p
    do iout = 2, nout
@@ -255,7 +253,7 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, t,
    use fold_cell, only: cell_t
    use fold_particles, only: particle_set_t
    use fold_contacts, only: contact_config_t, contact_stats_t, resolve_contacts
-   use fold_geometry_bind_util, only: make_cell, make_parts
+   use fold_geometry_bind_util, only: make_set
    implicit none
    integer(ip), intent(in) :: dim, n, walls, shape(n), mode, max_iter, on_cap, first, last
    real(dp), intent(in) :: lengths(3), shear_offset, G(3, 3), t, radius(n), length(n), x(dim, n), p(dim, n)
@@ -281,9 +279,8 @@ subroutine fold_geo_resolve_contacts(dim, n, lengths, walls, shear_offset, G, t,
    push = 0.0_dp
    list_builds = 0
    list_pairs = 0
-   call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
-   if (stat /= FOLD_OK) return
-   call make_parts(dim, n, shape, radius, length, x, p, parts, stat, errmsg)
+   call make_set(dim, n, lengths, walls, G, shear_offset, t, x, p, cell, parts, stat, errmsg, &
+                 shape=shape, radius=radius, length=length)
    if (stat /= FOLD_OK) return
    parts%v = v
    parts%omega = omega

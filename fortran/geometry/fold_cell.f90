@@ -49,6 +49,8 @@
 module fold_cell
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_mat3, only: adjugate3
+   use fold_check, only: check_dim
    use fold_matrix_exp, only: expm3
    implicit none
    private
@@ -119,12 +121,9 @@ contains
       real(dp) :: other(3, 3), trace, cs, sn
       integer :: k
 
+      call check_dim(dim, "cell_init", stat, errmsg)
+      if (stat /= FOLD_OK) return
       stat = FOLD_INPUT_ERROR
-      errmsg = ""
-      if (dim /= 2 .and. dim /= 3) then
-         write (errmsg, '(a,i0)') "cell_init: dim must be 2 or 3, got ", dim
-         return
-      end if
       if (.not. all(lengths(1:dim) > 0.0_dp) .or. .not. all(lengths(1:dim) < huge(1.0_dp))) then
          write (errmsg, '(a,3es11.3)') "cell_init: cell_lengths must be finite and > 0, got ", lengths(1:dim)
          return
@@ -369,15 +368,7 @@ contains
    pure function inverse3(a) result(b)
       real(dp), intent(in) :: a(3, 3)
       real(dp) :: b(3, 3), det
-      b(1, 1) = a(2, 2)*a(3, 3) - a(2, 3)*a(3, 2)
-      b(1, 2) = a(1, 3)*a(3, 2) - a(1, 2)*a(3, 3)
-      b(1, 3) = a(1, 2)*a(2, 3) - a(1, 3)*a(2, 2)
-      b(2, 1) = a(2, 3)*a(3, 1) - a(2, 1)*a(3, 3)
-      b(2, 2) = a(1, 1)*a(3, 3) - a(1, 3)*a(3, 1)
-      b(2, 3) = a(1, 3)*a(2, 1) - a(1, 1)*a(2, 3)
-      b(3, 1) = a(2, 1)*a(3, 2) - a(2, 2)*a(3, 1)
-      b(3, 2) = a(1, 2)*a(3, 1) - a(1, 1)*a(3, 2)
-      b(3, 3) = a(1, 1)*a(2, 2) - a(1, 2)*a(2, 1)
+      b = adjugate3(a)
       det = a(1, 1)*b(1, 1) + a(1, 2)*b(2, 1) + a(1, 3)*b(3, 1)
       b = b/det
    end function inverse3

@@ -92,21 +92,15 @@ contains
          write (errmsg, '(a,es10.3)') "cell_list: interaction range must be > 0, got ", rc
          return
       end if
+      cl%rc = rc
+      cl%nb = 1
+      cl%w = 1.0_dp
       if (nmax <= 1) then
          ! at most one particle: there is no pair, so no minimum image to make unique.
          ! A particle never interacts with its own periodic images (a rigid particle
          ! and its images move together), so any particle size is allowed: one bin.
-         cl%rc = rc
-         cl%nb = 1
-         cl%w = 1.0_dp
          if (.not. cell_deforming(cell)) cl%w(1:cell%dim) = cell%lengths(1:cell%dim)
-         allocate (cl%head(1), cl%next(max(nmax, 0)))
-         cl%head = 0
-         cl%next = 0
-         stat = FOLD_OK
-         return
-      end if
-      if (cell_deforming(cell)) then
+      else if (cell_deforming(cell)) then
          ! bins along the reduced lattice vectors; the 1e-9 margin keeps a pair at
          ! distance exactly rc within the stencil despite round-off in f
          do d = 1, cell%dim
@@ -120,34 +114,24 @@ contains
                return
             end if
          end do
-         cl%rc = rc
-         cl%nb = 1
-         cl%w = 1.0_dp
          do d = 1, cell%dim
             cl%nb(d) = max(1, int(cell%thickness(d)/(rc*(1.0_dp + 1.0e-9_dp))))
             cl%w(d) = 1.0_dp/cl%nb(d)
          end do
-         allocate (cl%head(product(cl%nb)), cl%next(max(nmax, 0)))
-         cl%head = 0
-         cl%next = 0
-         stat = FOLD_OK
-         return
+      else
+         do d = 1, cell%dim
+            if (d == 2 .and. cell%walls) cycle
+            if (.not. (cell%lengths(d) > 2.0_dp*rc)) then
+               write (errmsg, '(a,i0,a,es10.3,a,es10.3,a)') "cell_list: cell edge ", d, " (", cell%lengths(d), &
+                  ") must exceed twice the interaction range (2*", rc, "): enlarge the cell or shrink the particles"
+               return
+            end if
+         end do
+         do d = 1, cell%dim
+            cl%nb(d) = max(1, int(cell%lengths(d)/rc))
+            cl%w(d) = cell%lengths(d)/cl%nb(d)
+         end do
       end if
-      do d = 1, cell%dim
-         if (d == 2 .and. cell%walls) cycle
-         if (.not. (cell%lengths(d) > 2.0_dp*rc)) then
-            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a)') "cell_list: cell edge ", d, " (", cell%lengths(d), &
-               ") must exceed twice the interaction range (2*", rc, "): enlarge the cell or shrink the particles"
-            return
-         end if
-      end do
-      cl%rc = rc
-      cl%nb = 1
-      cl%w = 1.0_dp
-      do d = 1, cell%dim
-         cl%nb(d) = max(1, int(cell%lengths(d)/rc))
-         cl%w(d) = cell%lengths(d)/cl%nb(d)
-      end do
       allocate (cl%head(product(cl%nb)), cl%next(max(nmax, 0)))
       cl%head = 0
       cl%next = 0
@@ -197,6 +181,36 @@ contains
       k = 1 + ib(1) + cl%nb(1)*(ib(2) + cl%nb(2)*ib(3))
    end function bin_index
 
+   !> Bins searched along one axis: the query's bin ib and its two neighbours (`around`;
+   !> wrapped or skipped by the caller), else the whole row 0 .. nb - 1.
+   pure subroutine bin_span(around, ib, nb, lo, hi)
+      logical, intent(in) :: around
+      integer, intent(in) :: ib, nb
+      integer, intent(out) :: lo, hi
+      if (around) then
+         lo = ib - 1
+         hi = ib + 1
+      else
+         lo = 0
+         hi = nb - 1
+      end if
+   end subroutine bin_span
+
+   !> Append the particles of bin b to cand(nc+1:), in list order.
+   pure subroutine append_bin(cl, b, cand, nc)
+      type(cell_list_t), intent(in) :: cl
+      integer, intent(in) :: b
+      integer(ip), intent(inout) :: cand(:)
+      integer(ip), intent(inout) :: nc
+      integer(ip) :: k
+      k = cl%head(b)
+      do while (k > 0)
+         nc = nc + 1
+         cand(nc) = k
+         k = cl%next(k)
+      end do
+   end subroutine append_bin
+
    !> Insert particle k at position x (any image).
    pure subroutine cell_list_insert(cl, cell, k, x)
       type(cell_list_t), intent(inout) :: cl
@@ -235,7 +249,7 @@ contains
       real(dp), intent(in) :: xq(:)
       integer(ip), intent(inout) :: cand(:)
       integer(ip), intent(out) :: nc
-      integer :: ib(3), jy, jz, jx, jxlo, jxhi, b, k, iy_lo, iy_hi, iz_lo, iz_hi, jyw, jzw, jxw, lo(3), hi(3), d
+      integer :: ib(3), jy, jz, jx, jxlo, jxhi, b, iy_lo, iy_hi, iz_lo, iz_hi, jyw, jzw, jxw, lo(3), hi(3), d
       real(dp) :: xw(3), shift
 
       nc = 0
@@ -245,42 +259,20 @@ contains
          lo = 0
          hi = 0
          do d = 1, cell%dim
-            if (cl%nb(d) >= 3) then
-               lo(d) = ib(d) - 1
-               hi(d) = ib(d) + 1
-            else
-               hi(d) = cl%nb(d) - 1
-            end if
+            call bin_span(cl%nb(d) >= 3, ib(d), cl%nb(d), lo(d), hi(d))
          end do
          do jz = lo(3), hi(3)
             do jy = lo(2), hi(2)
                do jx = lo(1), hi(1)
                   b = bin_index(cl, [modulo(jx, cl%nb(1)), modulo(jy, cl%nb(2)), modulo(jz, cl%nb(3))])
-                  k = cl%head(b)
-                  do while (k > 0)
-                     nc = nc + 1
-                     cand(nc) = k
-                     k = cl%next(k)
-                  end do
+                  call append_bin(cl, b, cand, nc)
                end do
             end do
          end do
          return
       end if
-      if (cl%nb(2) >= 3 .or. cell%walls) then
-         iy_lo = ib(2) - 1
-         iy_hi = ib(2) + 1
-      else
-         iy_lo = 0
-         iy_hi = cl%nb(2) - 1
-      end if
-      if (cell%dim == 3 .and. cl%nb(3) >= 3) then
-         iz_lo = ib(3) - 1
-         iz_hi = ib(3) + 1
-      else
-         iz_lo = 0
-         iz_hi = cl%nb(3) - 1
-      end if
+      call bin_span(cl%nb(2) >= 3 .or. cell%walls, ib(2), cl%nb(2), iy_lo, iy_hi)
+      call bin_span(cell%dim == 3 .and. cl%nb(3) >= 3, ib(3), cl%nb(3), iz_lo, iz_hi)
       do jy = iy_lo, iy_hi
          shift = 0.0_dp
          jyw = jy
@@ -305,12 +297,7 @@ contains
             do jx = jxlo, jxhi
                jxw = modulo(jx, cl%nb(1))
                b = bin_index(cl, [jxw, jyw, jzw])
-               k = cl%head(b)
-               do while (k > 0)
-                  nc = nc + 1
-                  cand(nc) = k
-                  k = cl%next(k)
-               end do
+               call append_bin(cl, b, cand, nc)
             end do
          end do
       end do

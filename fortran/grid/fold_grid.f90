@@ -12,6 +12,8 @@
 module fold_grid
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_mat3, only: adjugate3
+   use fold_check, only: check_dim
    implicit none
    private
 
@@ -51,12 +53,9 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
 
+      call check_dim(dim, "grid_init", stat, errmsg)
+      if (stat /= FOLD_OK) return
       stat = FOLD_INPUT_ERROR
-      errmsg = ""
-      if (dim /= 2 .and. dim /= 3) then
-         write (errmsg, '(a,i0)') "grid_init: dim must be 2 or 3, got ", dim
-         return
-      end if
       if (any(n(1:dim) < 2)) then
          write (errmsg, '(a,3(1x,i0))') "grid_init: grid counts must be >= 2, got", n(1:dim)
          return
@@ -158,15 +157,7 @@ contains
    pure function inv3(a, d) result(b)
       real(dp), intent(in) :: a(3, 3), d
       real(dp) :: b(3, 3)
-      b(1, 1) = a(2, 2)*a(3, 3) - a(2, 3)*a(3, 2)
-      b(1, 2) = a(1, 3)*a(3, 2) - a(1, 2)*a(3, 3)
-      b(1, 3) = a(1, 2)*a(2, 3) - a(1, 3)*a(2, 2)
-      b(2, 1) = a(2, 3)*a(3, 1) - a(2, 1)*a(3, 3)
-      b(2, 2) = a(1, 1)*a(3, 3) - a(1, 3)*a(3, 1)
-      b(2, 3) = a(1, 3)*a(2, 1) - a(1, 1)*a(2, 3)
-      b(3, 1) = a(2, 1)*a(3, 2) - a(2, 2)*a(3, 1)
-      b(3, 2) = a(1, 2)*a(3, 1) - a(1, 1)*a(3, 2)
-      b(3, 3) = a(1, 1)*a(2, 2) - a(1, 2)*a(2, 1)
+      b = adjugate3(a)
       b = b/d
    end function inv3
 

@@ -363,23 +363,11 @@ contains
       integer(i8), allocatable, intent(out), target :: buf(:)
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(hid_t) :: dset
-      integer :: err, tclass
-      type(c_ptr) :: ptr
 
       allocate (buf(max(1_hsize_t, product(expected))))
       buf = 0
-      if (.not. checked_dataset(loc, name, expected, dset, tclass, stat, errmsg)) return
-      if (tclass /= H5T_INTEGER_F) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = name//": must be stored as an integer"
-      else
-         ptr = c_loc(buf)
-         call h5dread_f(dset, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), ptr, err)
-         call check_err(err, name//": read failed", stat, errmsg)
-      end if
-      call h5dclose_f(dset, err)
-      call keep_first(err, name//": h5dclose_f failed", stat, errmsg)
+      call read_dataset(loc, name, expected, .false., h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(buf), &
+                        stat, errmsg)
    end subroutine h5_read_int_array
 
    !> Read a real (or integer, converted) dataset of the expected Fortran-order shape.
@@ -390,23 +378,10 @@ contains
       real(dp), allocatable, intent(out), target :: buf(:)
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(hid_t) :: dset
-      integer :: err, tclass
-      type(c_ptr) :: ptr
 
       allocate (buf(max(1_hsize_t, product(expected))))
       buf = 0.0_dp
-      if (.not. checked_dataset(loc, name, expected, dset, tclass, stat, errmsg)) return
-      if (tclass /= H5T_FLOAT_F .and. tclass /= H5T_INTEGER_F) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = name//": must be stored as a number"
-      else
-         ptr = c_loc(buf)
-         call h5dread_f(dset, H5T_NATIVE_DOUBLE, ptr, err)
-         call check_err(err, name//": read failed", stat, errmsg)
-      end if
-      call h5dclose_f(dset, err)
-      call keep_first(err, name//": h5dclose_f failed", stat, errmsg)
+      call read_dataset(loc, name, expected, .true., H5T_NATIVE_DOUBLE, c_loc(buf), stat, errmsg)
    end subroutine h5_read_real_array
 
    ! ------------------------------------------------------------------ attributes
@@ -419,7 +394,7 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       character(kind=c_char, len=:), allocatable, target :: text
       type(c_ptr), target :: ptr(1)
-      integer(hid_t) :: vtype, space, attr
+      integer(hid_t) :: vtype
       integer :: err
 
       text = value//c_null_char
@@ -432,20 +407,7 @@ contains
          call h5tset_cset_f(vtype, H5T_CSET_UTF8_F, err)
          call check_err(err, "attribute "//name//": h5tset_cset_f failed", stat, errmsg)
       end if
-      if (stat == FOLD_OK) then
-         call h5screate_f(H5S_SCALAR_F, space, err)
-         if (ok(err, "attribute "//name//": h5screate_f failed", stat, errmsg)) then
-            call replace_attr(loc, name, vtype, space, attr, stat, errmsg)
-            if (stat == FOLD_OK) then
-               call h5awrite_f(attr, vtype, c_loc(ptr), err)
-               call check_err(err, "attribute "//name//": write failed", stat, errmsg)
-               call h5aclose_f(attr, err)
-               call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
-            end if
-            call h5sclose_f(space, err)
-            call keep_first(err, "attribute "//name//": h5sclose_f failed", stat, errmsg)
-         end if
-      end if
+      if (stat == FOLD_OK) call scalar_attr(loc, name, vtype, c_loc(ptr), stat, errmsg)
       call h5tclose_f(vtype, err)
       call keep_first(err, "attribute "//name//": h5tclose_f failed", stat, errmsg)
    end subroutine h5_attr_string
@@ -460,7 +422,7 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(i8), target :: v
-      integer(hid_t) :: space, attr, itype
+      integer(hid_t) :: attr, itype
       integer :: err
       logical :: there
       v = value
@@ -470,23 +432,10 @@ contains
       if (there) then
          call h5aopen_f(loc, name, attr, err)
          if (.not. ok(err, "attribute "//name//": cannot open", stat, errmsg)) return
-         call h5awrite_f(attr, itype, c_loc(v), err)
-         call check_err(err, "attribute "//name//": write failed", stat, errmsg)
-         call h5aclose_f(attr, err)
-         call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
+         call write_attr(attr, name, itype, c_loc(v), stat, errmsg)
          return
       end if
-      call h5screate_f(H5S_SCALAR_F, space, err)
-      if (.not. ok(err, "attribute "//name//": h5screate_f failed", stat, errmsg)) return
-      call replace_attr(loc, name, itype, space, attr, stat, errmsg)
-      if (stat == FOLD_OK) then
-         call h5awrite_f(attr, itype, c_loc(v), err)
-         call check_err(err, "attribute "//name//": write failed", stat, errmsg)
-         call h5aclose_f(attr, err)
-         call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
-      end if
-      call h5sclose_f(space, err)
-      call keep_first(err, "attribute "//name//": h5sclose_f failed", stat, errmsg)
+      call scalar_attr(loc, name, itype, c_loc(v), stat, errmsg)
    end subroutine h5_attr_int
 
    !> Write (replace) a real scalar attribute.
@@ -497,20 +446,8 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       real(dp), target :: v
-      integer(hid_t) :: space, attr
-      integer :: err
       v = value
-      call h5screate_f(H5S_SCALAR_F, space, err)
-      if (.not. ok(err, "attribute "//name//": h5screate_f failed", stat, errmsg)) return
-      call replace_attr(loc, name, H5T_NATIVE_DOUBLE, space, attr, stat, errmsg)
-      if (stat == FOLD_OK) then
-         call h5awrite_f(attr, H5T_NATIVE_DOUBLE, c_loc(v), err)
-         call check_err(err, "attribute "//name//": write failed", stat, errmsg)
-         call h5aclose_f(attr, err)
-         call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
-      end if
-      call h5sclose_f(space, err)
-      call keep_first(err, "attribute "//name//": h5sclose_f failed", stat, errmsg)
+      call scalar_attr(loc, name, H5T_NATIVE_DOUBLE, c_loc(v), stat, errmsg)
    end subroutine h5_attr_real
 
    !> Read a scalar integer attribute; `found` = .false. (and stat = FOLD_OK) when absent.
@@ -584,20 +521,7 @@ contains
       character(len=*), intent(in) :: units, long_name
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(hid_t) :: space, dset
-      integer :: err
-      call h5_delete(loc, name, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5screate_simple_f(size(shape), shape, space, err)
-      if (.not. ok(err, name//": dataspace", stat, errmsg)) return
-      call h5dcreate_f(loc, name, H5T_NATIVE_DOUBLE, space, dset, err)
-      call check_err(err, name//": cannot create dataset", stat, errmsg)
-      call h5sclose_f(space, err)
-      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(buf), err)
-      if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, units, long_name, stat, errmsg)
-      call close_dataset(dset, name, stat, errmsg)
+      call write_dataset(loc, name, .false., shape, H5T_NATIVE_DOUBLE, c_loc(buf), units, long_name, stat, errmsg)
    end subroutine h5_write_real_array
 
    !> Write a scalar real dataset (replacing any previous one).
@@ -609,21 +533,9 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       real(dp), target :: v(1)
-      integer(hid_t) :: space, dset
-      integer :: err
       v(1) = value
-      call h5_delete(loc, name, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5screate_f(H5S_SCALAR_F, space, err)
-      if (.not. ok(err, name//": dataspace", stat, errmsg)) return
-      call h5dcreate_f(loc, name, H5T_NATIVE_DOUBLE, space, dset, err)
-      call check_err(err, name//": cannot create dataset", stat, errmsg)
-      call h5sclose_f(space, err)
-      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(v), err)
-      if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, units, long_name, stat, errmsg)
-      call close_dataset(dset, name, stat, errmsg)
+      call write_dataset(loc, name, .true., [integer(hsize_t) ::], H5T_NATIVE_DOUBLE, c_loc(v), units, long_name, &
+                         stat, errmsg)
    end subroutine h5_write_real_scalar
 
    !> Write a scalar 64-bit integer dataset (replacing any previous one).
@@ -635,22 +547,9 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(i8), target :: v(1)
-      integer(hid_t) :: space, dset, itype
-      integer :: err
       v(1) = value
-      itype = h5kind_to_type(c_int64_t, H5_INTEGER_KIND)
-      call h5_delete(loc, name, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5screate_f(H5S_SCALAR_F, space, err)
-      if (.not. ok(err, name//": dataspace", stat, errmsg)) return
-      call h5dcreate_f(loc, name, itype, space, dset, err)
-      call check_err(err, name//": cannot create dataset", stat, errmsg)
-      call h5sclose_f(space, err)
-      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
-      if (stat /= FOLD_OK) return
-      call h5dwrite_f(dset, itype, c_loc(v), err)
-      if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, "1", long_name, stat, errmsg)
-      call close_dataset(dset, name, stat, errmsg)
+      call write_dataset(loc, name, .true., [integer(hsize_t) ::], h5kind_to_type(c_int64_t, H5_INTEGER_KIND), &
+                         c_loc(v), "1", long_name, stat, errmsg)
    end subroutine h5_write_int_scalar
 
    !> Like h5_write_real_array, but a dataset that exists with the same shape and a
@@ -664,15 +563,8 @@ contains
       character(len=*), intent(in) :: units, long_name
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(hid_t) :: dset
-      integer :: err
-      if (open_same(loc, name, shape, H5T_FLOAT_F, dset)) then
-         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(buf), err)
-         call check_err(err, name//": write failed", stat, errmsg)
-         call close_dataset(dset, name, stat, errmsg)
-      else
+      if (.not. overwritten(loc, name, shape, H5T_FLOAT_F, H5T_NATIVE_DOUBLE, c_loc(buf), stat, errmsg)) &
          call h5_write_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
-      end if
    end subroutine h5_put_real_array
 
    !> h5_write_real_scalar, in place when the scalar dataset exists (see h5_put_real_array).
@@ -684,16 +576,9 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       real(dp), target :: v(1)
-      integer(hid_t) :: dset
-      integer :: err
       v(1) = value
-      if (open_same(loc, name, [integer(hsize_t) ::], H5T_FLOAT_F, dset)) then
-         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(v), err)
-         call check_err(err, name//": write failed", stat, errmsg)
-         call close_dataset(dset, name, stat, errmsg)
-      else
+      if (.not. overwritten(loc, name, [integer(hsize_t) ::], H5T_FLOAT_F, H5T_NATIVE_DOUBLE, c_loc(v), stat, errmsg)) &
          call h5_write_real_scalar(loc, name, value, units, long_name, stat, errmsg)
-      end if
    end subroutine h5_put_real_scalar
 
    !> h5_write_int_scalar, in place when the scalar dataset exists (see h5_put_real_array).
@@ -705,16 +590,10 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(i8), target :: v(1)
-      integer(hid_t) :: dset
-      integer :: err
       v(1) = value
-      if (open_same(loc, name, [integer(hsize_t) ::], H5T_INTEGER_F, dset)) then
-         call h5dwrite_f(dset, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(v), err)
-         call check_err(err, name//": write failed", stat, errmsg)
-         call close_dataset(dset, name, stat, errmsg)
-      else
+      if (.not. overwritten(loc, name, [integer(hsize_t) ::], H5T_INTEGER_F, &
+                            h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(v), stat, errmsg)) &
          call h5_write_int_scalar(loc, name, value, long_name, stat, errmsg)
-      end if
    end subroutine h5_put_int_scalar
 
    ! ------------------------------------------------------------------ netCDF-style variables
@@ -729,18 +608,8 @@ contains
       character(len=*), intent(in) :: units, long_name
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(hid_t) :: dset
-      integer :: err
-      call create_extendible(loc, name, FOLD_H5_INT, [integer(hsize_t) :: size(values)], unlimited, dset, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      if (size(values) > 0) then
-         call h5dwrite_f(dset, h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(values), err)
-         if (.not. ok(err, name//": write failed", stat, errmsg)) then
-            call close_dataset(dset, name, stat, errmsg)
-            return
-         end if
-      end if
-      call finish_scale(dset, name, units, long_name, stat, errmsg)
+      call write_scale(loc, name, FOLD_H5_INT, int(size(values), hsize_t), unlimited, &
+                       h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(values), units, long_name, stat, errmsg)
    end subroutine h5_scale_int
 
    !> Create a 1-D real coordinate that is also a dimension scale (see h5_scale_int).
@@ -752,18 +621,8 @@ contains
       character(len=*), intent(in) :: units, long_name
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      integer(hid_t) :: dset
-      integer :: err
-      call create_extendible(loc, name, FOLD_H5_REAL, [integer(hsize_t) :: size(values)], unlimited, dset, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      if (size(values) > 0) then
-         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, c_loc(values), err)
-         if (.not. ok(err, name//": write failed", stat, errmsg)) then
-            call close_dataset(dset, name, stat, errmsg)
-            return
-         end if
-      end if
-      call finish_scale(dset, name, units, long_name, stat, errmsg)
+      call write_scale(loc, name, FOLD_H5_REAL, int(size(values), hsize_t), unlimited, H5T_NATIVE_DOUBLE, &
+                       c_loc(values), units, long_name, stat, errmsg)
    end subroutine h5_scale_real
 
    !> Create a variable over named dimensions, given in Fortran order (the last one
@@ -1220,6 +1079,145 @@ contains
          dset = -1
       end if
    end subroutine create_extendible
+
+   !> Read dataset `name` of the expected shape (checked_dataset) into ptr as mtype. Its
+   !> stored type must be an integer type, or (numbers) an integer or floating-point type.
+   subroutine read_dataset(loc, name, expected, numbers, mtype, ptr, stat, errmsg)
+      integer(hid_t), intent(in) :: loc, mtype
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: expected(:)
+      logical, intent(in) :: numbers
+      type(c_ptr), intent(in) :: ptr
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: err, tclass
+      type(c_ptr) :: dest  ! h5dread_f takes its buffer pointer intent(inout)
+
+      if (.not. checked_dataset(loc, name, expected, dset, tclass, stat, errmsg)) return
+      if (tclass /= H5T_INTEGER_F .and. .not. (numbers .and. tclass == H5T_FLOAT_F)) then
+         stat = FOLD_INPUT_ERROR
+         if (numbers) then
+            errmsg = name//": must be stored as a number"
+         else
+            errmsg = name//": must be stored as an integer"
+         end if
+      else
+         dest = ptr
+         call h5dread_f(dset, mtype, dest, err)
+         call check_err(err, name//": read failed", stat, errmsg)
+      end if
+      call h5dclose_f(dset, err)
+      call keep_first(err, name//": h5dclose_f failed", stat, errmsg)
+   end subroutine read_dataset
+
+   !> Create (replace) a scalar attribute of type atype and write the value at ptr.
+   subroutine scalar_attr(loc, name, atype, ptr, stat, errmsg)
+      integer(hid_t), intent(in) :: loc, atype
+      character(len=*), intent(in) :: name
+      type(c_ptr), intent(in) :: ptr
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: space, attr
+      integer :: err
+      call h5screate_f(H5S_SCALAR_F, space, err)
+      if (.not. ok(err, "attribute "//name//": h5screate_f failed", stat, errmsg)) return
+      call replace_attr(loc, name, atype, space, attr, stat, errmsg)
+      if (stat == FOLD_OK) call write_attr(attr, name, atype, ptr, stat, errmsg)
+      call h5sclose_f(space, err)
+      call keep_first(err, "attribute "//name//": h5sclose_f failed", stat, errmsg)
+   end subroutine scalar_attr
+
+   !> Write the value at ptr to the open attribute attr and close it.
+   subroutine write_attr(attr, name, atype, ptr, stat, errmsg)
+      integer(hid_t), intent(in) :: attr, atype
+      character(len=*), intent(in) :: name
+      type(c_ptr), intent(in) :: ptr
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer :: err
+      call h5awrite_f(attr, atype, ptr, err)
+      call check_err(err, "attribute "//name//": write failed", stat, errmsg)
+      call h5aclose_f(attr, err)
+      call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
+   end subroutine write_attr
+
+   !> Write a fixed-shape dataset of memory type mtype from ptr (replacing any previous
+   !> one), with units and long_name: a scalar dataspace when `scalar`, else `shape`.
+   subroutine write_dataset(loc, name, scalar, shape, mtype, ptr, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc, mtype
+      character(len=*), intent(in) :: name
+      logical, intent(in) :: scalar
+      integer(hsize_t), intent(in) :: shape(:)
+      type(c_ptr), intent(in) :: ptr
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: space, dset
+      integer :: err
+      call h5_delete(loc, name, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (scalar) then
+         call h5screate_f(H5S_SCALAR_F, space, err)
+      else
+         call h5screate_simple_f(size(shape), shape, space, err)
+      end if
+      if (.not. ok(err, name//": dataspace", stat, errmsg)) return
+      call h5dcreate_f(loc, name, mtype, space, dset, err)
+      call check_err(err, name//": cannot create dataset", stat, errmsg)
+      call h5sclose_f(space, err)
+      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call h5dwrite_f(dset, mtype, ptr, err)
+      if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, units, long_name, stat, errmsg)
+      call close_dataset(dset, name, stat, errmsg)
+   end subroutine write_dataset
+
+   !> Overwrite `name` in place from ptr (memory type mtype) when it exists with this
+   !> shape and type class (open_same); false, and nothing done, otherwise.
+   logical function overwritten(loc, name, shape, tclass, mtype, ptr, stat, errmsg)
+      integer(hid_t), intent(in) :: loc, mtype
+      character(len=*), intent(in) :: name
+      integer(hsize_t), intent(in) :: shape(:)
+      integer, intent(in) :: tclass
+      type(c_ptr), intent(in) :: ptr
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: err
+      stat = FOLD_OK
+      errmsg = ""
+      overwritten = open_same(loc, name, shape, tclass, dset)
+      if (.not. overwritten) return
+      call h5dwrite_f(dset, mtype, ptr, err)
+      call check_err(err, name//": write failed", stat, errmsg)
+      call close_dataset(dset, name, stat, errmsg)
+   end function overwritten
+
+   !> A 1-D coordinate of n values at ptr (memory type mtype) that is a dimension scale.
+   subroutine write_scale(loc, name, kind, n, unlimited, mtype, ptr, units, long_name, stat, errmsg)
+      integer(hid_t), intent(in) :: loc, mtype
+      character(len=*), intent(in) :: name
+      integer, intent(in) :: kind
+      integer(hsize_t), intent(in) :: n
+      logical, intent(in) :: unlimited
+      type(c_ptr), intent(in) :: ptr
+      character(len=*), intent(in) :: units, long_name
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      integer(hid_t) :: dset
+      integer :: err
+      call create_extendible(loc, name, kind, [n], unlimited, dset, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      if (n > 0) then
+         call h5dwrite_f(dset, mtype, ptr, err)
+         if (.not. ok(err, name//": write failed", stat, errmsg)) then
+            call close_dataset(dset, name, stat, errmsg)
+            return
+         end if
+      end if
+      call finish_scale(dset, name, units, long_name, stat, errmsg)
+   end subroutine write_scale
 
    subroutine finish_scale(dset, name, units, long_name, stat, errmsg)
       integer(hid_t), intent(in) :: dset

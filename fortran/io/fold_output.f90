@@ -819,32 +819,22 @@ contains
                          [d, d, d, d, f, 0_hsize_t], .true., "1", "a4 of each particle family", stat, errmsg)
       if (stat /= FOLD_OK) return
       call series("n_corrections", FOLD_H5_INT, "1", "contact velocity corrections applied since the previous record")
-      if (stat /= FOLD_OK) return
       call series("contact_iterations", FOLD_H5_INT, "1", "largest number of contact-loop iterations in one step")
-      if (stat /= FOLD_OK) return
       call series("pairs_left", FOLD_H5_INT, "1", "largest number of pairs left closer than alpha after the contact loop")
-      if (stat /= FOLD_OK) return
       call series("capped_steps", FOLD_H5_INT, "1", "steps whose contact loop reached contact_max_iter")
-      if (stat /= FOLD_OK) return
       call series("min_gap", FOLD_H5_REAL, "m", "smallest surface gap (particle-particle or particle-wall) after a step; < 0: overlap")
-      if (stat /= FOLD_OK) return
       call series("min_gap_over_alpha", FOLD_H5_REAL, "1", "smallest surface gap divided by the security zone alpha")
-      if (stat /= FOLD_OK) return
       call series("length_drift", FOLD_H5_REAL, "1", "largest relative change of a fibre's end-to-end length")
-      if (stat /= FOLD_OK) return
       call series("unit_norm_drift", FOLD_H5_REAL, "1", "largest deviation of |p| from 1")
       if (stat /= FOLD_OK) return
 
       if (out%stokes) then
          call series("stokes_iterations", FOLD_H5_INT, "1", &
                      "largest number of Stokes CG iterations of a solve since the previous record")
-         if (stat /= FOLD_OK) return
          call series("stokes_residual", FOLD_H5_REAL, "1", &
                      "largest relative preconditioned CG residual reached since the previous record")
-         if (stat /= FOLD_OK) return
          call series("rigidity_max", FOLD_H5_REAL, "1", "largest rigidity residual of a particle since the previous "// &
                      "record (non-rigid part of the velocity over a particle / (|E| max(L/2, R)))")
-         if (stat /= FOLD_OK) return
          call series("rigidity_mean", FOLD_H5_REAL, "1", &
                      "particle-averaged rigidity residual, largest since the previous record")
          if (stat /= FOLD_OK) return
@@ -859,7 +849,6 @@ contains
       if (out%lubrication) then
          call series("lubricated_pairs", FOLD_H5_INT, "1", "largest number of sphere pairs closer than the "// &
                      "lubrication threshold h_c (2 voxels) in a solve since the previous record")
-         if (stat /= FOLD_OK) return
          call series("lubrication_correction", FOLD_H5_REAL, "m/s", "largest lubrication velocity correction "// &
                      "|delta v| of a sphere since the previous record")
          if (stat /= FOLD_OK) return
@@ -877,6 +866,7 @@ contains
       subroutine series(name, kind, units, long_name)
          character(len=*), intent(in) :: name, units, long_name
          integer, intent(in) :: kind
+         if (stat /= FOLD_OK) return  ! after a failure: a run of calls needs one check after it
          call h5_var_create(out%file, name, kind, [character(len=8) :: T], [0_hsize_t], .true., units, long_name, stat, errmsg)
       end subroutine series
    end subroutine layout

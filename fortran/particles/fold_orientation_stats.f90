@@ -7,6 +7,7 @@
 module fold_orientation_stats
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
+   use fold_check, only: check_dim
    implicit none
    private
    public :: orientation_moments, orientation_moments_batch
@@ -33,15 +34,10 @@ contains
       integer(ip) :: k, i, j, l, m
       real(dp) :: wsum, v
 
-      stat = FOLD_OK
-      errmsg = ""
       a2 = 0.0_dp
       a4 = 0.0_dp
-      if (dim /= 2 .and. dim /= 3) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,i0)') "orientation_moments: dim must be 2 or 3, got ", dim
-         return
-      end if
+      call check_dim(dim, "orientation_moments", stat, errmsg)
+      if (stat /= FOLD_OK) return
       if (n < 1) then
          stat = FOLD_INPUT_ERROR
          write (errmsg, '(a,i0)') "orientation_moments: need at least one particle, got n = ", n

@@ -14,6 +14,7 @@
 module fold_particles
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_check, only: check_dim
    implicit none
    private
 
@@ -65,13 +66,8 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
 
-      stat = FOLD_OK
-      errmsg = ""
-      if (dim /= 2 .and. dim /= 3) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,i0)') "particles_init: dim must be 2 or 3, got ", dim
-         return
-      end if
+      call check_dim(dim, "particles_init", stat, errmsg)
+      if (stat /= FOLD_OK) return
       if (n < 0) then
          stat = FOLD_INPUT_ERROR
          write (errmsg, '(a,i0)') "particles_init: n must be >= 0, got ", n
@@ -105,12 +101,9 @@ contains
       integer(ip) :: k
       real(dp) :: pn
 
+      call check_dim(parts%dim, "particles", stat, errmsg)
+      if (stat /= FOLD_OK) return
       stat = FOLD_INPUT_ERROR
-      errmsg = ""
-      if (parts%dim /= 2 .and. parts%dim /= 3) then
-         write (errmsg, '(a,i0)') "particles: dim must be 2 or 3, got ", parts%dim
-         return
-      end if
       if (.not. allocated(parts%x)) then
          errmsg = "particles: set not initialised (call particles_init)"
          return

@@ -85,13 +85,35 @@ def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_o
     t_end = round(n_steps * step, 12)
     model_words = "contacts-only" if hydrodynamics == "jeffery" else "Stokes-coupled"
     title = title or f"{model_words} fibres, beta {beta:g}, n L^3 {count / side ** 3:.3g}, seed {seed}"
+    toml = sheared_fibres_toml(title=title, side=side, count=count, radius=radius, length=length, dt=step,
+                               t_end=t_end, seed=int(seed), interval=interval, snapshot_interval=t_end,
+                               hydrodynamics=hydrodynamics, collisions=collisions, alpha=alpha,
+                               stokes=(stokes or {}) if hydrodynamics == "stokes" else None,
+                               time_scheme=time_scheme)
+    return ShearedFibres(toml=toml, beta=float(beta), n_l3=count / side ** 3, count=count, side=side,
+                         alpha=alpha, dt=step, t_end=t_end, seed=int(seed), hydrodynamics=hydrodynamics)
+
+
+def sheared_fibres_toml(*, title: str, side: float, count: int, radius: float, dt: float, t_end: float,
+                        seed: int | str, length: float = 1.0, interval: float | None = None,
+                        snapshot_interval: float | None = None, checkpoint_interval: float | None = None,
+                        hydrodynamics: str | None = None, collisions: str | None = None,
+                        alpha: float | None = None, stokes: Mapping[str, int | float | str] | None = None,
+                        time_scheme: str | None = None) -> str:
+    """The scene text of ``count`` fibres (``length``, ``radius``) in a cubic cell of ``side``
+    in simple shear at rate 1, as given (no sizing: :func:`sheared_fibres` sizes it from beta
+    and n L^3). Keys given as ``None`` are left out (the scene defaults apply); ``stokes``
+    (even empty) adds the ``[numerics.stokes]`` table; ``seed`` may be a placeholder text."""
     numerics_extra = ""
     if time_scheme is not None:
         numerics_extra += f'time_scheme = "{time_scheme}"\n'
-    if hydrodynamics == "stokes":
+    if stokes is not None:
         numerics_extra += "\n[numerics.stokes]\n" + "".join(
-            f"{key} = {_toml_value(value)}\n" for key, value in (stokes or {}).items())
-    toml = f'''title = "{title}"
+            f"{key} = {_toml_value(value)}\n" for key, value in stokes.items())
+    model = _toml_keys(hydrodynamics=hydrodynamics, collisions=collisions, alpha=alpha)
+    output = _toml_keys(interval=interval, snapshot_interval=snapshot_interval,
+                        checkpoint_interval=checkpoint_interval)
+    return f'''title = "{title}"
 [cell]
 dim = 3
 size = [{side!r}, {side!r}, {side!r}]
@@ -109,21 +131,19 @@ count = {count}
 orientation = "isotropic"
 
 [model]
-hydrodynamics = "{hydrodynamics}"
-collisions = "{collisions}"
-alpha = {alpha!r}
-
+{model}
 [numerics]
-dt = {step!r}
+dt = {dt!r}
 t_end = {t_end!r}
-seed = {int(seed)}
+seed = {seed}
 {numerics_extra}
 [output]
-interval = {interval!r}
-snapshot_interval = {t_end!r}
-'''
-    return ShearedFibres(toml=toml, beta=float(beta), n_l3=count / side ** 3, count=count, side=side,
-                         alpha=alpha, dt=step, t_end=t_end, seed=int(seed), hydrodynamics=hydrodynamics)
+{output}'''
+
+
+def _toml_keys(**values: int | float | str | None) -> str:
+    """``key = value`` lines of the values given (``None`` left out)."""
+    return "".join(f"{key} = {_toml_value(value)}\n" for key, value in values.items() if value is not None)
 
 
 def _toml_value(value: int | float | str) -> str:

@@ -365,12 +365,6 @@ def main() -> None:
                 print(f"trajectory fits beta {b:g}, n L^3 {n:g}, seed {s} ({time.perf_counter() - start:.0f} s)",
                       flush=True)
     points = [(b, n) for b, n in points if any((b, n, s) in results for s in seeds)]
-    if args.trajectory_fit:
-        for (b, n, s), r in results.items():
-            if b in form.fit_betas:
-                r["est"].update(trajectory_fits(r, form.fit_closures))
-                print(f"trajectory fits beta {b:g}, n L^3 {n:g}, seed {s} ({time.perf_counter() - start:.0f} s)",
-                      flush=True)
     table, per_point = summarise(points, seeds, results, form.rsc_betas if args.rsc else ())
     total = time.perf_counter() - start
 

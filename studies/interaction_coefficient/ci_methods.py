@@ -45,36 +45,10 @@ from pyfold.ci_estimators import ci_rate_regression, ci_steady_state_match
 from pyfold.fit import fit_parameters
 from pyfold.models import FolgarTucker
 from pyfold.run_results import open_run
+from pyfold.scene.sheared_fibres import sheared_fibres_toml
 from pyfold.steady_state import detect_steady_state
 
 # Parameters
-SCENE = """
-title = "concentrated contacts-only fibres in simple shear (C_I methods study)"
-[cell]
-dim = 3
-size = [{side}, {side}, {side}]
-[flow]
-type = "simple_shear"
-rate = 1.0
-[[particles]]
-name = "fibres"
-shape = "fibre"
-length = 1.0
-radius = 0.05
-count = {count}
-orientation = "isotropic"
-[model]
-hydrodynamics = "jeffery"
-collisions = "strategy"
-alpha = 0.02
-[numerics]
-dt = 0.02
-t_end = {t_end}
-seed = {seed}
-[output]
-interval = {interval}
-snapshot_interval = {t_end}
-"""
 COUNT = 200
 SIDE = 2.4  # n L^3 = 200 / 2.4^3 = 14.5 (concentrated: > L/d = 10); >= 2 (L + 2R + alpha)
 INTERVAL = 0.2  # record spacing [1/gamma_dot] for (b), (c); (a) fits every 2nd record
@@ -87,9 +61,17 @@ METHODS = (
 )
 
 
+def scene_text(seed: int | str, t_end: float) -> str:
+    """The study's scene: COUNT fibres (beta = 10) in a cell of SIDE, contacts with alpha = 0.2 d."""
+    return sheared_fibres_toml(
+        title="concentrated contacts-only fibres in simple shear (C_I methods study)", side=SIDE, count=COUNT,
+        radius=0.05, dt=0.02, t_end=t_end, seed=seed, interval=INTERVAL, snapshot_interval=t_end,
+        hydrodynamics="jeffery", collisions="strategy", alpha=0.02)
+
+
 def simulate(seed: int, t_end: float, folder: Path) -> Path:
     scene = folder / f"seed_{seed}.toml"
-    scene.write_text(SCENE.format(side=SIDE, count=COUNT, t_end=t_end, seed=seed, interval=INTERVAL))
+    scene.write_text(scene_text(seed, t_end))
     return run_command.run_scene(scene, folder / f"seed_{seed}.h5")
 
 
@@ -167,7 +149,7 @@ def main() -> None:
         coords={"seed": args.seeds, "method": list(METHODS), "time": ("time", t, {"units": "s"}),
                 "i": ["x", "y", "z"], "j": ["x", "y", "z"]},
         attrs={"question": "C_I of a concentrated contacts-only suspension by three methods",
-               "scene": SCENE.format(side=SIDE, count=COUNT, t_end=args.t_end, seed="<seed>", interval=INTERVAL),
+               "scene": scene_text("<seed>", args.t_end),
                "xi": rows[0]["xi"], "n_L3": COUNT / SIDE**3},
     )
     result.to_netcdf(args.out / "ci_methods.nc", engine="h5netcdf")

@@ -33,39 +33,19 @@ from pyfold import run_checks
 from pyfold.commands import run as run_command
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.run_results import open_run
+from pyfold.scene.sheared_fibres import sheared_fibres_toml
 
-SCENE = """
-title = "concentrated fibres, contacts {collisions}"
-[cell]
-dim = 3
-size = [2.5, 2.5, 2.5]
-[flow]
-type = "simple_shear"
-rate = 1.0
-[[particles]]
-name = "fibres"
-shape = "fibre"
-length = 1.0
-radius = 0.05
-count = 180
-orientation = "isotropic"
-[model]
-hydrodynamics = "jeffery"
-collisions = "{collisions}"
-alpha = 0.02
-[numerics]
-dt = 0.02
-t_end = 100.0
-seed = 7
-[output]
-interval = 0.2
-snapshot_interval = 100.0
-"""
+
+def _scene_text(collisions: str) -> str:
+    """180 fibres (beta = 10) in a 2.5^3 cell, n L^3 = 11.5, alpha = 0.2 d."""
+    return sheared_fibres_toml(title=f"concentrated fibres, contacts {collisions}", side=2.5, count=180, radius=0.05,
+                               dt=0.02, t_end=100.0, seed=7, interval=0.2, snapshot_interval=100.0,
+                               hydrodynamics="jeffery", collisions=collisions, alpha=0.02)
 
 
 def _regression(folder: Path, collisions: str):
     scene = folder / f"{collisions}.toml"
-    scene.write_text(SCENE.format(collisions=collisions), encoding="utf-8")
+    scene.write_text(_scene_text(collisions), encoding="utf-8")
     run = run_command.run_scene(scene, folder / f"{collisions}.h5")
     ds = open_run(run)
     return ci_rate_regression(ds["time"].values, ds["a2"].values, ds["a4"].values,

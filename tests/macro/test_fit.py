@@ -68,9 +68,8 @@ def test_fit_with_seeded_noise_lies_within_three_standard_errors():
     assert heavy.residual_rms == pytest.approx(2.0 * res.residual_rms, rel=1e-6)
 
 
-def test_fit_recovers_ci_zero_on_its_bound_from_jeffery_population_with_exact_a4():
-    """A dilute population follows Jeffery exactly, so FT with C_I = 0 and the
-    population's *own* a4 reproduces its a2(t): the fitted C_I must be 0, on the bound."""
+def _jeffery_population() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """t, a2(t), a4(t) of 400 isotropic fibres (seed 7) following Jeffery exactly, t in [0, 10]."""
     from pyfold.models import jeffery_vectors
 
     rng = np.random.default_rng(7)
@@ -80,6 +79,13 @@ def test_fit_recovers_ci_zero_on_its_bound_from_jeffery_population_with_exact_a4
     p = np.asarray(jeffery_vectors(jnp.asarray(p0), jnp.asarray(SHEAR), jnp.asarray(t), XI))
     a2 = np.asarray(a2_from_vectors(jnp.asarray(p)))
     a4 = np.asarray(a4_from_vectors(jnp.asarray(p)))
+    return t, a2, a4
+
+
+def test_fit_recovers_ci_zero_on_its_bound_from_jeffery_population_with_exact_a4():
+    """A dilute population follows Jeffery exactly, so FT with C_I = 0 and the
+    population's *own* a4 reproduces its a2(t): the fitted C_I must be 0, on the bound."""
+    t, a2, a4 = _jeffery_population()
     data = xr.Dataset(
         {
             "a2": (("time", "i", "j"), a2, {"units": "1", "long_name": "a2"}),
@@ -272,15 +278,8 @@ def test_rk4_fit_with_the_populations_own_a4_holds_ci_zero_on_its_bound():
     error, below the 1e-5 of tests/cross/test_chain_dilute.py (same interpolation, same
     record spacing)."""
     from pyfold.fast_fit import fit_ci_rk4
-    from pyfold.models import jeffery_vectors
 
-    rng = np.random.default_rng(7)
-    p0 = rng.normal(size=(400, 3))
-    p0 /= np.linalg.norm(p0, axis=1, keepdims=True)
-    t = np.linspace(0.0, 10.0, 201)
-    p = np.asarray(jeffery_vectors(jnp.asarray(p0), jnp.asarray(SHEAR), jnp.asarray(t), XI))
-    a2 = np.asarray(a2_from_vectors(jnp.asarray(p)))
-    a4 = np.asarray(a4_from_vectors(jnp.asarray(p)))
+    t, a2, a4 = _jeffery_population()
     res = fit_ci_rk4("exact", t, a2, SHEAR, XI, a4=a4, ci_start=0.01)
     assert res.success, res.message
     assert 0.0 <= res.ci <= 1e-6

@@ -9,26 +9,17 @@ Records are written at every step and are minima over their interval anyway.
 """
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import h5py
 import numpy as np
 import pytest
 
 from test_run_common import run_fold, write_run_file, xi_of
 
-
-def place_disks(n, R, Lx, Ly, rng):
-    """Random sequential addition of disks (periodic in x, walls at y = 0, Ly)."""
-    pts = np.empty((0, 2))
-    while len(pts) < n:
-        for c in np.column_stack([rng.uniform(0, Lx, 4096), rng.uniform(R, Ly - R, 4096)]):
-            dx = pts[:, 0] - c[0]
-            dx -= Lx * np.round(dx / Lx)
-            if len(pts) and np.min(dx**2 + (pts[:, 1] - c[1]) ** 2) < (2 * R) ** 2:
-                continue
-            pts = np.vstack([pts, c])
-            if len(pts) == n:
-                break
-    return pts
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "fortran" / "app"))
+from check_fold_run import place_disks  # noqa: E402  (the meson check's placement of the same disks)
 
 
 def seed_disks():

@@ -59,6 +59,34 @@ if FFT_PLAN not in ("estimate", "measure"):
     raise ValueError(f"PYFOLD_TEST_FFT_PLAN: 'estimate' or 'measure', got {FFT_PLAN!r}")
 
 
+def one_sphere_scene(path: Path, **over) -> Path:
+    """Write a one-sphere scene (radius 1/8 of a unit cell) with Stokes hydrodynamics to ``path``.
+    ``over``: ``{"table.key": value}`` replacements (``"cell.boundary": "couette"``); ``None`` removes the key."""
+    import tomli_w
+
+    scene: dict = {
+        "cell": {"dim": 3, "size": [1.0, 1.0, 1.0]},
+        "flow": {"type": "simple_shear", "rate": 1.0},
+        "particles": [{"name": "ball", "shape": "sphere", "radius": 0.125, "count": 1,
+                       "orientation": "aligned", "direction": [1.0, 0.0, 0.0]}],
+        "model": {"hydrodynamics": "stokes", "collisions": "none"},
+        "numerics": {"dt": 0.05, "t_end": 0.2, "seed": 5, "time_scheme": "ab2",
+                     "stokes": {"cells_per_diameter": 8, "fft_plan": FFT_PLAN}},
+        "output": {"interval": 0.05, "snapshot_interval": 0.2, "checkpoint_interval": 0.2},
+    }
+    for key, value in over.items():
+        table, _, leaf = key.rpartition(".")
+        node = scene
+        for part in table.split(".") if table else []:
+            node = node.setdefault(part, {})
+        if value is None:
+            node.pop(leaf, None)
+        else:
+            node[leaf] = value
+    path.write_text(tomli_w.dumps(scene), encoding="utf-8")
+    return path
+
+
 def stokes_settings(**kw):
     """``pyfold.native.stokes.StokesSettings`` with the suite's FFTW planning."""
     from pyfold.native.stokes import StokesSettings

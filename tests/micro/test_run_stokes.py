@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import tomli_w
 
-from test_run_common import FFT_PLAN, require_fold_run, run_fold, stokes_settings, write_run_file, xi_of
+from test_run_common import FFT_PLAN, one_sphere_scene, require_fold_run, run_fold, stokes_settings, write_run_file, xi_of
 
 from pyfold.native import stokes as stokes_codes
 
@@ -21,26 +21,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _scene(tmp_path: Path, name: str, **over) -> Path:
-    """A one-sphere scene (radius 1/8 of a unit cell) with Stokes hydrodynamics."""
-    scene = {
-        "cell": {"dim": 3, "size": [1.0, 1.0, 1.0]},
-        "flow": {"type": "simple_shear", "rate": 1.0},
-        "particles": [{"name": "ball", "shape": "sphere", "radius": 0.125, "count": 1,
-                       "orientation": "aligned", "direction": [1.0, 0.0, 0.0]}],
-        "model": {"hydrodynamics": "stokes", "collisions": "none"},
-        "numerics": {"dt": 0.05, "t_end": 0.2, "seed": 5, "time_scheme": "ab2",
-                     "stokes": {"cells_per_diameter": 8, "fft_plan": FFT_PLAN}},
-        "output": {"interval": 0.05, "snapshot_interval": 0.2, "checkpoint_interval": 0.2},
-    }
-    for key, value in over.items():
-        table, _, leaf = key.rpartition(".")
-        node = scene
-        for part in table.split(".") if table else []:
-            node = node.setdefault(part, {})
-        node[leaf] = value
-    path = tmp_path / f"{name}.toml"
-    path.write_text(tomli_w.dumps(scene), encoding="utf-8")
-    return path
+    """:func:`one_sphere_scene` as ``tmp_path/<name>.toml``."""
+    return one_sphere_scene(tmp_path / f"{name}.toml", **over)
 
 
 @pytest.fixture(scope="module")
@@ -207,14 +189,9 @@ def test_walled_np2_equals_np1_to_solver_tolerance(tmp_path):
     assert one.attrs["mpi_ranks"] == 1 and two.attrs["mpi_ranks"] == 2
 
 
-def test_walled_non_convergence_exits_1_with_residual_and_keeps_last_good_state(tmp_path):
-    """The same stop rule as the FFT path: an iteration cap reached is exit 1, the step,
-    the residual and kappa in the message and the status, the initial state kept."""
-    require_fold_run()
-    path = tmp_path / "walls_cap.h5"
-    _walled_scene_file(path, tol=1e-9, max_iterations=2)
-    with h5py.File(path) as f:
-        x0 = f["/initial/x"][()]
+def _assert_step_1_not_converged(path: Path, x0: np.ndarray, iterations: int, residual_above: float) -> None:
+    """Run ``path``: exit 1, the step, the residual and kappa in the message and the status,
+    no step done, the initial (last good) state kept, the capped solve recorded."""
     proc = run_fold(path)
     assert proc.returncode == 1, proc.stderr
     assert "step 1" in proc.stderr and "not converged" in proc.stderr and "residual" in proc.stderr
@@ -224,7 +201,18 @@ def test_walled_non_convergence_exits_1_with_residual_and_keeps_last_good_state(
         assert status.startswith("failed: step 1") and "kappa" in status
         assert int(f.attrs["steps_done"]) == 0
         np.testing.assert_array_equal(f["x"][-1], x0)
-        assert f["stokes_iterations"][-1] == 2 and f["stokes_residual"][-1] > 1e-9
+        assert f["stokes_iterations"][-1] == iterations and f["stokes_residual"][-1] > residual_above
+
+
+def test_walled_non_convergence_exits_1_with_residual_and_keeps_last_good_state(tmp_path):
+    """The same stop rule as the FFT path: an iteration cap reached is exit 1, the step,
+    the residual and kappa in the message and the status, the initial state kept."""
+    require_fold_run()
+    path = tmp_path / "walls_cap.h5"
+    _walled_scene_file(path, tol=1e-9, max_iterations=2)
+    with h5py.File(path) as f:
+        x0 = f["/initial/x"][()]
+    _assert_step_1_not_converged(path, x0, iterations=2, residual_above=1e-9)
 
 
 def test_dilute_spheroid_follows_jeffery_with_its_discrete_shape_factor(tmp_path):
@@ -333,16 +321,8 @@ def test_stokes_non_convergence_exits_1_with_residual_and_keeps_last_good_state(
     write_run_file(path, x=x, p=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], radius=0.1, length=[0.2, 0.3], xi=[0.0, xi_of(1.5)],
                    shape=[2, 3], dt=0.02, t_end=0.1, snapshot_every=1,
                    stokes={"stokes_grid": (24, 24, 24), "stokes_max_iterations": 4})
-    proc = run_fold(path)
-    assert proc.returncode == 1, proc.stderr
-    assert "step 1" in proc.stderr and "not converged" in proc.stderr and "residual" in proc.stderr
+    _assert_step_1_not_converged(path, x, iterations=4, residual_above=1e-6)
     with h5py.File(path) as f:
-        status = f.attrs["status"]
-        status = status.decode() if isinstance(status, bytes) else str(status)
-        assert status.startswith("failed: step 1") and "kappa" in status
-        assert int(f.attrs["steps_done"]) == 0
-        np.testing.assert_array_equal(f["x"][-1], x)  # the initial (last good) state
-        assert f["stokes_iterations"][-1] == 4 and f["stokes_residual"][-1] > 1e-6
         np.testing.assert_array_equal(f["/checkpoint/x"][()], x)
 
 

@@ -21,6 +21,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from test_run_common import one_sphere_scene
+
 from pyfold.native.stokes import Particles, StokesSettings, solve_chi, solve_particles
 
 SHEAR2 = np.array([[0.0, 1.0], [0.0, 0.0]])
@@ -118,19 +120,9 @@ def test_penalised_solve_of_a_binary_solid_converges_to_the_exact_one_like_one_o
 
 
 def _scene(path, **stokes):
-    import tomli_w
-
-    scene = {
-        "cell": {"dim": 3, "size": [1.0, 1.0, 1.0]},
-        "flow": {"type": "simple_shear", "rate": 1.0},
-        "particles": [{"name": "ball", "shape": "sphere", "radius": 0.125, "count": 1,
-                       "orientation": "aligned", "direction": [1.0, 0.0, 0.0]}],
-        "model": {"hydrodynamics": "stokes", "collisions": "none"},
-        "numerics": {"dt": 0.05, "t_end": 0.1, "seed": 5,
-                     "stokes": {"cells_per_diameter": 4, "fft_plan": "estimate", **stokes}},
-    }
-    path.write_text(tomli_w.dumps(scene), encoding="utf-8")
-    return path
+    """:func:`one_sphere_scene` with t_end = 0.1, no output keys, and these ``[numerics.stokes]`` keys."""
+    return one_sphere_scene(path, **{"numerics.t_end": 0.1, "numerics.time_scheme": None, "output": None,
+                                     "numerics.stokes": {"cells_per_diameter": 4, "fft_plan": "estimate", **stokes}})
 
 
 @pytest.mark.parametrize("stokes, key", [
