@@ -110,6 +110,7 @@ SETTINGS: tuple[Setting, ...] = (
     # ---- [particles]
     Setting("particles.shape", "choice", None, ("fibre", "sphere", "spheroid"),
             _codes(fibre=1, sphere=2, spheroid=3), resolved="family_shape", legend="1 fibre, 2 sphere, 3 spheroid",
+            fortran="SHAPE",
             help="cylinder (R, L); sphere (2-D disk); prolate spheroid, semi-axes L/2 and R (2-D ellipse)"),
     # ---- [model]
     Setting("model.hydrodynamics", "choice", "auto", ("auto", "jeffery", "stokes"), _codes(jeffery=0, stokes=1),
@@ -123,7 +124,7 @@ SETTINGS: tuple[Setting, ...] = (
                  '"naive" (same rule, O(N^2) reference) or "none"'),
     Setting("model.alpha", "real", None, lo=0.0, units="m", physics=_CONTACTS, resolved="alpha",
             legend="security zone alpha", fortran="ALPHA",
-            default_text=f"smallest radius x {DEFAULT_ALPHA_OVER_RADIUS:g}",
+            default_text=f"{DEFAULT_ALPHA_OVER_RADIUS:g} × smallest radius",
             help="security zone alpha, at most the smallest particle radius"),
     Setting("model.contact_max_iter", "integer", 100, lo=1, hi=100_000, physics=_CONTACTS,
             resolved="contact_max_iter", legend="cap on contact iterations per step", fortran="CONTACT_MAX_ITER",
