@@ -165,18 +165,16 @@ class StokesSettings:
     def __post_init__(self) -> None:
         if not self.eta_f > 0:
             raise InputError(f"eta_f: must be > 0, got {self.eta_f}")
-        if not KAPPA_MIN <= self.kappa <= KAPPA_MAX:
-            raise InputError(f"kappa: must be in [{KAPPA_MIN:g}, {KAPPA_MAX:g}], got {self.kappa}")
-        if not 0.0 < self.tol < 1.0:
-            raise InputError(f"tol: must be in (0, 1), got {self.tol}")
-        if int(self.max_iter) < 1:
-            raise InputError(f"max_iter: must be >= 1, got {self.max_iter}")
+        # the ranges of the scene's numerics.stokes keys (the registry's), under the bindings' names
+        for key, path in (("kappa", "kappa"), ("tol", "tolerance"), ("max_iter", "max_iterations"),
+                          ("subsamples", "subsamples")):
+            if not _registry.in_range(f"numerics.stokes.{path}", getattr(self, key)):
+                raise InputError(f"{key}: must be in {_registry.range_text(f'numerics.stokes.{path}')}, "
+                                 f"got {getattr(self, key)}")
         for key, table in (("derivative", DERIVATIVES), ("mixing", MIXINGS), ("fibre_ends", FIBRE_ENDS),
                            ("guess", GUESSES), ("backend", BACKEND_CHOICES), ("rigidity", RIGIDITIES)):
             if getattr(self, key) not in table:
                 raise InputError(f"{key}: must be one of {sorted(table)}, got {getattr(self, key)!r}")
-        if not 1 <= int(self.subsamples) <= 8:
-            raise InputError(f"subsamples: must be in 1..8, got {self.subsamples}")
         if self.backend not in (AUTO_BACKEND, backend_for(walls=False)):
             raise InputError(f"backend: these bindings solve fully periodic cells with the FFT solver; "
                              f"allowed: 'fft' or 'auto', got {self.backend!r} (walled cells run through "

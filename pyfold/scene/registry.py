@@ -28,6 +28,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 __all__ = ["Setting", "Backend", "SETTINGS", "BACKENDS", "AUTO_BACKEND", "setting", "codes", "resolved",
+           "in_range", "range_text",
            "backend_for", "backend_capable", "DEFAULT_ALPHA_OVER_RADIUS", "KAPPA_MIN", "KAPPA_MAX"]
 
 #: Largest value of a 32-bit signed integer (counts and seeds fold_run holds in default integers).
@@ -228,6 +229,26 @@ def codes(path: str) -> Mapping[str, int]:
 def default(path: str) -> object:
     """The default of the setting at ``path``."""
     return setting(path).default
+
+
+def range_text(path: str) -> str:
+    """The range of a numeric setting as text: ``[1, 1e+12]``, ``(0, 1)``, ``>= 1``."""
+    s = setting(path)
+    if s.lo is not None and s.hi is not None:
+        return f"{'(' if s.lo_open else '['}{s.lo:g}, {s.hi:g}{')' if s.hi_open else ']'}"
+    if s.lo is not None:
+        return f"{'>' if s.lo_open else '>='} {s.lo:g}"
+    return f"{'<' if s.hi_open else '<='} {s.hi:g}"
+
+
+def in_range(path: str, value: float) -> bool:
+    """Whether ``value`` lies in the range of the numeric setting at ``path`` (NaN never does)."""
+    s = setting(path)
+    if s.lo is not None and not (value > s.lo if s.lo_open else value >= s.lo):
+        return False
+    if s.hi is not None and not (value < s.hi if s.hi_open else value <= s.hi):
+        return False
+    return value == value
 
 
 # ---------------------------------------------------------------------------------------
