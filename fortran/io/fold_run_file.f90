@@ -13,20 +13,40 @@
 !> setting that changes results is read, none is left at a default of the solver.
 !> Any problem is returned as FOLD_INPUT_ERROR (wrong content) or FOLD_IO_ERROR
 !> (missing dataset, unreadable file) with the dataset path and the allowed range.
+!> The ranges, codes and optional-key defaults of the scene settings are the registry's
+!> (pyfold/scene/registry.py, generated into fortran/core/fold_settings.f90), so what
+!> `pyfold validate` accepts is read here; which backend a cell needs is the registry's
+!> capability table (FOLD_BACKEND_WALLS, FOLD_BACKEND_LEES_EDWARDS).
 module fold_run_file
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
    use fold_particles, only: particle_set_t, particles_init, particles_check
-   use fold_stokes_solver, only: stokes_settings_t, FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, &
-                                 FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE, &
-                                 FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT
+   use fold_stokes_solver, only: stokes_settings_t
+   use fold_settings, only: FOLD_HYDRO_JEFFERY, FOLD_HYDRO_STOKES, FOLD_BACKEND_NAME, FOLD_BACKEND_WALLS, &
+                            FOLD_BACKEND_LEES_EDWARDS, &
+                            FOLD_LO_HYDRODYNAMICS, FOLD_HI_HYDRODYNAMICS, FOLD_LO_COLLISIONS, FOLD_HI_COLLISIONS, &
+                            FOLD_LO_ALPHA, FOLD_HI_ALPHA, FOLD_LO_CONTACT_MAX_ITER, FOLD_HI_CONTACT_MAX_ITER, &
+                            FOLD_LO_ON_CONTACT_CAP, FOLD_HI_ON_CONTACT_CAP, FOLD_LO_LUBRICATION, FOLD_HI_LUBRICATION, &
+                            FOLD_LO_TIME_SCHEME, FOLD_HI_TIME_SCHEME, FOLD_LO_STOKES_BACKEND, FOLD_HI_STOKES_BACKEND, &
+                            FOLD_LO_STOKES_TOLERANCE, FOLD_HI_STOKES_TOLERANCE, &
+                            FOLD_LO_STOKES_MAX_ITERATIONS, FOLD_HI_STOKES_MAX_ITERATIONS, &
+                            FOLD_LO_STOKES_KAPPA, FOLD_HI_STOKES_KAPPA, FOLD_LO_STOKES_DERIVATIVE, FOLD_HI_STOKES_DERIVATIVE, &
+                            FOLD_LO_STOKES_FFT_PLAN, FOLD_HI_STOKES_FFT_PLAN, FOLD_LO_STOKES_MIXING, FOLD_HI_STOKES_MIXING, &
+                            FOLD_LO_STOKES_SUBSAMPLES, FOLD_HI_STOKES_SUBSAMPLES, &
+                            FOLD_LO_STOKES_FIBRE_ENDS, FOLD_HI_STOKES_FIBRE_ENDS, &
+                            FOLD_LO_STOKES_WARM_START, FOLD_HI_STOKES_WARM_START, &
+                            FOLD_LO_STOKES_INITIAL_GUESS, FOLD_HI_STOKES_INITIAL_GUESS, FOLD_DEF_STOKES_INITIAL_GUESS, &
+                            FOLD_LO_STOKES_FFT_PRECISION, FOLD_HI_STOKES_FFT_PRECISION, FOLD_DEF_STOKES_FFT_PRECISION, &
+                            FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, FOLD_DEF_STOKES_RIGIDITY, &
+                            FOLD_LO_STOKES_SOLVE_EVERY, FOLD_HI_STOKES_SOLVE_EVERY, FOLD_DEF_STOKES_SOLVE_EVERY, &
+                            FOLD_LO_SHAPE, FOLD_HI_SHAPE
    use fold_h5, only: hid_t, hsize_t, h5_open_file, h5_close_file, h5_exists, h5_shape, &
                       h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
    implicit none
    private
 
-   !> Hydrodynamics codes of /setup/resolved/hydrodynamics
-   integer, parameter, public :: FOLD_HYDRO_JEFFERY = 0, FOLD_HYDRO_STOKES = 1
+   !> Hydrodynamics codes of /setup/resolved/hydrodynamics (fold_settings)
+   public :: FOLD_HYDRO_JEFFERY, FOLD_HYDRO_STOKES
 
    !> Everything the run driver needs from /setup/resolved.
    type, public :: run_setup_t
@@ -155,16 +175,21 @@ contains
       ! The relative slack keeps t_end = k*dt (up to round-off) at exactly k steps.
       s%nsteps = max(1_i8, ceiling(s%t_end/s%dt*(1.0_dp - 1.0e-12_dp), i8))
       call get_int(file, R//"seed", -huge(1_i8), huge(1_i8), s%seed, stat, errmsg); if (stat /= FOLD_OK) return
-      call get_int(file, R//"hydrodynamics", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"hydrodynamics", FOLD_LO_HYDRODYNAMICS, FOLD_HI_HYDRODYNAMICS, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%hydrodynamics = int(iv)
-      call get_int(file, R//"collisions", 0_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"collisions", FOLD_LO_COLLISIONS, FOLD_HI_COLLISIONS, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%collisions = int(iv)
-      call get_real(file, R//"alpha", 0.0_dp, big, s%alpha, stat, errmsg); if (stat /= FOLD_OK) return
-      call get_int(file, R//"contact_max_iter", 1_i8, int(huge(1), i8), iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_real(file, R//"alpha", FOLD_LO_ALPHA, FOLD_HI_ALPHA, s%alpha, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"contact_max_iter", FOLD_LO_CONTACT_MAX_ITER, FOLD_HI_CONTACT_MAX_ITER, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%contact_max_iter = int(iv)
-      call get_int(file, R//"on_contact_cap", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"on_contact_cap", FOLD_LO_ON_CONTACT_CAP, FOLD_HI_ON_CONTACT_CAP, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%on_contact_cap = int(iv)
-      call get_int(file, R//"lubrication", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"lubrication", FOLD_LO_LUBRICATION, FOLD_HI_LUBRICATION, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%lubrication = iv == 1
       call get_int(file, R//"output_every", 1_i8, huge(1_i8), s%output_every, stat, errmsg); if (stat /= FOLD_OK) return
       call get_int(file, R//"snapshot_every", 0_i8, huge(1_i8), s%snapshot_every, stat, errmsg); if (stat /= FOLD_OK) return
@@ -197,63 +222,77 @@ contains
       end if
       s%stokes_grid = int(ibuf, ip)
       s%stokes%eta_f = s%viscosity
-      call get_int(file, R//"stokes_backend", int(FOLD_STOKES_FFT, i8), int(FOLD_STOKES_HYPRE, i8), iv, stat, errmsg)
+      call get_int(file, R//"stokes_backend", FOLD_LO_STOKES_BACKEND, FOLD_HI_STOKES_BACKEND, iv, stat, errmsg)
       if (stat /= FOLD_OK) return
       s%stokes%backend = int(iv, ip)
-      ! Each backend solves one kind of cell (pyfold.native.stokes.backend_for): the FFT
-      ! basis is periodic (no walls); the staggered grid is rectangular (no Lees-Edwards lattice).
-      if (s%walls .and. s%stokes%backend /= FOLD_STOKES_HYPRE) then
-         call range_error(R//"stokes_backend", "a cell with walls (/setup/resolved/walls = 1) needs 2 (hypre): "// &
-                          "1 (fft) solves fully periodic cells only", stat, errmsg)
+      ! Each backend solves one kind of cell (the registry's capability table,
+      ! pyfold.scene.registry.backend_for): walls need a backend that imposes them, a
+      ! periodic cell in shear one that follows its Lees-Edwards lattice.
+      if (s%walls .and. .not. FOLD_BACKEND_WALLS(s%stokes%backend)) then
+         call range_error(R//"stokes_backend", "a cell with walls (/setup/resolved/walls = 1) needs a backend that "// &
+                          "imposes walls (2 hypre): "//trim(FOLD_BACKEND_NAME(s%stokes%backend))// &
+                          " solves fully periodic cells only", stat, errmsg)
          return
-      else if (.not. s%walls .and. s%stokes%backend /= FOLD_STOKES_FFT) then
-         call range_error(R//"stokes_backend", "a periodic cell in shear (/setup/resolved/walls = 0) needs 1 (fft): "// &
-                          "2 (hypre) has a rectangular grid, for cells with walls only", stat, errmsg)
+      else if (.not. s%walls .and. .not. FOLD_BACKEND_LEES_EDWARDS(s%stokes%backend)) then
+         call range_error(R//"stokes_backend", "a periodic cell in shear (/setup/resolved/walls = 0) needs a backend "// &
+                          "that follows its Lees-Edwards lattice (1 fft): "//trim(FOLD_BACKEND_NAME(s%stokes%backend))// &
+                          " has a rectangular grid, for cells with walls only", stat, errmsg)
          return
       end if
-      call get_real(file, R//"stokes_tolerance", tiny(1.0_dp), 1.0_dp - epsilon(1.0_dp), s%stokes%tol, stat, errmsg)
+      call get_real(file, R//"stokes_tolerance", FOLD_LO_STOKES_TOLERANCE, FOLD_HI_STOKES_TOLERANCE, s%stokes%tol, &
+                    stat, errmsg)
       if (stat /= FOLD_OK) return
-      call get_int(file, R//"stokes_max_iterations", 1_i8, 1000000_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_max_iterations", FOLD_LO_STOKES_MAX_ITERATIONS, FOLD_HI_STOKES_MAX_ITERATIONS, iv, &
+                   stat, errmsg); if (stat /= FOLD_OK) return
       s%stokes%max_iter = int(iv, ip)
-      call get_real(file, R//"stokes_kappa", FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, s%stokes%kappa, stat, errmsg)
+      call get_real(file, R//"stokes_kappa", FOLD_LO_STOKES_KAPPA, FOLD_HI_STOKES_KAPPA, s%stokes%kappa, stat, errmsg)
       if (stat /= FOLD_OK) return
-      call get_int(file, R//"stokes_derivative", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_derivative", FOLD_LO_STOKES_DERIVATIVE, FOLD_HI_STOKES_DERIVATIVE, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%stokes%derivative = int(iv, ip)
-      call get_int(file, R//"stokes_fft_plan", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_fft_plan", FOLD_LO_STOKES_FFT_PLAN, FOLD_HI_STOKES_FFT_PLAN, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%stokes%plan_effort = int(iv)
-      call get_int(file, R//"stokes_mixing", 0_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_mixing", FOLD_LO_STOKES_MIXING, FOLD_HI_STOKES_MIXING, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%stokes%mixing = int(iv, ip)
-      call get_int(file, R//"stokes_subsamples", 1_i8, 8_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_subsamples", FOLD_LO_STOKES_SUBSAMPLES, FOLD_HI_STOKES_SUBSAMPLES, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%stokes%subsamples = int(iv, ip)
-      call get_int(file, R//"stokes_fibre_ends", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_fibre_ends", FOLD_LO_STOKES_FIBRE_ENDS, FOLD_HI_STOKES_FIBRE_ENDS, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%stokes%fibre_ends = int(iv, ip)
-      call get_int(file, R//"stokes_warm_start", 0_i8, 1_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"stokes_warm_start", FOLD_LO_STOKES_WARM_START, FOLD_HI_STOKES_WARM_START, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%stokes%warm_start = iv == 1
-      call get_int(file, R//"time_scheme", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"time_scheme", FOLD_LO_TIME_SCHEME, FOLD_HI_TIME_SCHEME, iv, stat, errmsg)
+      if (stat /= FOLD_OK) return
       s%time_scheme = int(iv, ip)
       ! optional: run files written before the setting existed used the previous solution
-      s%stokes%guess = 1
+      s%stokes%guess = FOLD_DEF_STOKES_INITIAL_GUESS
       if (h5_exists(file, R//"stokes_initial_guess")) then
-         call get_int(file, R//"stokes_initial_guess", 1_i8, 2_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+         call get_int(file, R//"stokes_initial_guess", FOLD_LO_STOKES_INITIAL_GUESS, FOLD_HI_STOKES_INITIAL_GUESS, iv, &
+                      stat, errmsg); if (stat /= FOLD_OK) return
          s%stokes%guess = int(iv, ip)
       end if
       ! optional: run files written before the setting existed transformed in double
-      s%stokes%fft_precision = FOLD_FFT_DOUBLE
+      s%stokes%fft_precision = FOLD_DEF_STOKES_FFT_PRECISION
       if (h5_exists(file, R//"stokes_fft_precision")) then
-         call get_int(file, R//"stokes_fft_precision", int(FOLD_FFT_DOUBLE, i8), int(FOLD_FFT_SINGLE, i8), iv, &
+         call get_int(file, R//"stokes_fft_precision", FOLD_LO_STOKES_FFT_PRECISION, FOLD_HI_STOKES_FFT_PRECISION, iv, &
                       stat, errmsg); if (stat /= FOLD_OK) return
          s%stokes%fft_precision = int(iv, ip)
       end if
       ! optional: run files written before the setting existed are penalised
-      s%stokes%rigidity = FOLD_RIGIDITY_PENALTY
+      s%stokes%rigidity = FOLD_DEF_STOKES_RIGIDITY
       if (h5_exists(file, R//"stokes_rigidity")) then
-         call get_int(file, R//"stokes_rigidity", int(FOLD_RIGIDITY_PENALTY, i8), int(FOLD_RIGIDITY_EXACT, i8), iv, &
+         call get_int(file, R//"stokes_rigidity", FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, iv, &
                       stat, errmsg); if (stat /= FOLD_OK) return
          s%stokes%rigidity = int(iv, ip)
       end if
-      s%stokes_solve_every = 1
+      s%stokes_solve_every = FOLD_DEF_STOKES_SOLVE_EVERY
       if (h5_exists(file, R//"stokes_solve_every")) then
-         call get_int(file, R//"stokes_solve_every", 1_i8, 1000_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+         call get_int(file, R//"stokes_solve_every", FOLD_LO_STOKES_SOLVE_EVERY, FOLD_HI_STOKES_SOLVE_EVERY, iv, &
+                      stat, errmsg); if (stat /= FOLD_OK) return
          s%stokes_solve_every = int(iv, ip)
       end if
    end subroutine read_stokes
@@ -300,7 +339,7 @@ contains
          end if
       end do
       call h5_read_int_array(file, INI//"shape", [n], ibuf, stat, errmsg); if (stat /= FOLD_OK) return
-      if (any(ibuf < 1 .or. ibuf > 3)) then
+      if (any(ibuf < FOLD_LO_SHAPE .or. ibuf > FOLD_HI_SHAPE)) then
          call range_error(INI//"shape", "allowed codes 1 (fibre), 2 (sphere), 3 (spheroid)", stat, errmsg)
          return
       end if

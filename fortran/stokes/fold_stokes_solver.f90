@@ -14,41 +14,39 @@
 !> decomposition for "fft"), so construction is not a binding here: the factory
 !> builds them from the settings and the communicator and returns the solver.
 !>
-!> Every integer code below has the same table in Python (pyfold/native/stokes.py);
-!> tests/micro/test_code_tables.py checks that the two agree.
+!> The integer codes, ranges, defaults and backend capabilities come from the settings
+!> registry (pyfold/scene/registry.py) through the generated fortran/core/fold_settings.f90;
+!> the codes are re-exported here under their usual names.
 module fold_stokes_solver
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_grid, only: grid_t
+   use fold_settings, only: FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, &
+                            FOLD_MIX_ARITHMETIC, FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, &
+                            FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE, &
+                            FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT, FOLD_ENDS_FLAT, FOLD_ENDS_CAPPED, &
+                            FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, FOLD_N_BACKENDS, FOLD_BACKEND_NAME, FOLD_BACKEND_WALLS, &
+                            FOLD_BACKEND_RIGIDITY, &
+                            FOLD_LO_STOKES_TOLERANCE, FOLD_HI_STOKES_TOLERANCE, &
+                            FOLD_LO_STOKES_MAX_ITERATIONS, FOLD_HI_STOKES_MAX_ITERATIONS, &
+                            FOLD_LO_STOKES_SUBSAMPLES, FOLD_HI_STOKES_SUBSAMPLES, &
+                            FOLD_LO_STOKES_DERIVATIVE, FOLD_HI_STOKES_DERIVATIVE, &
+                            FOLD_LO_STOKES_MIXING, FOLD_HI_STOKES_MIXING, &
+                            FOLD_LO_STOKES_FIBRE_ENDS, FOLD_HI_STOKES_FIBRE_ENDS, &
+                            FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, &
+                            FOLD_LO_STOKES_INITIAL_GUESS, FOLD_HI_STOKES_INITIAL_GUESS, &
+                            FOLD_DEF_STOKES_KAPPA, FOLD_DEF_STOKES_TOLERANCE, FOLD_DEF_STOKES_MAX_ITERATIONS, &
+                            FOLD_DEF_STOKES_DERIVATIVE, FOLD_DEF_STOKES_SUBSAMPLES, FOLD_DEF_STOKES_FIBRE_ENDS, &
+                            FOLD_DEF_STOKES_FFT_PLAN, FOLD_DEF_STOKES_MIXING, FOLD_DEF_STOKES_WARM_START, &
+                            FOLD_DEF_STOKES_INITIAL_GUESS, FOLD_DEF_STOKES_FFT_PRECISION, FOLD_DEF_STOKES_RIGIDITY
    implicit none
    private
 
-   !> Backend codes of stokes_settings_t%backend: FFT-preconditioned CG on a periodic
-   !> (Lees-Edwards) lattice; hypre on a staggered grid, for cells with walls
-   integer(ip), parameter, public :: FOLD_STOKES_FFT = 1, FOLD_STOKES_HYPRE = 2
-
-   !> Derivative discretisation: spectral (i k) or rotated finite differences (Willot 2015)
-   integer(ip), parameter, public :: FOLD_DERIV_SPECTRAL = 0, FOLD_DERIV_FD = 1
-
-   !> Viscosity of a partially covered voxel: arithmetic eta_f (1 + (kappa-1) chi),
-   !> harmonic 1/eta = (1-chi)/eta_f + chi/(kappa eta_f), geometric eta_f kappa^chi
-   integer(ip), parameter, public :: FOLD_MIX_ARITHMETIC = 0, FOLD_MIX_HARMONIC = 1, FOLD_MIX_GEOMETRIC = 2
-
-   !> Initial guess of a warm-started solve: the previous solution x_n (its Fourier
-   !> coefficients in lattice coordinates, re-projected on the new lattice), or the
-   !> linear extrapolation 2 x_n - x_(n-1) of the last two. (Translating the stored
-   !> field along a1 by a fraction of the offset change was tried and only made the
-   !> guess worse: measured on a sphere at the cell centre, no shift is the best.)
-   integer(ip), parameter, public :: FOLD_GUESS_PREVIOUS = 1, FOLD_GUESS_EXTRAPOLATE = 2
-
-   !> Precision of the FFTs of the FFT backend's CG operator (fold_stokes_fft): double, or
-   !> single-precision transforms inside the double-precision CG (tolerance bounded below)
-   integer(ip), parameter, public :: FOLD_FFT_DOUBLE = 0, FOLD_FFT_SINGLE = 1
-
-   !> Rigidity of the particles: a viscosity kappa eta_f in the solid (the seed's
-   !> penalty, fold_stokes_fft) or the constraint eps(u) = 0 on the solid voxels imposed
-   !> by a multiplier (fold_stokes_rigid; FFT backend only, no kappa)
-   integer(ip), parameter, public :: FOLD_RIGIDITY_PENALTY = 0, FOLD_RIGIDITY_EXACT = 1
+   !> Codes of the settings (fold_settings), under the names the backends use
+   public :: FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, &
+             FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, &
+             FOLD_FFT_SINGLE, FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT, FOLD_ENDS_FLAT, FOLD_ENDS_CAPPED, &
+             FOLD_KAPPA_MIN, FOLD_KAPPA_MAX
 
    !> Coverage from which a voxel is rigid under exact rigidity. 1/2: the union of these
    !> voxels approximates the particle without bias, and the partly covered voxels left
@@ -58,51 +56,43 @@ module fold_stokes_solver
    !> iterations for a sphere of radius 4 voxels at tolerance 1e-8.) [-]
    real(dp), parameter, public :: FOLD_RIGID_COVERAGE = 0.5_dp
 
-   !> Fibre ends of the voxelisation: flat cylinder or capsule (fold_voxelise)
-   integer(ip), parameter, public :: FOLD_ENDS_FLAT = 0, FOLD_ENDS_CAPPED = 1
-
-   !> Bounds of the viscosity contrast kappa (pyfold/native/stokes.py KAPPA_MIN, KAPPA_MAX).
-   !> kappa = 1 is a particle-free fluid (a test of the solver, no rigidity at all).
-   real(dp), parameter, public :: FOLD_KAPPA_MIN = 1.0_dp, FOLD_KAPPA_MAX = 1.0e12_dp
-
    !> Settings of the fictitious-domain solve. A run reads every field from
    !> /setup/resolved (fold_run_file) and the bindings pass every field
-   !> (fortran/bind/stokes_bind.f90), both from the one table of defaults
-   !> pyfold/native/stokes.py DEFAULTS; the defaults below serve Fortran-only callers
-   !> (fortran/stokes/tests).
+   !> (fortran/bind/stokes_bind.f90); the defaults below, the registry's (FOLD_DEF_*),
+   !> serve Fortran-only callers (fortran/stokes/tests).
    type, public :: stokes_settings_t
       !> Backend (FOLD_STOKES_*)
       integer(ip) :: backend = FOLD_STOKES_FFT
       !> Fluid viscosity eta_f [Pa s]
       real(dp) :: eta_f = 1.0_dp
       !> Viscosity contrast kappa = eta_solid/eta_f in [FOLD_KAPPA_MIN, FOLD_KAPPA_MAX] [-]
-      real(dp) :: kappa = 1.0e3_dp
+      real(dp) :: kappa = FOLD_DEF_STOKES_KAPPA
       !> Relative preconditioned residual at which CG stops [-]
-      real(dp) :: tol = 1.0e-6_dp
+      real(dp) :: tol = FOLD_DEF_STOKES_TOLERANCE
       !> CG iteration cap
-      integer(ip) :: max_iter = 3000
+      integer(ip) :: max_iter = FOLD_DEF_STOKES_MAX_ITERATIONS
       !> FOLD_DERIV_SPECTRAL or FOLD_DERIV_FD
-      integer(ip) :: derivative = FOLD_DERIV_FD
+      integer(ip) :: derivative = FOLD_DEF_STOKES_DERIVATIVE
       !> Sub-samples per voxel edge for the partial-volume chi (1..8)
-      integer(ip) :: subsamples = 3
+      integer(ip) :: subsamples = FOLD_DEF_STOKES_SUBSAMPLES
       !> Fibre ends for voxelisation (FOLD_ENDS_*)
-      integer(ip) :: fibre_ends = FOLD_ENDS_FLAT
+      integer(ip) :: fibre_ends = FOLD_DEF_STOKES_FIBRE_ENDS
       !> FFTW planning effort (fold_fft_backend FOLD_PLAN_ESTIMATE / FOLD_PLAN_MEASURE)
-      integer :: plan_effort = 0
+      integer :: plan_effort = FOLD_DEF_STOKES_FFT_PLAN
       !> Mixing rule of the viscosity in partially covered voxels (FOLD_MIX_*)
-      integer(ip) :: mixing = FOLD_MIX_HARMONIC
+      integer(ip) :: mixing = FOLD_DEF_STOKES_MIXING
       !> Start CG from the previous solution (re-projected on the new lattice)
-      logical :: warm_start = .true.
+      logical :: warm_start = FOLD_DEF_STOKES_WARM_START
       !> Initial guess of a warm start (FOLD_GUESS_*)
-      integer(ip) :: guess = FOLD_GUESS_PREVIOUS
+      integer(ip) :: guess = FOLD_DEF_STOKES_INITIAL_GUESS
       !> No-slip walls at y = 0 and y = Ly (the Couette cell of fold_cell): the
       !> disturbance flow vanishes there. A property of the cell, which the caller
       !> copies from it; only a backend that can impose walls accepts it.
       logical :: walls = .false.
       !> Precision of the CG operator's transforms (FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE)
-      integer(ip) :: fft_precision = FOLD_FFT_DOUBLE
+      integer(ip) :: fft_precision = FOLD_DEF_STOKES_FFT_PRECISION
       !> Rigidity of the particles (FOLD_RIGIDITY_*)
-      integer(ip) :: rigidity = FOLD_RIGIDITY_PENALTY
+      integer(ip) :: rigidity = FOLD_DEF_STOKES_RIGIDITY
    end type stokes_settings_t
 
    !> What every Stokes backend holds and does.
@@ -198,41 +188,47 @@ module fold_stokes_solver
 
 contains
 
-   !> Check a settings record; names the offending field and its allowed range.
+   !> Check a settings record against the registry's ranges and the backend's capabilities
+   !> (fold_settings); names the offending field and its allowed range.
    subroutine stokes_settings_check(set, stat, errmsg)
       type(stokes_settings_t), intent(in) :: set
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       stat = FOLD_INPUT_ERROR
       errmsg = ""
-      if (set%backend /= FOLD_STOKES_FFT .and. set%backend /= FOLD_STOKES_HYPRE) then
-         write (errmsg, '(a,i0)') "stokes settings: backend must be 1 (fft) or 2 (hypre), got ", set%backend
-      else if (set%backend == FOLD_STOKES_FFT .and. set%walls) then
-         errmsg = "stokes settings: backend 1 (fft) solves fully periodic cells only; a cell with walls needs "// &
-                  "backend 2 (hypre)"
+      if (set%backend < 1 .or. set%backend > FOLD_N_BACKENDS) then
+         write (errmsg, '(a,i0,a,i0)') "stokes settings: backend must be 1 ... ", FOLD_N_BACKENDS, &
+            " (1 fft, 2 hypre), got ", set%backend
+      else if (set%walls .and. .not. FOLD_BACKEND_WALLS(set%backend)) then
+         write (errmsg, '(a,i0,a)') "stokes settings: backend ", set%backend, " ("//trim(FOLD_BACKEND_NAME(set%backend))// &
+            ") solves fully periodic cells only; a cell with walls needs a backend that imposes walls (2 hypre)"
       else if (.not. (set%eta_f > 0.0_dp)) then
          write (errmsg, '(a,es10.3)') "stokes settings: eta_f must be > 0, got ", set%eta_f
       else if (.not. (set%kappa >= FOLD_KAPPA_MIN .and. set%kappa <= FOLD_KAPPA_MAX)) then
-         write (errmsg, '(a,es10.3)') "stokes settings: kappa must be in [1, 1e12], got ", set%kappa
-      else if (.not. (set%tol > 0.0_dp .and. set%tol < 1.0_dp)) then
+         write (errmsg, '(a,es10.3,a,es10.3,a,es10.3)') "stokes settings: kappa must be in [", FOLD_KAPPA_MIN, ", ", &
+            FOLD_KAPPA_MAX, "], got ", set%kappa
+      else if (.not. (set%tol >= FOLD_LO_STOKES_TOLERANCE .and. set%tol <= FOLD_HI_STOKES_TOLERANCE)) then
          write (errmsg, '(a,es10.3)') "stokes settings: tol must be in (0, 1), got ", set%tol
-      else if (set%max_iter < 1) then
-         write (errmsg, '(a,i0)') "stokes settings: max_iter must be >= 1, got ", set%max_iter
-      else if (set%derivative /= FOLD_DERIV_SPECTRAL .and. set%derivative /= FOLD_DERIV_FD) then
+      else if (set%max_iter < FOLD_LO_STOKES_MAX_ITERATIONS) then
+         write (errmsg, '(a,i0,a,i0)') "stokes settings: max_iter must be >= ", FOLD_LO_STOKES_MAX_ITERATIONS, &
+            ", got ", set%max_iter
+      else if (set%derivative < FOLD_LO_STOKES_DERIVATIVE .or. set%derivative > FOLD_HI_STOKES_DERIVATIVE) then
          write (errmsg, '(a,i0)') "stokes settings: derivative must be 0 (spectral) or 1 (finite differences), got ", &
             set%derivative
-      else if (set%subsamples < 1 .or. set%subsamples > 8) then
-         write (errmsg, '(a,i0)') "stokes settings: subsamples must be in 1..8, got ", set%subsamples
-      else if (set%mixing < FOLD_MIX_ARITHMETIC .or. set%mixing > FOLD_MIX_GEOMETRIC) then
+      else if (set%subsamples < FOLD_LO_STOKES_SUBSAMPLES .or. set%subsamples > FOLD_HI_STOKES_SUBSAMPLES) then
+         write (errmsg, '(a,i0,a,i0,a,i0)') "stokes settings: subsamples must be in ", FOLD_LO_STOKES_SUBSAMPLES, "..", &
+            FOLD_HI_STOKES_SUBSAMPLES, ", got ", set%subsamples
+      else if (set%mixing < FOLD_LO_STOKES_MIXING .or. set%mixing > FOLD_HI_STOKES_MIXING) then
          write (errmsg, '(a,i0)') "stokes settings: mixing must be 0 (arithmetic), 1 (harmonic) or 2 (geometric), got ", &
             set%mixing
-      else if (set%fibre_ends /= FOLD_ENDS_FLAT .and. set%fibre_ends /= FOLD_ENDS_CAPPED) then
+      else if (set%fibre_ends < FOLD_LO_STOKES_FIBRE_ENDS .or. set%fibre_ends > FOLD_HI_STOKES_FIBRE_ENDS) then
          write (errmsg, '(a,i0)') "stokes settings: fibre_ends must be 0 (flat) or 1 (capped), got ", set%fibre_ends
-      else if (set%rigidity /= FOLD_RIGIDITY_PENALTY .and. set%rigidity /= FOLD_RIGIDITY_EXACT) then
+      else if (set%rigidity < FOLD_LO_STOKES_RIGIDITY .or. set%rigidity > FOLD_HI_STOKES_RIGIDITY) then
          write (errmsg, '(a,i0)') "stokes settings: rigidity must be 0 (penalty) or 1 (exact), got ", set%rigidity
-      else if (set%rigidity == FOLD_RIGIDITY_EXACT .and. set%backend /= FOLD_STOKES_FFT) then
-         errmsg = "stokes settings: rigidity 1 (exact) needs backend 1 (fft); backend 2 (hypre) is penalised only"
-      else if (set%guess /= FOLD_GUESS_PREVIOUS .and. set%guess /= FOLD_GUESS_EXTRAPOLATE) then
+      else if (.not. FOLD_BACKEND_RIGIDITY(set%rigidity, set%backend)) then
+         write (errmsg, '(a,i0,a,i0,a)') "stokes settings: rigidity ", set%rigidity, " is not a formulation of backend ", &
+            set%backend, " ("//trim(FOLD_BACKEND_NAME(set%backend))//"); rigidity 1 (exact) needs backend 1 (fft)"
+      else if (set%guess < FOLD_LO_STOKES_INITIAL_GUESS .or. set%guess > FOLD_HI_STOKES_INITIAL_GUESS) then
          write (errmsg, '(a,i0)') "stokes settings: guess must be 1 (previous) or 2 (extrapolate), got ", set%guess
       else
          stat = FOLD_OK

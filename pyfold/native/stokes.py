@@ -23,26 +23,25 @@ import numpy as np
 
 from pyfold.errors import InputError, checked
 from pyfold.native import load
+from pyfold.scene import registry as _registry
 
-# Code tables of the Stokes settings, one per enumeration: the integers are those of
-# fortran/stokes/fold_stokes_solver.f90 (FOLD_STOKES_*, FOLD_DERIV_*, FOLD_MIX_*,
-# FOLD_ENDS_*, FOLD_GUESS_*), fold_time_scheme.f90 (FOLD_EULER, FOLD_AB2) and
-# fold_fft_backend.f90 (FOLD_PLAN_*); the scene schema, the normaliser (what
-# /setup/resolved holds) and these bindings use them, and
-# tests/micro/test_code_tables.py checks them against the Fortran sources.
-BACKENDS = {"fft": 1, "hypre": 2}
-DERIVATIVES = {"spectral": 0, "fd": 1}
-MIXINGS = {"arithmetic": 0, "harmonic": 1, "geometric": 2}
-FIBRE_ENDS = {"flat": 0, "capped": 1}
-GUESSES = {"previous": 1, "extrapolate": 2}
-SCHEMES = {"euler": 1, "ab2": 2}
-FFT_PLANS = {"estimate": 0, "measure": 1}
-#: transforms of the CG operator (fold_stokes_solver FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE); fold_run only
-FFT_PRECISIONS = {"double": 0, "single": 1}
-#: rigidity of the particles (fold_stokes_solver FOLD_RIGIDITY_*): the seed's penalty kappa, or the
+# Code tables of the Stokes settings: views of the settings registry
+# (pyfold/scene/registry.py), which also generates the Fortran constants
+# (fortran/core/fold_settings.f90); tests/micro/test_stokes_code_tables.py checks the
+# constants of the Fortran modules that are not generated (fold_time_scheme, fold_fft_backend).
+BACKENDS = _registry.codes("numerics.stokes.backend")
+DERIVATIVES = _registry.codes("numerics.stokes.derivative")
+MIXINGS = _registry.codes("numerics.stokes.mixing")
+FIBRE_ENDS = _registry.codes("numerics.stokes.fibre_ends")
+GUESSES = _registry.codes("numerics.stokes.initial_guess")
+SCHEMES = _registry.codes("numerics.time_scheme")
+FFT_PLANS = _registry.codes("numerics.stokes.fft_plan")
+#: transforms of the CG operator (fold_settings FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE); fold_run only
+FFT_PRECISIONS = _registry.codes("numerics.stokes.fft_precision")
+#: rigidity of the particles (fold_settings FOLD_RIGIDITY_*): the seed's penalty kappa, or the
 #: constraint eps(u) = 0 on the voxels covered at least half, by a multiplier (fold_stokes_rigid; fft)
-RIGIDITIES = {"penalty": 0, "exact": 1}
-SHAPES = {"fibre": 1, "sphere": 2, "spheroid": 3}
+RIGIDITIES = _registry.codes("numerics.stokes.rigidity")
+SHAPES = _registry.codes("particles.shape")
 
 #: Unit round-off of single precision (fold_stokes_fft FOLD_SINGLE_ROUNDOFF).
 SINGLE_ROUNDOFF = 0.5 * float(np.finfo(np.float32).eps)
@@ -60,29 +59,16 @@ def single_tolerance_min(voxels: int) -> float:
 
 #: The backend choice that has no code: :func:`backend_for` resolves it from the cell
 #: (the normaliser writes the resolved code to /setup/resolved/stokes_backend).
-AUTO_BACKEND = "auto"
+AUTO_BACKEND = _registry.AUTO_BACKEND
 #: Every word numerics.stokes.backend accepts: the coded backends and "auto".
-BACKEND_CHOICES = (AUTO_BACKEND, *BACKENDS)
+BACKEND_CHOICES = _registry.setting("numerics.stokes.backend").choices
+#: The backend "auto" stands for in a cell with or without walls (the capability table
+#: of the registry decides: pyfold.scene.registry.BACKENDS).
+backend_for = _registry.backend_for
 
-
-def backend_for(walls: bool) -> str:
-    """The backend ``"auto"`` stands for: ``"hypre"`` (staggered grid with no-slip
-    walls at y = 0, Ly) in a cell with walls, ``"fft"`` (periodic, Lees–Edwards) otherwise.
-
-    The two backends are not interchangeable: the FFT solver's Fourier basis is
-    periodic, so it cannot impose walls; hypre's staggered grid is rectangular, so it
-    cannot follow the sheared Lees–Edwards lattice of a periodic cell in shear.
-    """
-    return "hypre" if walls else "fft"
-
-
-#: Bounds of the viscosity contrast kappa = eta_solid / eta_f (fold_stokes_solver
-#: FOLD_KAPPA_MIN, FOLD_KAPPA_MAX; fold_run_file refuses the same range). kappa = 1 is
-#: a particle-free fluid, a test of the solver; the rigidity error falls like 1/kappa
-#: (docs/physics.md#fictitious-domain-penalisation) and 1e12 keeps kappa eta_f and the
-#: CG residuals within double precision. A run allows at most the kappa_max of :func:`kappa_range` at its
-#: grid, tolerance and precision, usually far less.
-KAPPA_MIN, KAPPA_MAX = 1.0, 1.0e12
+#: Bounds of the viscosity contrast kappa (the registry's; fold_settings FOLD_KAPPA_MIN,
+#: FOLD_KAPPA_MAX, which fold_run_file refuses outside).
+KAPPA_MIN, KAPPA_MAX = _registry.KAPPA_MIN, _registry.KAPPA_MAX
 
 
 @dataclass(frozen=True)
@@ -122,24 +108,11 @@ def stress_check(eta_eff: float, eta_f: float, voxels: int, kappa: float, tol: f
                                                               float(kappa), float(tol))
     checked(stat, msg)
 
-#: The one source of the defaults of every solver setting that changes results: the
-#: scene schema (pyfold.scene.schema.StokesSettings, names of the scene file) and
-#: StokesSettings below (names of the bindings) both take them from here.
-DEFAULTS = {
-    "backend": AUTO_BACKEND,
-    "tolerance": 1.0e-6,
-    "max_iterations": 1000,
-    "kappa": 1.0e3,
-    "derivative": "fd",
-    "mixing": "harmonic",
-    "subsamples": 3,
-    "fibre_ends": "flat",
-    "warm_start": True,
-    "initial_guess": "previous",
-    "fft_plan": "measure",
-    "fft_precision": "double",
-    "rigidity": "penalty",
-}
+#: The defaults of every solver setting that changes results, named as in the scene file
+#: (a view of the settings registry, which the scene schema reads too).
+DEFAULTS = {key: _registry.default(f"numerics.stokes.{key}")
+            for key in ("backend", "tolerance", "max_iterations", "kappa", "derivative", "mixing", "subsamples",
+                        "fibre_ends", "warm_start", "initial_guess", "fft_plan", "fft_precision", "rigidity")}
 
 
 @dataclass(frozen=True)
@@ -192,18 +165,16 @@ class StokesSettings:
     def __post_init__(self) -> None:
         if not self.eta_f > 0:
             raise InputError(f"eta_f: must be > 0, got {self.eta_f}")
-        if not KAPPA_MIN <= self.kappa <= KAPPA_MAX:
-            raise InputError(f"kappa: must be in [{KAPPA_MIN:g}, {KAPPA_MAX:g}], got {self.kappa}")
-        if not 0.0 < self.tol < 1.0:
-            raise InputError(f"tol: must be in (0, 1), got {self.tol}")
-        if int(self.max_iter) < 1:
-            raise InputError(f"max_iter: must be >= 1, got {self.max_iter}")
+        # the ranges of the scene's numerics.stokes keys (the registry's), under the bindings' names
+        for key, path in (("kappa", "kappa"), ("tol", "tolerance"), ("max_iter", "max_iterations"),
+                          ("subsamples", "subsamples")):
+            if not _registry.in_range(f"numerics.stokes.{path}", getattr(self, key)):
+                raise InputError(f"{key}: must be in {_registry.range_text(f'numerics.stokes.{path}')}, "
+                                 f"got {getattr(self, key)}")
         for key, table in (("derivative", DERIVATIVES), ("mixing", MIXINGS), ("fibre_ends", FIBRE_ENDS),
                            ("guess", GUESSES), ("backend", BACKEND_CHOICES), ("rigidity", RIGIDITIES)):
             if getattr(self, key) not in table:
                 raise InputError(f"{key}: must be one of {sorted(table)}, got {getattr(self, key)!r}")
-        if not 1 <= int(self.subsamples) <= 8:
-            raise InputError(f"subsamples: must be in 1..8, got {self.subsamples}")
         if self.backend not in (AUTO_BACKEND, backend_for(walls=False)):
             raise InputError(f"backend: these bindings solve fully periodic cells with the FFT solver; "
                              f"allowed: 'fft' or 'auto', got {self.backend!r} (walled cells run through "

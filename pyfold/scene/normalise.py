@@ -15,7 +15,7 @@ import numpy as np
 from pyfold.errors import InputError
 from pyfold.files import regular_file
 from pyfold.native import stokes as stokes_codes
-from pyfold.scene import shapes
+from pyfold.scene import registry, shapes
 from pyfold.scene._problems import Problems
 from pyfold.scene.hydrodynamics_evidence import auto_evidence
 from pyfold.scene.kappa_range import check_kappa
@@ -26,27 +26,20 @@ from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RAT
 __all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "backend_mismatch", "HYDRODYNAMICS_CODES",
            "COLLISION_CODES", "SPHERE_INTERACTION_FRACTION"]
 
-HYDRODYNAMICS_CODES = {"jeffery": 0, "stokes": 1}
-# the Stokes code tables are those of the bindings (pyfold.native.stokes), shared with Fortran
-TIME_SCHEME_CODES = stokes_codes.SCHEMES
-DERIVATIVE_CODES = stokes_codes.DERIVATIVES
-FFT_PLAN_CODES = stokes_codes.FFT_PLANS
-INITIAL_GUESS_CODES = stokes_codes.GUESSES
-FFT_PRECISION_CODES = stokes_codes.FFT_PRECISIONS
+# code tables of /setup/resolved: views of the settings registry (pyfold/scene/registry.py)
+HYDRODYNAMICS_CODES = registry.codes("model.hydrodynamics")
 #: Spheres: hydrodynamic interactions "matter" for ``auto`` from this total volume
 #: fraction on. Batchelor & Green (1972, J. Fluid Mech. 56:401):
 #: eta/eta_f = 1 + 2.5 phi + 6.2 phi^2; the pair term is 2.48 phi of the single-particle
 #: (Einstein) term, i.e. >= 12 % from phi = 0.05.
 SPHERE_INTERACTION_FRACTION = 0.05
-COLLISION_CODES = {"none": 0, "naive": 1, "strategy": 2}
-ON_CAP_CODES = {"stop": 0, "continue": 1}
+COLLISION_CODES = registry.codes("model.collisions")
+ON_CAP_CODES = registry.codes("model.on_contact_cap")
 
 #: Relative tolerance for "is a multiple of dt" (times given in decimal notation).
 MULTIPLE_TOL = 1e-9
-#: Default security zone as a fraction of the smallest particle radius (the seed's
-#: Couette scene uses alpha = R / 15; a tenth keeps alpha below a grid cell at the
-#: default 4 cells per diameter).
-DEFAULT_ALPHA_OVER_RADIUS = 0.1
+#: Default security zone as a fraction of the smallest particle radius (the registry's).
+DEFAULT_ALPHA_OVER_RADIUS = registry.DEFAULT_ALPHA_OVER_RADIUS
 #: Default number of statistics records and of snapshots over a run.
 DEFAULT_RECORDS, DEFAULT_SNAPSHOTS = 100, 10
 #: Restart checkpoints of a run by default: one every 1/20 of it, so a killed long run
@@ -74,6 +67,23 @@ LUBRICATION_THRESHOLD_VOXELS = 2.0
 #: Most time steps the admissibility check of a deforming lattice visits one by one
 #: (the native loop takes ~0.3 s per million); beyond, every k-th step with a margin.
 LATTICE_CHECK_SAMPLES = 1_000_000
+
+
+#: The numerics.stokes datasets of /setup/resolved, in the order they are written.
+_STOKES_DATASETS = ("stokes_backend", "stokes_tolerance", "stokes_max_iterations", "stokes_kappa", "stokes_derivative",
+                    "stokes_fft_plan", "stokes_mixing", "stokes_subsamples", "stokes_fibre_ends", "stokes_warm_start",
+                    "stokes_initial_guess", "stokes_fft_precision", "stokes_rigidity", "stokes_solve_every")
+
+
+def _dataset(name: str, value) -> tuple[object, str, str]:
+    """``(value, units, long_name)`` of the registered /setup/resolved dataset ``name``: a
+    word as its code, an integer or bool as int32, a real as it is."""
+    s = registry.resolved(name)
+    if s.kind == "choice":
+        return np.int32(s.codes[value]), s.units, s.legend
+    if s.kind in ("integer", "bool"):
+        return np.int32(value), s.units, s.legend
+    return float(value), s.units, s.legend
 
 
 @dataclass(frozen=True)
@@ -155,20 +165,21 @@ class ResolvedScene:
             "dt": (self.dt, "s", "time step"),
             "t_end": (self.t_end, "s", "end time"),
             "n_steps": (np.int32(self.n_steps), "1", "number of time steps, t_end / dt"),
-            "seed": (np.int32(self.seed), "1", "random seed"),
-            "hydrodynamics": (np.int32(HYDRODYNAMICS_CODES[self.hydrodynamics]), "1", "0 jeffery, 1 stokes"),
+            "seed": _dataset("seed", self.seed),
+            "hydrodynamics": _dataset("hydrodynamics", self.hydrodynamics),
             "hydrodynamics_reason": (self.reason, "", "what was chosen for hydrodynamics and collisions, and why"),
             "scene_warnings": ("\n".join(self.warnings), "", "what pyfold validate warned about (one per line)"),
-            "collisions": (np.int32(COLLISION_CODES[self.collisions]), "1", "0 none, 1 naive, 2 strategy"),
-            "alpha": (self.alpha, "m", "security zone alpha"),
-            "contact_max_iter": (np.int32(self.contact_max_iter), "1", "cap on contact iterations per step"),
-            "on_contact_cap": (np.int32(ON_CAP_CODES[self.on_contact_cap]), "1", "0 stop, 1 continue"),
-            "lubrication": (np.int32(self.lubrication), "1", "sphere-sphere lubrication on (1) or off (0)"),
+            "collisions": _dataset("collisions", self.collisions),
+            "alpha": _dataset("alpha", self.alpha),
+            "contact_max_iter": _dataset("contact_max_iter", self.contact_max_iter),
+            "on_contact_cap": _dataset("on_contact_cap", self.on_contact_cap),
+            "lubrication": _dataset("lubrication", self.lubrication),
             "output_every": (np.int32(self.output_every), "1", "steps between statistics records"),
             "snapshot_every": (np.int32(self.snapshot_every), "1", "steps between snapshots, 0 = none"),
             "checkpoint_every": (np.int32(self.checkpoint_every), "1", "steps between checkpoints, 0 = none"),
             "family_names": ([f.name for f in fams], "", "particle family names, in family index order"),
-            "family_shape": (np.array([f.shape_code for f in fams], np.int32), "1", "1 fibre, 2 sphere, 3 spheroid"),
+            "family_shape": (np.array([f.shape_code for f in fams], np.int32), "1",
+                             registry.resolved("family_shape").legend),
             "family_count": (np.array([f.count for f in fams], np.int32), "1", "particles per family"),
             "family_radius": (np.array([f.radius for f in fams]), "m", "radius per family"),
             "family_length": (np.array([f.length for f in fams]), "m", "length per family"),
@@ -188,31 +199,8 @@ class ResolvedScene:
         return {
             "stokes_grid": (np.array(self.stokes_grid, np.int32), "1",
                             "Stokes grid voxel counts along a1, a2, a3 (1 along a3 in 2-D)"),
-            "stokes_backend": (np.int32(stokes_codes.BACKENDS[st.backend]), "1",
-                               "Stokes backend: 1 fft (periodic cell), 2 hypre (cell with walls)"),
-            "stokes_tolerance": (float(st.tolerance), "1", "relative preconditioned CG residual of a Stokes solve"),
-            "stokes_max_iterations": (np.int32(st.max_iterations), "1", "CG iteration cap of a Stokes solve"),
-            "stokes_kappa": (float(st.kappa), "1", "viscosity contrast kappa = eta_solid / eta_fluid"),
-            "stokes_derivative": (np.int32(DERIVATIVE_CODES[st.derivative]), "1",
-                                  "0 spectral, 1 rotated finite differences (Willot 2015)"),
-            "stokes_fft_plan": (np.int32(FFT_PLAN_CODES[st.fft_plan]), "1", "FFTW planning: 0 estimate, 1 measure"),
-            "stokes_mixing": (np.int32(stokes_codes.MIXINGS[st.mixing]), "1",
-                              "viscosity of partially covered voxels: 0 arithmetic, 1 harmonic, 2 geometric"),
-            "stokes_subsamples": (np.int32(st.subsamples), "1", "sub-samples per voxel edge of the partial-volume chi"),
-            "stokes_fibre_ends": (np.int32(stokes_codes.FIBRE_ENDS[st.fibre_ends]), "1",
-                                  "fibre ends of the voxelisation: 0 flat, 1 capped"),
-            "stokes_warm_start": (np.int32(st.warm_start), "1",
-                                  "1: each CG solve starts from the previous solution, 0: from zero"),
-            "stokes_initial_guess": (np.int32(INITIAL_GUESS_CODES[st.initial_guess]), "1",
-                                     "CG initial guess: 1 previous solution, 2 extrapolated from the last two"),
-            "stokes_fft_precision": (np.int32(FFT_PRECISION_CODES[st.fft_precision]), "1",
-                                     "precision of the CG operator's FFTs: 0 double, 1 single"),
-            "stokes_rigidity": (np.int32(stokes_codes.RIGIDITIES[st.rigidity]), "1",
-                                "rigidity of the particles: 0 penalty (kappa), 1 exact (multiplier on the solid voxels)"),
-            "stokes_solve_every": (np.int32(st.solve_every), "1",
-                                   "a Stokes solve every k-th step, velocities extrapolated linearly in between"),
-            "time_scheme": (np.int32(TIME_SCHEME_CODES[num.time_scheme]), "1",
-                            "time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2"),
+            **{name: _dataset(name, getattr(st, registry.resolved(name).key)) for name in _STOKES_DATASETS},
+            "time_scheme": _dataset("time_scheme", num.time_scheme),
         }
 
     def summary(self) -> str:
@@ -788,14 +776,15 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
     if alpha > min(radii):
         problems.add("model.alpha", f"must be between 0 and the smallest particle radius {min(radii):g} "
                      f"(a security zone of the order of a grid cell), got {alpha:g}")
-    if model.hydrodynamics == "stokes" and not shear_flow:
+    if model.hydrodynamics == "stokes" and not shear_flow and not any(
+            b.deforming_lattice for b in registry.BACKENDS.values()):
         problems.add("model.hydrodynamics", "'stokes' is available for simple shear only: the FFT Stokes solver has "
                      f"no deforming (elongational) lattice yet (flow.type = {scene.flow.type!r}); use "
                      "hydrodynamics = 'jeffery'")
     st = scene.numerics.stokes
-    # The backend: "auto" is the backend of the cell (pyfold.native.stokes.backend_for);
+    # The backend: "auto" is the backend of the cell (pyfold.scene.registry.backend_for);
     # an explicit one must be that backend, since neither can do the other's cell.
-    backend = stokes_codes.backend_for(walls)
+    backend = registry.backend_for(walls)
     backend_text = backend_mismatch(st.backend, walls)
     if model.hydrodynamics == "stokes" and backend_text:
         problems.add("numerics.stokes.backend", backend_text)
@@ -813,7 +802,8 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                      f"{st.cells_per_diameter} across the thinnest diameter {2.0 * min(radii):g}) exceeds "
                      f"max_grid_points = {st.max_grid_points}; raise it (memory ~ {_grid_megabytes(grid, dim):.0f} MB), "
                      f"lower numerics.stokes.cells_per_diameter or the cell size")
-    if grid is not None and backend == "fft" and st.fft_precision == "single":
+    if grid is not None and st.fft_precision in registry.BACKENDS[backend].fft_precisions \
+            and st.fft_precision == "single":
         tol_min = stokes_codes.single_tolerance_min(grid_points)
         if st.tolerance < tol_min:
             problems.add("numerics.stokes.tolerance",
@@ -821,10 +811,12 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                          f"round-off of the transforms, (2 log2 N + 4) 2^-24 = {tol_min:.3g} on the "
                          f"{' x '.join(map(str, grid[:dim]))} grid; allowed: tolerance >= {tol_min:.3g} or "
                          f"fft_precision = 'double', got {st.tolerance:g}")
-    if st.rigidity == "exact" and backend != "fft":
+    if st.rigidity not in registry.BACKENDS[backend].rigidities:
+        able = " or ".join(b.name for b in registry.BACKENDS.values() if st.rigidity in b.rigidities)
+        allowed = " or ".join(f"rigidity = {r!r}" for r in registry.BACKENDS[backend].rigidities)
         problems.add("numerics.stokes.rigidity",
-                     f"rigidity = 'exact' needs the fft backend (a periodic cell); the {backend} backend "
-                     f"is penalised only; allowed: rigidity = 'penalty' with this cell, got 'exact'")
+                     f"rigidity = {st.rigidity!r} needs the {able} backend (a periodic cell); the {backend} backend "
+                     f"is penalised only; allowed: {allowed} with this cell, got {st.rigidity!r}")
     if st.rigidity == "exact" and st.fft_precision != "double":
         problems.add("numerics.stokes.fft_precision",
                      "rigidity = 'exact' transforms in double precision only; allowed: fft_precision = 'double' "
@@ -1032,7 +1024,7 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
         extra = f" ({grid_text})" if hydrodynamics == "stokes" else ""
         reasons.insert(0, f"hydrodynamics = {hydrodynamics} (requested){extra}")
     if hydrodynamics == "stokes":
-        how = "auto: " if st.backend == stokes_codes.AUTO_BACKEND else "requested; "
+        how = "auto: " if st.backend == registry.AUTO_BACKEND else "requested; "
         reasons.insert(1, f"Stokes backend = {backend} ({how}" + (
             "the cell has no-slip walls at y = 0 and y = Ly, which the staggered-grid hypre solver imposes)"
             if walls else "the cell is periodic, the FFT solver follows its Lees-Edwards lattice)"))
@@ -1122,11 +1114,11 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
 def backend_mismatch(choice: str, walls: bool) -> str:
     """Why ``numerics.stokes.backend = choice`` cannot solve a cell with (``walls``) or
     without no-slip walls, with the allowed choices; empty when it can (``"auto"``
-    always can: pyfold.native.stokes.backend_for)."""
-    fits = stokes_codes.backend_for(walls)
-    if choice in (stokes_codes.AUTO_BACKEND, fits):
+    always can: pyfold.scene.registry.backend_for)."""
+    fits = registry.backend_for(walls)
+    if choice == registry.AUTO_BACKEND or registry.backend_capable(choice, walls):
         return ""
-    allowed = f"allowed: {fits!r} or {stokes_codes.AUTO_BACKEND!r}, got {choice!r}"
+    allowed = f"allowed: {fits!r} or {registry.AUTO_BACKEND!r}, got {choice!r}"
     if walls:
         return (f"'{choice}' solves fully periodic cells only: its Fourier basis cannot impose the no-slip walls of "
                 f"cell.boundary = 'couette'; {allowed}")

@@ -18,8 +18,7 @@ from typing import Annotated, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
-from pyfold.native.stokes import DEFAULTS as _STOKES
-from pyfold.native.stokes import KAPPA_MAX, KAPPA_MIN
+from pyfold.scene import registry
 
 __all__ = [
     "Cell",
@@ -76,6 +75,29 @@ def _one_of(*allowed: int):
     return check
 
 
+def _registered(path: str):
+    """The field type of the registered setting at TOML ``path`` (pyfold/scene/registry.py):
+    its words, or its type within its range (strict, finite)."""
+    s = registry.setting(path)
+    if s.kind == "choice":
+        return Literal[s.choices]
+    if s.kind == "bool":
+        return bool
+    bounds = {}
+    if s.lo is not None:
+        bounds["gt" if s.lo_open else "ge"] = s.lo
+    if s.hi is not None:
+        bounds["lt" if s.hi_open else "le"] = s.hi
+    if s.kind == "integer":
+        return Annotated[int, Field(**bounds)]
+    return Annotated[float, Field(**bounds), AfterValidator(_finite)]
+
+
+def _default(path: str):
+    """The registered default of the setting at ``path``."""
+    return registry.default(path)
+
+
 Real = Annotated[float, AfterValidator(_finite)]
 PositiveReal = Annotated[float, Field(gt=0), AfterValidator(_finite)]
 NonNegativeReal = Annotated[float, Field(ge=0), AfterValidator(_finite)]
@@ -130,7 +152,7 @@ class ParticleFamily(_Table):
 
     #: label used in outputs (default "family<index>")
     name: Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.+-]+$")] | None = None
-    shape: Literal["fibre", "sphere", "spheroid"]
+    shape: _registered("particles.shape")
     #: fibre cross-section radius, sphere radius, spheroid minor semi-axis [m]
     radius: Length
     #: fibre (cylinder) length or spheroid major axis; not for spheres [m]
@@ -160,81 +182,81 @@ class Model(_Table):
     """Physical model of the direct simulation."""
 
     #: "auto" (chosen from the regime), "jeffery" (imposed-flow kinematics) or "stokes"
-    hydrodynamics: Literal["auto", "jeffery", "stokes"] = "auto"
+    hydrodynamics: _registered("model.hydrodynamics") = _default("model.hydrodynamics")
     #: "auto" (chosen from the regime), "strategy" (seed loop with cell lists),
     #: "naive" (same rule, O(N^2) reference) or "none"
-    collisions: Literal["auto", "strategy", "naive", "none"] = "auto"
+    collisions: _registered("model.collisions") = _default("model.collisions")
     #: security zone alpha [m] (default: a tenth of the smallest particle radius)
-    alpha: NonNegativeReal | None = None
+    alpha: _registered("model.alpha") | None = None
     #: cap on contact-correction iterations per step
-    contact_max_iter: Annotated[int, Field(ge=1, le=100_000)] = 100
+    contact_max_iter: _registered("model.contact_max_iter") = _default("model.contact_max_iter")
     #: what to do when the cap is hit: "stop" the run (status failed) or "continue" and count it
-    on_contact_cap: Literal["stop", "continue"] = "stop"
+    on_contact_cap: _registered("model.on_contact_cap") = _default("model.on_contact_cap")
     #: sphere-sphere lubrication force (docs/physics.md#lubrication-between-spheres); spheres only
-    lubrication: bool = False
+    lubrication: _registered("model.lubrication") = _default("model.lubrication")
 
 
 class StokesSettings(_Table):
     """Settings of the fictitious-domain Stokes solver (``fortran/stokes``).
 
-    Defaults, code tables and the kappa range come from :mod:`pyfold.native.stokes`
-    (``DEFAULTS``, ``KAPPA_MIN``/``KAPPA_MAX``), the one place the bindings take them
-    from too; every field below that changes results is written to
-    ``/setup/resolved`` and read from there by ``fold_run``.
+    Types, ranges, words and defaults come from the settings registry
+    (pyfold/scene/registry.py), the one place the bindings and fold_run take them from
+    too; every field below that changes results is written to ``/setup/resolved`` and
+    read from there by ``fold_run``.
     """
 
     #: Stokes backend: "fft" (FFT-preconditioned CG on the periodic, Lees-Edwards cell),
     #: "hypre" (staggered grid with no-slip walls: cell.boundary = "couette" only) or
     #: "auto" (hypre when the cell has walls, fft otherwise; pyfold.native.stokes.backend_for)
-    backend: Literal["auto", "fft", "hypre"] = _STOKES["backend"]
+    backend: _registered("numerics.stokes.backend") = _default("numerics.stokes.backend")
     #: relative (preconditioned) residual at which the conjugate-gradient solve stops [-]
-    tolerance: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] = _STOKES["tolerance"]
+    tolerance: _registered("numerics.stokes.tolerance") = _default("numerics.stokes.tolerance")
     #: CG iteration cap per solve; reaching it stops the run (exit 1, residual reached)
-    max_iterations: Annotated[int, Field(ge=1, le=1_000_000)] = _STOKES["max_iterations"]
+    max_iterations: _registered("numerics.stokes.max_iterations") = _default("numerics.stokes.max_iterations")
     #: viscosity contrast of the penalisation eta_solid / eta_fluid (seed: 1e3); rigidity
     #: error ~ 1/kappa, CG iterations ~ sqrt(kappa) (docs/physics.md#fictitious-domain-penalisation,
     #: docs/physics.md#solver-vs-contrast); at most kappa_max ~ 1/tolerance of the grid and
     #: precision (pyfold/scene/kappa_range.py, docs/physics.md#how-large-a-penalty-the-solver-can-carry) [-]
-    kappa: Annotated[float, Field(ge=KAPPA_MIN, le=KAPPA_MAX), AfterValidator(_finite)] = _STOKES["kappa"]
+    kappa: _registered("numerics.stokes.kappa") = _default("numerics.stokes.kappa")
     #: grid cells per diameter of the thinnest particle (4-8, docs/physics.md#resolution) [-]
-    cells_per_diameter: Annotated[int, Field(ge=1, le=64)] = 4
+    cells_per_diameter: _registered("numerics.stokes.cells_per_diameter") = _default("numerics.stokes.cells_per_diameter")
     #: largest Stokes grid (voxel count) allowed: "auto" falls back to jeffery above it,
     #: an explicit "stokes" is rejected (default 64^3; memory ~ 0.27 kB per point in 3-D)
-    max_grid_points: Annotated[int, Field(ge=8, le=2**31 - 1)] = 64**3
+    max_grid_points: _registered("numerics.stokes.max_grid_points") = _default("numerics.stokes.max_grid_points")
     #: derivative scheme: "fd" (rotated finite differences, Willot 2015; no Gibbs ringing)
     #: or "spectral" (i k, Nyquist modes removed)
-    derivative: Literal["fd", "spectral"] = _STOKES["derivative"]
+    derivative: _registered("numerics.stokes.derivative") = _default("numerics.stokes.derivative")
     #: viscosity of a partially covered voxel: "harmonic" 1/eta = (1-chi)/eta_f + chi/(kappa eta_f),
     #: "arithmetic" eta_f (1 + (kappa-1) chi) (inflates particles by ~h/2) or "geometric"
     #: eta_f kappa^chi (docs/physics.md#viscosity-of-partially-covered-voxels)
-    mixing: Literal["harmonic", "arithmetic", "geometric"] = _STOKES["mixing"]
+    mixing: _registered("numerics.stokes.mixing") = _default("numerics.stokes.mixing")
     #: sub-samples per voxel edge of the partial-volume chi (1..8) [-]
-    subsamples: Annotated[int, Field(ge=1, le=8)] = _STOKES["subsamples"]
+    subsamples: _registered("numerics.stokes.subsamples") = _default("numerics.stokes.subsamples")
     #: fibre ends of the voxelised particle: "flat" cylinder or "capped" (the contact capsule)
-    fibre_ends: Literal["flat", "capped"] = _STOKES["fibre_ends"]
+    fibre_ends: _registered("numerics.stokes.fibre_ends") = _default("numerics.stokes.fibre_ends")
     #: start each CG solve from the previous solution (see initial_guess) or from zero
-    warm_start: bool = _STOKES["warm_start"]
+    warm_start: _registered("numerics.stokes.warm_start") = _default("numerics.stokes.warm_start")
     #: FFTW planning: "measure" (faster transforms, plans timed at start-up; repeated runs
     #: agree to the solver tolerance) or "estimate" (bitwise reproducible)
-    fft_plan: Literal["measure", "estimate"] = _STOKES["fft_plan"]
+    fft_plan: _registered("numerics.stokes.fft_plan") = _default("numerics.stokes.fft_plan")
     #: precision of the FFTs of the CG operator: "double" or "single" (single-precision
     #: transforms inside the double-precision CG, 1.3-1.4x cheaper iterations; fold_run refuses
     #: a tolerance below (2 log2 N + 4) 2^-24 for N voxels, docs/physics.md)
-    fft_precision: Literal["double", "single"] = _STOKES["fft_precision"]
+    fft_precision: _registered("numerics.stokes.fft_precision") = _default("numerics.stokes.fft_precision")
     #: rigidity of the particles: "penalty" (the seed's viscosity kappa eta_f in the solid;
     #: rigidity error ~ 1/kappa, CG iterations ~ sqrt(kappa)) or "exact" (eps(u) = 0 on the
     #: voxels covered at least half, imposed by a multiplier, the others with the harmonic
     #: mixing's kappa -> infinity viscosity; no kappa; the CG tolerance is the rigidity
     #: error; fft backend, double precision; docs/physics.md#exact-rigidity)
-    rigidity: Literal["penalty", "exact"] = _STOKES["rigidity"]
+    rigidity: _registered("numerics.stokes.rigidity") = _default("numerics.stokes.rigidity")
     #: initial guess of each CG solve: "previous" (the last step's solution) or
     #: "extrapolate" (2 u_n - u_(n-1) of the last two solutions); measured by
     #: benchmarks/bench_stokes_step.py (2 % fewer iterations on the dense-fibre scene)
-    initial_guess: Literal["previous", "extrapolate"] = _STOKES["initial_guess"]
+    initial_guess: _registered("numerics.stokes.initial_guess") = _default("numerics.stokes.initial_guess")
     #: a Stokes solve every k-th step only; in between the rigid velocities are the linear
     #: extrapolation in time of the last two solves (contacts still every step). A
     #: speed-accuracy setting (benchmarks/bench_stokes_step.py); 1 = a solve every step
-    solve_every: Annotated[int, Field(ge=1, le=1000)] = 1
+    solve_every: _registered("numerics.stokes.solve_every") = _default("numerics.stokes.solve_every")
 
 
 class Numerics(_Table):
@@ -245,11 +267,11 @@ class Numerics(_Table):
     #: end time; a multiple of dt [s]
     t_end: PositiveReal
     #: seed of every random draw (placement, orientations)
-    seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
+    seed: _registered("numerics.seed") = _default("numerics.seed")
     #: time scheme of the Stokes rigid velocities: "ab2" (Adams-Bashforth 2, first step
     #: Euler; second order) or "euler" (explicit Euler, the seed's). Rotations are exact
     #: either way. Jeffery hydrodynamics ignores it (exact propagator for constant G).
-    time_scheme: Literal["ab2", "euler"] = "ab2"
+    time_scheme: _registered("numerics.time_scheme") = _default("numerics.time_scheme")
     stokes: StokesSettings = StokesSettings()
 
 

@@ -13,9 +13,10 @@ import math
 import numpy as np
 
 from pyfold.errors import InputError
+from pyfold.scene import registry
 
-#: shape name -> code of fold_particles (FOLD_FIBRE, FOLD_SPHERE, FOLD_SPHEROID)
-SHAPE_CODES = {"fibre": 1, "sphere": 2, "spheroid": 3}
+#: shape name -> code of fold_particles (FOLD_FIBRE, FOLD_SPHERE, FOLD_SPHEROID): the registry's
+SHAPE_CODES = registry.codes("particles.shape")
 
 #: Random close packing of identical disks (2-D) and spheres (3-D): 0.82 and 0.64
 #: (Berryman 1983, Phys. Rev. A 27:1053). The placement kernel goes beyond random

@@ -10,7 +10,9 @@ scene once, so that every study means the same thing by "beta = 10, n L^3 = 15".
 
 Choices, and why:
 
-* security zone ``alpha = alpha_over_d * d`` (default 0.1 d, docs/physics.md#collision-strategy);
+* security zone ``alpha = alpha_over_d * d`` (default :data:`DEFAULT_ALPHA_OVER_D` = 0.05 d, i.e.
+  the scene default of ``model.alpha``, a tenth of the radius: pyfold/scene/registry.py,
+  docs/physics.md#collision-strategy);
 * time step ``dt = alpha / (rate L)``: a fibre tip moves at most ``rate L / 2`` so it
   travels at most ``alpha / 2`` per step (docs/physics.md#time-step);
 * cell side: the smallest multiple of 0.1 L (at least ``min_side``) that clears fold_run's
@@ -31,7 +33,13 @@ import math
 from typing import Mapping
 
 from pyfold.errors import InputError
+from pyfold.scene.registry import DEFAULT_ALPHA_OVER_RADIUS
 from pyfold.scene.shapes import interaction_range
+
+#: Default security zone in fibre diameters: the scene's default alpha (a fraction
+#: DEFAULT_ALPHA_OVER_RADIUS of the radius, the registry's), so a scene built here and a
+#: scene file without model.alpha mean the same zone.
+DEFAULT_ALPHA_OVER_D = DEFAULT_ALPHA_OVER_RADIUS / 2.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,7 +58,7 @@ class ShearedFibres:
     hydrodynamics: str = "jeffery"
 
 
-def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_over_d: float = 0.1,
+def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_over_d: float = DEFAULT_ALPHA_OVER_D,
                    interval: float = 0.2, min_side: float = 2.2, collisions: str = "strategy",
                    dt: float | None = None, title: str | None = None, hydrodynamics: str = "jeffery",
                    stokes: Mapping[str, int | float | str] | None = None,

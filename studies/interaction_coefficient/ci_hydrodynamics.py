@@ -115,6 +115,8 @@ from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 
 # Parameters
+#: security zone in diameters (the design above: alpha = 0.1 d)
+ALPHA_OVER_D = 0.1
 MODELS = ("stokes", "jeffery")  # fluid-coupled, contacts only; both with collisions = "strategy"
 ESTIMATORS = ("own_a4", "ibof")  # rate regression with the run's a4, with IBOF(a2)
 PAIR_LEVEL = 0.05  # two-sided level of the paired test
@@ -137,13 +139,13 @@ class Study:
     def scene(self, model: str, seed: int):
         """The scene of ``model`` and ``seed`` (pyfold.scene.sheared_fibres: same cell, particles, dt)."""
         if model == "jeffery":
-            return sheared_fibres(self.beta, self.n_l3, seed, self.t_end)
+            return sheared_fibres(self.beta, self.n_l3, seed, self.t_end, alpha_over_d=ALPHA_OVER_D)
         stokes = {"cells_per_diameter": self.cells_per_diameter, "tolerance": self.tolerance,
                   "kappa": self.kappa}
         if self.max_grid_points != 262144:
             stokes["max_grid_points"] = self.max_grid_points
-        return sheared_fibres(self.beta, self.n_l3, seed, self.t_end, hydrodynamics="stokes", stokes=stokes,
-                              time_scheme="ab2")
+        return sheared_fibres(self.beta, self.n_l3, seed, self.t_end, alpha_over_d=ALPHA_OVER_D,
+                              hydrodynamics="stokes", stokes=stokes, time_scheme="ab2")
 
 
 #: The sweep files of the forms (models x seeds): studies/sweeps/ci_hydrodynamics[_large].toml.

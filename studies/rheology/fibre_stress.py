@@ -65,6 +65,8 @@ from pyfold.scene.sheared_fibres import sheared_fibres
 
 # Parameters
 BETA = 5.0
+#: security zone in diameters (the design above: alpha = 0.1 d)
+ALPHA_OVER_D = 0.1
 SMALL = dict(n_l3=2.0, t_end=10.0, cells_per_diameter=3, snapshots=5, regrid=(42, 54, 64), seed=1)
 LARGE = dict(n_l3=5.0, t_end=30.0, cells_per_diameter=4, snapshots=10, regrid=(54, 64, 81), seed=1)
 TOLERANCE = 1e-5
@@ -142,7 +144,8 @@ def run_dns(cfg: dict, runs: Path) -> Path:
     """The small/large Stokes fibre run (simulated once, reused afterwards)."""
     from pyfold.cli import main as cli_main
 
-    scene = sheared_fibres(BETA, cfg["n_l3"], cfg["seed"], cfg["t_end"], interval=0.1, hydrodynamics="stokes",
+    scene = sheared_fibres(BETA, cfg["n_l3"], cfg["seed"], cfg["t_end"], interval=0.1, alpha_over_d=ALPHA_OVER_D,
+                           hydrodynamics="stokes",
                            stokes={"cells_per_diameter": cfg["cells_per_diameter"], "tolerance": TOLERANCE,
                                    "kappa": KAPPA, "fft_plan": "estimate"}, time_scheme="ab2")
     snap = round(scene.t_end / cfg["snapshots"], 12)

@@ -15,6 +15,7 @@ from pyfold.correlations import (
 from pyfold.ensemble import ensemble_mean, holm, paired_difference, rank_paired
 from pyfold.errors import InputError
 from pyfold.scene import parse_scene
+from pyfold.scene.registry import DEFAULT_ALPHA_OVER_RADIUS
 from pyfold.scene.shapes import interaction_range
 from pyfold.scene.sheared_fibres import sheared_fibres
 
@@ -118,7 +119,8 @@ def test_sheared_fibres_scene_is_valid_and_sized_by_its_rules(beta, n_l3):
     assert abs(s.n_l3 - n_l3) <= 0.5 / s.side ** 3 + 1e-12  # rounding to a whole fibre
     rc = interaction_range([("fibre", 0.5 / beta, 1.0)], s.alpha)
     assert s.side > 2 * rc and (s.side - 0.1 <= 2 * rc or s.side == pytest.approx(2.2))  # smallest 0.1 step
-    assert s.alpha == pytest.approx(0.1 / beta, rel=1e-12)
+    # the scene default of model.alpha (a tenth of the radius, pyfold/scene/registry.py) in diameters
+    assert s.alpha == pytest.approx(DEFAULT_ALPHA_OVER_RADIUS * 0.5 / beta, rel=1e-12)
     assert 0.5 * 1.0 * s.dt <= 0.5 * s.alpha * (1 + 1e-12)  # a tip moves at most alpha/2 per step
     assert resolved.t_end == pytest.approx(2.0)
 

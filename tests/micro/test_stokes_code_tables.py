@@ -1,12 +1,15 @@
 """The integer codes of /setup/resolved and of the bindings are the same in Python and
 Fortran, and both sides refuse the same Stokes settings.
 
-Each enumeration has one table in Python (pyfold.native.stokes, pyfold.scene.normalise,
-pyfold.scene.shapes) and one set of named constants in Fortran; the tables are
-compared in both directions against the Fortran sources, so a constant added on one
-side only (a new backend, a new mixing rule) fails here. The kappa range is stated
-once in Python (KAPPA_MIN, KAPPA_MAX); the scene schema must accept exactly that
-range and fold_run must refuse a run file outside it with exit 2 naming the dataset.
+Each enumeration is declared once, in the settings registry (pyfold/scene/registry.py),
+whose views are pyfold.native.stokes, pyfold.scene.normalise and pyfold.scene.shapes; its
+Fortran constants are generated into fortran/core/fold_settings.f90 or, for modules not
+generated (fold_time_scheme, fold_fft_backend, fold_contacts, fold_particles), written by
+hand. The tables are compared in both directions against the Fortran sources, so a
+constant added on one side only (a new backend, a new mixing rule) fails here. The kappa
+range is stated once (the registry's KAPPA_MIN, KAPPA_MAX); the scene schema must accept
+exactly that range and fold_run must refuse a run file outside it with exit 2 naming the
+dataset.
 """
 from __future__ import annotations
 
@@ -28,22 +31,22 @@ FORTRAN = REPO / "fortran"
 
 #: (Python table, Fortran source, prefix of the Fortran constants, Python name -> suffix)
 TABLES = {
-    "backend": (stokes.BACKENDS, "stokes/fold_stokes_solver.f90", "FOLD_STOKES_", None),
-    "derivative": (stokes.DERIVATIVES, "stokes/fold_stokes_solver.f90", "FOLD_DERIV_", {"fd": "FD"}),
-    "mixing": (stokes.MIXINGS, "stokes/fold_stokes_solver.f90", "FOLD_MIX_", None),
-    "fibre_ends": (stokes.FIBRE_ENDS, "stokes/fold_stokes_solver.f90", "FOLD_ENDS_", None),
-    "initial_guess": (stokes.GUESSES, "stokes/fold_stokes_solver.f90", "FOLD_GUESS_", None),
+    "backend": (stokes.BACKENDS, "core/fold_settings.f90", "FOLD_STOKES_", None),
+    "derivative": (stokes.DERIVATIVES, "core/fold_settings.f90", "FOLD_DERIV_", {"fd": "FD"}),
+    "mixing": (stokes.MIXINGS, "core/fold_settings.f90", "FOLD_MIX_", None),
+    "fibre_ends": (stokes.FIBRE_ENDS, "core/fold_settings.f90", "FOLD_ENDS_", None),
+    "initial_guess": (stokes.GUESSES, "core/fold_settings.f90", "FOLD_GUESS_", None),
     "time_scheme": (stokes.SCHEMES, "stokes/fold_time_scheme.f90", "FOLD_", {"euler": "EULER", "ab2": "AB2"}),
     "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_backend.f90", "FOLD_PLAN_", None),
-    "fft_precision": (stokes.FFT_PRECISIONS, "stokes/fold_stokes_solver.f90", "FOLD_FFT_", None),
-    "rigidity": (stokes.RIGIDITIES, "stokes/fold_stokes_solver.f90", "FOLD_RIGIDITY_", None),
-    "hydrodynamics": (HYDRODYNAMICS_CODES, "io/fold_run_file.f90", "FOLD_HYDRO_", None),
+    "fft_precision": (stokes.FFT_PRECISIONS, "core/fold_settings.f90", "FOLD_FFT_", None),
+    "rigidity": (stokes.RIGIDITIES, "core/fold_settings.f90", "FOLD_RIGIDITY_", None),
+    "hydrodynamics": (HYDRODYNAMICS_CODES, "core/fold_settings.f90", "FOLD_HYDRO_", None),
     "collisions": (COLLISION_CODES, "contact/fold_contacts.f90", "FOLD_CONTACT_", None),
     "on_contact_cap": (ON_CAP_CODES, "contact/fold_contacts.f90", "FOLD_ON_CAP_", None),
     "shape": (shapes.SHAPE_CODES, "particles/fold_particles.f90", "FOLD_", None),
 }
 
-_CONST = re.compile(r"\b(FOLD_[A-Z0-9_]+)\s*=\s*([-+0-9.eEdD]+)(?:_dp)?")
+_CONST = re.compile(r"\b(FOLD_[A-Z0-9_]+)\s*=\s*([-+]?\d[0-9.eEdD+-]*)(?:_dp)?")
 
 
 def fortran_constants(source: str) -> dict[str, float]:
@@ -119,10 +122,11 @@ def test_stokes_defaults_have_one_source():
 
 
 def test_stokes_kappa_bounds_are_stated_once_and_fortran_uses_them():
-    consts = fortran_constants("stokes/fold_stokes_solver.f90")
+    consts = fortran_constants("core/fold_settings.f90")
     assert (consts["FOLD_KAPPA_MIN"], consts["FOLD_KAPPA_MAX"]) == (stokes.KAPPA_MIN, stokes.KAPPA_MAX)
+    assert (consts["FOLD_LO_STOKES_KAPPA"], consts["FOLD_HI_STOKES_KAPPA"]) == (stokes.KAPPA_MIN, stokes.KAPPA_MAX)
     # the run-file reader takes its range from those constants, not from literals
-    assert "FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, s%stokes%kappa" in (FORTRAN / "io/fold_run_file.f90").read_text()
+    assert "FOLD_LO_STOKES_KAPPA, FOLD_HI_STOKES_KAPPA, s%stokes%kappa" in (FORTRAN / "io/fold_run_file.f90").read_text()
 
 
 # the next representable numbers outside the range: the smallest violation there is

@@ -1,0 +1,310 @@
+"""The scene settings and the Stokes backends, each declared once, as data.
+
+Every setting that reaches ``fold_run`` (through ``/setup/resolved``) or chooses
+between coded alternatives is a :class:`Setting`: its TOML path, type, range or
+enumeration (words and their integer codes), default, units, the physics that uses
+it, a help text, and the ``/setup/resolved`` dataset and legend it is written as.
+Every Stokes backend is a :class:`Backend` with the capabilities the normaliser, the
+bindings and ``fold_run`` ask about instead of testing names.
+
+Views of these tables (generated or computed, never copied by hand):
+
+* the scene schema's fields (``pyfold/scene/schema.py``: :func:`pyfold.scene.schema_fields.field`),
+* the code tables of the normaliser and the bindings (``pyfold/scene/normalise.py``,
+  ``pyfold/native/stokes.py``: :func:`codes`) and the legends of ``/setup/resolved``,
+* ``fortran/core/fold_settings.f90``: codes, ranges, defaults and capabilities that
+  ``fortran/io/fold_run_file.f90`` and ``fortran/stokes/fold_stokes_solver.f90`` use,
+  written by ``scripts/generate_settings``,
+* the tables of ``docs/scenes.md`` between ``<!-- settings:... -->`` markers, same script.
+
+``tests/micro/test_settings_registry.py`` fails when a generated copy is stale.
+This module uses the standard library only, so the generator runs without the
+package's dependencies.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
+
+__all__ = ["Setting", "Backend", "SETTINGS", "BACKENDS", "AUTO_BACKEND", "setting", "codes", "resolved",
+           "in_range", "range_text",
+           "backend_for", "backend_capable", "DEFAULT_ALPHA_OVER_RADIUS", "KAPPA_MIN", "KAPPA_MAX"]
+
+#: Largest value of a 32-bit signed integer (counts and seeds fold_run holds in default integers).
+INT32_MAX = 2**31 - 1
+
+#: Bounds of the viscosity contrast kappa = eta_solid / eta_f. kappa = 1 is a particle-free
+#: fluid, a test of the solver; the rigidity error falls like 1/kappa
+#: (docs/physics.md#fictitious-domain-penalisation) and 1e12 keeps kappa eta_f and the CG
+#: residuals within double precision. A run allows at most the kappa_max of
+#: pyfold.native.stokes.kappa_range at its grid, tolerance and precision, usually far less.
+KAPPA_MIN, KAPPA_MAX = 1.0, 1.0e12
+
+#: Default security zone as a fraction of the smallest particle radius (the seed's
+#: Couette scene uses alpha = R / 15; a tenth keeps alpha below a grid cell at the
+#: default 4 cells per diameter). pyfold.scene.sheared_fibres takes its default from it.
+DEFAULT_ALPHA_OVER_RADIUS = 0.1
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One scene setting.
+
+    ``kind`` is ``"choice"`` (a word of ``choices``), ``"integer"``, ``"real"`` or
+    ``"bool"``. A numeric range is ``[lo, hi]``, a bound excluded when ``lo_open`` /
+    ``hi_open``; ``None`` is unbounded. ``codes`` maps a word to the integer written to
+    ``/setup/resolved`` (a word without a code, like the backend's ``"auto"``, is
+    resolved by the normaliser first). ``default`` ``None``: computed by the normaliser
+    (``default_text`` says how) or required.
+    """
+
+    path: str
+    kind: str
+    default: object = None
+    choices: tuple[str, ...] = ()
+    codes: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
+    lo: float | int | None = None
+    hi: float | int | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    units: str = "1"
+    physics: str = "all"
+    help: str = ""
+    #: name of the /setup/resolved dataset, and its legend (long_name)
+    resolved: str | None = None
+    legend: str = ""
+    #: fold_run reads the dataset only when present (older run files): the default stands in
+    optional: bool = False
+    #: stem of the generated Fortran constants (FOLD_LO_<stem>, FOLD_HI_<stem>, FOLD_DEF_<stem>)
+    fortran: str | None = None
+    #: prefix of the named Fortran code constants, and the constant per word when not <prefix><WORD>
+    fortran_codes: str | None = None
+    default_text: str = ""
+
+    @property
+    def key(self) -> str:
+        """The last component of the TOML path (the pydantic field name)."""
+        return self.path.rsplit(".", 1)[-1]
+
+    def code_names(self) -> dict[str, int]:
+        """Fortran constant name -> code of each coded word."""
+        return {f"{self.fortran_codes}{word.upper()}": code for word, code in self.codes.items()}
+
+    def code_range(self) -> tuple[int, int]:
+        """Smallest and largest code (the range fold_run accepts)."""
+        return min(self.codes.values()), max(self.codes.values())
+
+    def legend_of_codes(self) -> str:
+        """``"0 stop, 1 continue"``: the codes in increasing order."""
+        return ", ".join(f"{c} {w}" for w, c in sorted(self.codes.items(), key=lambda wc: wc[1]))
+
+
+def _codes(**table: int) -> Mapping[str, int]:
+    return MappingProxyType(dict(table))
+
+
+_STOKES = "stokes"
+_CONTACTS = "contacts"
+
+SETTINGS: tuple[Setting, ...] = (
+    # ---- [particles]
+    Setting("particles.shape", "choice", None, ("fibre", "sphere", "spheroid"),
+            _codes(fibre=1, sphere=2, spheroid=3), resolved="family_shape", legend="1 fibre, 2 sphere, 3 spheroid",
+            fortran="SHAPE",
+            help="cylinder (R, L); sphere (2-D disk); prolate spheroid, semi-axes L/2 and R (2-D ellipse)"),
+    # ---- [model]
+    Setting("model.hydrodynamics", "choice", "auto", ("auto", "jeffery", "stokes"), _codes(jeffery=0, stokes=1),
+            resolved="hydrodynamics", legend="0 jeffery, 1 stokes", fortran="HYDRODYNAMICS",
+            fortran_codes="FOLD_HYDRO_",
+            help='"auto" (chosen from the regime), "jeffery" (imposed-flow kinematics) or "stokes"'),
+    Setting("model.collisions", "choice", "auto", ("auto", "strategy", "naive", "none"),
+            _codes(none=0, naive=1, strategy=2), physics=_CONTACTS, resolved="collisions",
+            legend="0 none, 1 naive, 2 strategy", fortran="COLLISIONS",
+            help='"auto" (chosen from the regime), "strategy" (seed loop with cell lists), '
+                 '"naive" (same rule, O(N^2) reference) or "none"'),
+    Setting("model.alpha", "real", None, lo=0.0, units="m", physics=_CONTACTS, resolved="alpha",
+            legend="security zone alpha", fortran="ALPHA",
+            default_text=f"{DEFAULT_ALPHA_OVER_RADIUS:g} × smallest radius",
+            help="security zone alpha, at most the smallest particle radius"),
+    Setting("model.contact_max_iter", "integer", 100, lo=1, hi=100_000, physics=_CONTACTS,
+            resolved="contact_max_iter", legend="cap on contact iterations per step", fortran="CONTACT_MAX_ITER",
+            help="cap on contact-correction iterations per step"),
+    Setting("model.on_contact_cap", "choice", "stop", ("stop", "continue"),
+            MappingProxyType({"stop": 0, "continue": 1}), physics=_CONTACTS,
+            resolved="on_contact_cap", legend="0 stop, 1 continue", fortran="ON_CONTACT_CAP",
+            help='what to do when the cap is hit: "stop" the run (status failed) or "continue" and count it'),
+    Setting("model.lubrication", "bool", False, physics=_STOKES, resolved="lubrication",
+            legend="sphere-sphere lubrication on (1) or off (0)", fortran="LUBRICATION",
+            help="sphere-sphere lubrication force; spheres only"),
+    # ---- [numerics]
+    Setting("numerics.seed", "integer", 0, lo=0, hi=INT32_MAX, resolved="seed", legend="random seed",
+            help="seed of every random draw (placement, orientations)"),
+    Setting("numerics.time_scheme", "choice", "ab2", ("ab2", "euler"), _codes(euler=1, ab2=2), physics=_STOKES,
+            resolved="time_scheme",
+            legend="time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2",
+            fortran="TIME_SCHEME", help='"ab2" (Adams-Bashforth 2, first step Euler) or "euler" (explicit Euler)'),
+    # ---- [numerics.stokes]
+    Setting("numerics.stokes.backend", "choice", "auto", ("auto", "fft", "hypre"), _codes(fft=1, hypre=2),
+            physics=_STOKES, resolved="stokes_backend",
+            legend="Stokes backend: 1 fft (periodic cell), 2 hypre (cell with walls)", fortran="STOKES_BACKEND",
+            fortran_codes="FOLD_STOKES_",
+            help='"fft" (periodic, Lees-Edwards cell), "hypre" (cell with walls) or "auto" (the backend of the cell)'),
+    Setting("numerics.stokes.tolerance", "real", 1.0e-6, lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+            physics=_STOKES, resolved="stokes_tolerance",
+            legend="relative preconditioned CG residual of a Stokes solve", fortran="STOKES_TOLERANCE",
+            help="relative (preconditioned) residual at which the conjugate-gradient solve stops"),
+    Setting("numerics.stokes.max_iterations", "integer", 1000, lo=1, hi=1_000_000, physics=_STOKES,
+            resolved="stokes_max_iterations", legend="CG iteration cap of a Stokes solve",
+            fortran="STOKES_MAX_ITERATIONS", help="CG iteration cap per solve; reaching it stops the run"),
+    Setting("numerics.stokes.kappa", "real", 1.0e3, lo=KAPPA_MIN, hi=KAPPA_MAX, physics=_STOKES,
+            resolved="stokes_kappa", legend="viscosity contrast kappa = eta_solid / eta_fluid",
+            fortran="STOKES_KAPPA", help="viscosity contrast of the penalisation eta_solid / eta_fluid"),
+    Setting("numerics.stokes.cells_per_diameter", "integer", 4, lo=1, hi=64, physics=_STOKES,
+            help="grid cells per diameter of the thinnest particle"),
+    Setting("numerics.stokes.max_grid_points", "integer", 64**3, lo=8, hi=INT32_MAX, physics=_STOKES,
+            help="largest Stokes grid (voxel count) allowed"),
+    Setting("numerics.stokes.derivative", "choice", "fd", ("fd", "spectral"), _codes(spectral=0, fd=1),
+            physics=_STOKES, resolved="stokes_derivative",
+            legend="0 spectral, 1 rotated finite differences (Willot 2015)", fortran="STOKES_DERIVATIVE",
+            fortran_codes="FOLD_DERIV_", help='"fd" (rotated finite differences) or "spectral" (i k)'),
+    Setting("numerics.stokes.mixing", "choice", "harmonic", ("harmonic", "arithmetic", "geometric"),
+            _codes(arithmetic=0, harmonic=1, geometric=2), physics=_STOKES, resolved="stokes_mixing",
+            legend="viscosity of partially covered voxels: 0 arithmetic, 1 harmonic, 2 geometric",
+            fortran="STOKES_MIXING", fortran_codes="FOLD_MIX_",
+            help="viscosity of a partially covered voxel"),
+    Setting("numerics.stokes.subsamples", "integer", 3, lo=1, hi=8, physics=_STOKES, resolved="stokes_subsamples",
+            legend="sub-samples per voxel edge of the partial-volume chi", fortran="STOKES_SUBSAMPLES",
+            help="sub-samples per voxel edge of the partial-volume chi"),
+    Setting("numerics.stokes.fibre_ends", "choice", "flat", ("flat", "capped"), _codes(flat=0, capped=1),
+            physics=_STOKES, resolved="stokes_fibre_ends", legend="fibre ends of the voxelisation: 0 flat, 1 capped",
+            fortran="STOKES_FIBRE_ENDS", fortran_codes="FOLD_ENDS_",
+            help='fibre ends of the voxelised particle: "flat" cylinder or "capped" (the contact capsule)'),
+    Setting("numerics.stokes.warm_start", "bool", True, physics=_STOKES, resolved="stokes_warm_start",
+            legend="1: each CG solve starts from the previous solution, 0: from zero", fortran="STOKES_WARM_START",
+            help="start each CG solve from the previous solution (see initial_guess) or from zero"),
+    Setting("numerics.stokes.fft_plan", "choice", "measure", ("measure", "estimate"), _codes(estimate=0, measure=1),
+            physics=_STOKES, resolved="stokes_fft_plan", legend="FFTW planning: 0 estimate, 1 measure",
+            fortran="STOKES_FFT_PLAN",
+            help='FFTW planning: "measure" (faster transforms) or "estimate" (bitwise reproducible)'),
+    Setting("numerics.stokes.fft_precision", "choice", "double", ("double", "single"), _codes(double=0, single=1),
+            physics=_STOKES, resolved="stokes_fft_precision", optional=True,
+            legend="precision of the CG operator's FFTs: 0 double, 1 single", fortran="STOKES_FFT_PRECISION",
+            fortran_codes="FOLD_FFT_", help="precision of the FFTs of the CG operator"),
+    Setting("numerics.stokes.rigidity", "choice", "penalty", ("penalty", "exact"), _codes(penalty=0, exact=1),
+            physics=_STOKES, resolved="stokes_rigidity", optional=True,
+            legend="rigidity of the particles: 0 penalty (kappa), 1 exact (multiplier on the solid voxels)",
+            fortran="STOKES_RIGIDITY", fortran_codes="FOLD_RIGIDITY_",
+            help='"penalty" (viscosity kappa eta_f in the solid) or "exact" (eps(u) = 0 by a multiplier)'),
+    Setting("numerics.stokes.initial_guess", "choice", "previous", ("previous", "extrapolate"),
+            _codes(previous=1, extrapolate=2), physics=_STOKES, resolved="stokes_initial_guess", optional=True,
+            legend="CG initial guess: 1 previous solution, 2 extrapolated from the last two",
+            fortran="STOKES_INITIAL_GUESS", fortran_codes="FOLD_GUESS_",
+            help='initial guess of each CG solve: "previous" or "extrapolate" (2 u_n - u_(n-1))'),
+    Setting("numerics.stokes.solve_every", "integer", 1, lo=1, hi=1000, physics=_STOKES,
+            resolved="stokes_solve_every", optional=True,
+            legend="a Stokes solve every k-th step, velocities extrapolated linearly in between",
+            fortran="STOKES_SOLVE_EVERY", help="a Stokes solve every k-th step only"),
+)
+
+_BY_PATH = {s.path: s for s in SETTINGS}
+_BY_RESOLVED = {s.resolved: s for s in SETTINGS if s.resolved}
+
+
+def setting(path: str) -> Setting:
+    """The setting at TOML ``path`` (``"numerics.stokes.kappa"``)."""
+    return _BY_PATH[path]
+
+
+def resolved(name: str) -> Setting:
+    """The setting written as ``/setup/resolved/<name>``."""
+    return _BY_RESOLVED[name]
+
+
+def codes(path: str) -> Mapping[str, int]:
+    """Word -> integer code of an enumerated setting (read-only)."""
+    return setting(path).codes
+
+
+def default(path: str) -> object:
+    """The default of the setting at ``path``."""
+    return setting(path).default
+
+
+def range_text(path: str) -> str:
+    """The range of a numeric setting as text: ``[1, 1e+12]``, ``(0, 1)``, ``>= 1``."""
+    s = setting(path)
+    if s.lo is not None and s.hi is not None:
+        return f"{'(' if s.lo_open else '['}{s.lo:g}, {s.hi:g}{')' if s.hi_open else ']'}"
+    if s.lo is not None:
+        return f"{'>' if s.lo_open else '>='} {s.lo:g}"
+    return f"{'<' if s.hi_open else '<='} {s.hi:g}"
+
+
+def in_range(path: str, value: float) -> bool:
+    """Whether ``value`` lies in the range of the numeric setting at ``path`` (NaN never does)."""
+    s = setting(path)
+    if s.lo is not None and not (value > s.lo if s.lo_open else value >= s.lo):
+        return False
+    if s.hi is not None and not (value < s.hi if s.hi_open else value <= s.hi):
+        return False
+    return value == value
+
+
+# ---------------------------------------------------------------------------------------
+# Stokes backends and what each can do
+
+#: The backend choice that has no code: :func:`backend_for` resolves it from the cell.
+AUTO_BACKEND = "auto"
+
+
+@dataclass(frozen=True)
+class Backend:
+    """A Stokes backend of fortran/stokes and its capabilities."""
+
+    name: str
+    #: solves a cell with no-slip walls at y = 0, Ly
+    walls: bool
+    #: follows the sheared (Lees-Edwards) lattice of a periodic cell in shear
+    lees_edwards: bool
+    #: follows a deforming (elongational) lattice
+    deforming_lattice: bool
+    #: precisions of its FFTs (empty: it has none, numerics.stokes.fft_precision does not apply)
+    fft_precisions: tuple[str, ...]
+    #: runs on several MPI ranks
+    mpi: bool
+    #: rigidity formulations (numerics.stokes.rigidity words)
+    rigidities: tuple[str, ...]
+    #: what it is, for messages
+    summary: str
+
+    @property
+    def code(self) -> int:
+        """Its /setup/resolved/stokes_backend code."""
+        return setting("numerics.stokes.backend").codes[self.name]
+
+
+BACKENDS: Mapping[str, Backend] = MappingProxyType({
+    "fft": Backend("fft", walls=False, lees_edwards=True, deforming_lattice=False, fft_precisions=("double", "single"),
+                   mpi=True, rigidities=("penalty", "exact"),
+                   summary="FFT-preconditioned CG on the periodic, Lees-Edwards cell"),
+    "hypre": Backend("hypre", walls=True, lees_edwards=False, deforming_lattice=False, fft_precisions=(),
+                     mpi=True, rigidities=("penalty",), summary="staggered grid with no-slip walls"),
+})
+
+
+def backend_for(walls: bool) -> str:
+    """The backend ``"auto"`` stands for: the one that imposes walls in a cell with walls,
+    the one that follows the Lees-Edwards lattice in a periodic cell.
+
+    The backends are not interchangeable: the FFT solver's Fourier basis is periodic, so
+    it cannot impose walls; hypre's staggered grid is rectangular, so it cannot follow the
+    sheared lattice of a periodic cell in shear.
+    """
+    return next(b.name for b in BACKENDS.values() if (b.walls if walls else b.lees_edwards))
+
+
+def backend_capable(name: str, walls: bool) -> bool:
+    """Whether backend ``name`` solves a cell with (``walls``) or without no-slip walls."""
+    b = BACKENDS[name]
+    return b.walls if walls else b.lees_edwards

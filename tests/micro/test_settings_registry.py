@@ -1,0 +1,105 @@
+"""The settings registry (pyfold/scene/registry.py) is the one declaration of each setting:
+its generated copies are current, fold_run reads every registered dataset within the
+registry's range, and a value `pyfold validate` accepts at a bound is run by fold_run."""
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_run_common import require_fold_run, run_fold, write_run_file, xi_of
+
+from pyfold.native import stokes
+from pyfold.scene import registry, schema
+
+REPO = Path(__file__).resolve().parents[2]
+READER = REPO / "fortran" / "io" / "fold_run_file.f90"
+
+
+def test_generated_fortran_module_and_docs_tables_are_current():
+    """fortran/core/fold_settings.f90 and the marked tables of docs/scenes.md are what
+    scripts/generate_settings makes from the registry now."""
+    proc = subprocess.run([sys.executable, str(REPO / "scripts" / "generate_settings"), "--check"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+
+
+def _reader_text() -> str:
+    # one statement per line: Fortran continuation lines joined
+    return re.sub(r"&\s*\n\s*", "", READER.read_text())
+
+
+@pytest.mark.parametrize("s", [s for s in registry.SETTINGS if s.fortran and s.resolved and s.path != "particles.shape"],
+                         ids=lambda s: s.path)
+def test_the_run_file_reader_takes_each_range_from_the_registry(s):
+    """Every registered /setup/resolved dataset is read within FOLD_LO_<stem> ... FOLD_HI_<stem>
+    (fortran/core/fold_settings.f90), never a literal range."""
+    call = re.compile(rf'get_(?:int|real)\(file, R//"{s.resolved}", FOLD_LO_{s.fortran}, FOLD_HI_{s.fortran},')
+    assert call.search(_reader_text()), f"{s.resolved}: not read within FOLD_LO_{s.fortran} ... FOLD_HI_{s.fortran}"
+
+
+def test_optional_datasets_default_to_the_registry():
+    text = _reader_text()
+    for s in registry.SETTINGS:
+        if s.optional:
+            assert f"= FOLD_DEF_{s.fortran}" in text, s.path
+
+
+def test_backend_for_follows_the_capability_table():
+    for walls in (False, True):
+        chosen = registry.BACKENDS[registry.backend_for(walls)]
+        assert (chosen.walls if walls else chosen.lees_edwards)
+        assert stokes.backend_for(walls) == chosen.name
+    assert stokes.BACKENDS == {b.name: b.code for b in registry.BACKENDS.values()}
+
+
+# the largest double below 1: the top of numerics.stokes.tolerance in (0, 1)
+_BELOW_ONE = float(np.nextafter(1.0, 0.0))
+
+#: (scene key, dataset, value at a bound of the registry's range); each a cheap run. A
+#: tolerance near 1 carries kappa <= 2 only (pyfold.native.stokes.kappa_range): kappa = 1 there.
+BOUNDS = [
+    ("tolerance", "stokes_tolerance", _BELOW_ONE),
+    ("kappa", "stokes_kappa", registry.KAPPA_MIN),
+    ("max_iterations", "stokes_max_iterations", registry.setting("numerics.stokes.max_iterations").hi),
+    ("subsamples", "stokes_subsamples", registry.setting("numerics.stokes.subsamples").lo),
+    ("subsamples", "stokes_subsamples", registry.setting("numerics.stokes.subsamples").hi),
+    ("solve_every", "stokes_solve_every", registry.setting("numerics.stokes.solve_every").hi),
+]
+
+
+@pytest.mark.parametrize("key, dataset, value", BOUNDS, ids=[f"{d}={v:g}" for _, d, v in BOUNDS])
+def test_a_setting_validate_accepts_at_its_bound_is_run_by_fold_run(key, dataset, value, tmp_path):
+    assert getattr(schema.StokesSettings(**{key: value}), key) == value
+    require_fold_run()
+    path = tmp_path / "bound.h5"
+    val = np.int64(value) if isinstance(value, int) else float(value)
+    write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.1, length=0.6, xi=xi_of(3.0),
+                   shape=[3], t_end=0.02,
+                   stokes={"stokes_grid": (8, 8, 8), **({"stokes_kappa": 1.0} if key == "tolerance" else {}), dataset: val})
+    proc = run_fold(path)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr)
+
+
+_CAP = registry.setting("model.contact_max_iter").hi
+
+
+@pytest.mark.parametrize("dataset, value, accepted", [("contact_max_iter", _CAP, True), ("alpha", 0.0, True),
+                                                      ("contact_max_iter", _CAP + 1, False), ("alpha", -1e-300, False)])
+def test_a_contact_setting_is_run_at_its_bound_and_refused_beyond(dataset, value, accepted, tmp_path):
+    """fold_run runs a contact setting at the bound of the schema's range (exit 0) and refuses
+    it just beyond, naming the dataset (exit 2)."""
+    s = registry.resolved(dataset)
+    if accepted:
+        assert getattr(schema.Model(**{s.key: value}), s.key) == value
+    require_fold_run()
+    path = tmp_path / "contact.h5"
+    write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.05, length=0.5, xi=xi_of(5.0),
+                   t_end=0.02, collisions=2, **{dataset: value})
+    proc = run_fold(path)
+    assert proc.returncode == (0 if accepted else 2), (proc.returncode, proc.stderr)
+    if not accepted:
+        assert f"/setup/resolved/{dataset}" in proc.stderr, proc.stderr
