@@ -142,9 +142,10 @@ def open_checked_run(run_path: Path, allow_failed: bool = False, command: str = 
     """Open a run for the C_I fit, refusing what cannot be fitted meaningfully.
 
     Refused (:class:`InputError`): not a run file, no ``/setup`` (or an incomplete
-    one), no ``/initial``, fewer than two whole records of ``a2``/``a4``, a root
-    outcome other than ``completed`` (status ``"ok"``; :mod:`pyfold.outcome`) (unless ``allow_failed``: then a loud warning on
-    stderr and only the records up to the last good state, ``steps_done``), and any
+    one), no ``/initial``, fewer than two whole records of ``a2``/``a4``, an outcome
+    other than ``completed`` (status ``"ok"``; :mod:`pyfold.outcome`) unless
+    ``allow_failed`` (then a loud warning on stderr and only the records up to the last
+    good state, ``steps_done``), and any
     record of ``a2`` that is not an orientation tensor (:func:`check_orientation_records`)
     or an ``a4`` that is not finite. ``command`` names the caller in the warning.
     """

@@ -77,7 +77,8 @@ contains
       end if
    end subroutine scheme_velocity
 
-   !> Empty state for n particles in dim dimensions (no solve, no history).
+   !> Empty state for n particles in dim dimensions (no solve, no history); a state
+   !> made before is emptied.
    subroutine time_scheme_init(self, scheme, solve_every, dim, n)
       class(time_scheme_state_t), intent(inout) :: self
       !> FOLD_EULER or FOLD_AB2 (checked by the caller)
@@ -87,6 +88,8 @@ contains
       integer(ip), intent(in) :: dim, n
       self%scheme = scheme
       self%solve_every = solve_every
+      if (allocated(self%v_solve)) deallocate (self%v_solve, self%omega_solve, self%v_solve_before, &
+                                               self%omega_solve_before, self%history%v, self%history%omega)
       allocate (self%v_solve(dim, n), self%omega_solve(3, n))
       allocate (self%v_solve_before(dim, n), self%omega_solve_before(3, n))
       self%v_solve = 0.0_dp

@@ -63,3 +63,21 @@ def test_nan_blow_up_outcome(tmp_path):
     o = read_outcome(path)
     assert (o.code, o.step, o.time) == ("blow_up", 1, 1e300)
     assert "NaN" in o.cause and o.status.startswith("failed: step 1,") and o.status.endswith(": " + o.cause)
+
+
+def test_stokes_non_convergence_outcome_carries_the_residual_reached(tmp_path):
+    """A Stokes solve capped at 4 CG iterations fails at step 1: outcome not_converged,
+    with the residual the record holds."""
+    path = tmp_path / "nc.h5"
+    x = np.array([[0.3, 0.3, 0.3], [0.7, 0.6, 0.6]])
+    write_run_file(path, x=x, p=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], radius=0.1, length=[0.2, 0.3],
+                   xi=[0.0, xi_of(1.5)], shape=[2, 3], dt=0.02, t_end=0.1,
+                   stokes={"stokes_grid": (24, 24, 24), "stokes_max_iterations": 4})
+    proc = run_fold(path)
+    assert proc.returncode == 1, proc.stderr
+    with h5py.File(path) as f:
+        residual = f["stokes_residual"][-1]
+    o = read_outcome(path)
+    assert (o.code, o.step) == ("not_converged", 1)
+    assert o.residual == residual > 1e-6
+    assert "not converged" in o.cause and o.status.endswith(": " + o.cause)
