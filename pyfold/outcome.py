@@ -6,8 +6,8 @@ fold_run writes, beside the human-readable ``status`` (``"running"``, ``"ok"`` o
 ``outcome_cause`` and ``outcome_residual`` (relative residual of the last Stokes
 solve, NaN without a solver). :func:`outcome_of` reads them; for a file written
 before these attributes, or one whose status was recorded after them (``pyfold run``
-marking a killed fold_run, a full disk that took the outcome's flush), the outcome
-is read from the status text, the kind of failure then being :data:`UNKNOWN_FAILURE`
+marking a killed fold_run, a full disk that took the outcome's flush: the two then
+disagree), the outcome is read from the status text, the kind of failure then being :data:`UNKNOWN_FAILURE`
 unless the text says it.
 """
 from __future__ import annotations
@@ -108,6 +108,15 @@ def from_status_text(status: str) -> Outcome:
     return Outcome(code, status, step=int(match.group(1)), time=_number(match.group(2), float), cause=cause)
 
 
+def _agrees(code: str, status: str) -> bool:
+    """Whether an outcome code and a status text say the same."""
+    if code == "completed":
+        return status == "ok"
+    if code == "running":
+        return status == "running"
+    return status.startswith("failed")
+
+
 def outcome_of(attrs: Mapping[str, Any]) -> Outcome | None:
     """The outcome recorded in a run file's root attributes (h5py or xarray ``attrs``);
     None when there is no ``status``."""
@@ -116,8 +125,9 @@ def outcome_of(attrs: Mapping[str, Any]) -> Outcome | None:
     status = _text(attrs["status"])
     code = attrs.get("outcome")
     code = None if code is None else _text(code)
-    # an outcome still "running" beside an ended status: the status was recorded after it
-    if code not in OUTCOMES or (code == "running" and status != "running"):
+    # an outcome that disagrees with the status (still "running" beside an ended status,
+    # "completed" beside a failure): the status was recorded after it
+    if code not in OUTCOMES or not _agrees(code, status):
         return from_status_text(status)
     return Outcome(code, status, step=_number(attrs.get("outcome_step"), int),
                    time=_number(attrs.get("outcome_time"), float),

@@ -69,6 +69,14 @@ def test_outcome_running_beside_an_ended_status_goes_by_the_status(tmp_path):
     assert read_outcome(path).code == "io_error"
 
 
+def test_status_rewritten_after_a_completed_outcome_goes_by_the_status(tmp_path):
+    path = _write(tmp_path / "r.h5", "failed: step 8, t = 8.0E-01: NaN in the particle velocities",
+                  outcome="completed", outcome_step=np.int64(10), outcome_time=1.0, outcome_cause="",
+                  outcome_residual=math.nan)
+    o = read_outcome(path)
+    assert (o.code, o.step) == (UNKNOWN_FAILURE, 8) and not o.completed
+
+
 def test_no_status_and_unreadable_file_read_none(tmp_path):
     with h5py.File(tmp_path / "empty.h5", "w"):
         pass
@@ -100,8 +108,9 @@ def test_sweep_run_state_follows_the_outcome(tmp_path, outcome, state):
     """The sweep's state of a run is read from the outcome code, not from the text."""
     folder = tmp_path / "runs" / "abc"
     folder.mkdir(parents=True)
-    _write(folder / store.RUN_FILE, "some status text", outcome=outcome, outcome_step=np.int64(3),
+    status = {"completed": "ok"}.get(outcome, "failed: some cause")
+    _write(folder / store.RUN_FILE, status, outcome=outcome, outcome_step=np.int64(3),
            outcome_time=0.3, outcome_cause="cause", outcome_residual=math.nan)
     got = store.run_state(folder)
     assert (got.state, got.outcome) == (state, outcome)
-    assert got.detail == ("" if state == "done" else "some status text")
+    assert got.detail == ("" if state == "done" else status)
