@@ -175,17 +175,13 @@ contains
    !> The current configuration is good: keep a copy of the history for a rollback.
    subroutine time_scheme_keep_good(self)
       class(time_scheme_state_t), intent(inout) :: self
-      self%good_history%v = self%history%v
-      self%good_history%omega = self%history%omega
-      self%good_history%held = self%history%held
+      self%good_history = self%history
    end subroutine time_scheme_keep_good
 
    !> Back to the history of the last good state (the failing step is dropped).
    subroutine time_scheme_restore_good(self)
       class(time_scheme_state_t), intent(inout) :: self
-      self%history%v = self%good_history%v
-      self%history%omega = self%good_history%omega
-      self%history%held = self%good_history%held
+      self%history = self%good_history
    end subroutine time_scheme_restore_good
 
 end module fold_time_scheme

@@ -11,29 +11,25 @@ program test_time_scheme
    use fold_cell, only: cell_t, cell_init, cell_set_time, cell_wrap
    use fold_time_scheme, only: time_scheme_state_t, FOLD_EULER, FOLD_AB2
    implicit none
-   integer :: failures
+   integer :: failures = 0
 
-   failures = 0
    call ab2_after_euler(failures)
    call reuse_extrapolates(failures)
    call rollback(failures)
    call history_crosses_sheared_face(failures)
-   if (failures > 0) then
-      write (*, '(i0,a)') failures, " check(s) failed"
-      error stop 1
-   end if
-   write (*, '(a)') "test_time_scheme: all checks passed"
+   if (failures /= 0) error stop "test_time_scheme: a check failed (FAILED lines above)"
+   print '(a)', "test_time_scheme: all checks passed"
 
 contains
 
+   !> Count and name a failed check.
    subroutine check(ok, what, failures)
       logical, intent(in) :: ok
       character(len=*), intent(in) :: what
       integer, intent(inout) :: failures
-      if (.not. ok) then
-         failures = failures + 1
-         write (*, '(a)') "FAILED: "//what
-      end if
+      if (ok) return
+      failures = failures + 1
+      print '(2a)', "FAILED: ", what
    end subroutine check
 
    subroutine ab2_after_euler(failures)
