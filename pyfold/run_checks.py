@@ -116,14 +116,16 @@ def open_checked_run(run_path: Path, allow_failed: bool = False, command: str = 
     """Open a run for the C_I fit, refusing what cannot be fitted meaningfully.
 
     Refused (:class:`InputError`): not a run file, no ``/setup`` (or an incomplete
-    one), no ``/initial``, fewer than two whole records of ``a2``/``a4``, a root
-    ``status`` other than ``"ok"`` (unless ``allow_failed``: then a loud warning on
-    stderr and only the records up to the last good state, ``steps_done``), and any
+    one), no ``/initial``, fewer than two whole records of ``a2``/``a4``, an outcome
+    other than ``completed`` (status ``"ok"``; :mod:`pyfold.outcome`) unless
+    ``allow_failed`` (then a loud warning on stderr and only the records up to the last
+    good state, ``steps_done``), and any
     record of ``a2`` that is not an orientation tensor (:func:`check_orientation_records`)
     or an ``a4`` that is not finite. ``command`` names the caller in the warning.
     """
     import h5py
 
+    from pyfold.outcome import outcome_of
     from pyfold.run_input import check_format
     from pyfold.run_results import open_run
 
@@ -146,10 +148,11 @@ def open_checked_run(run_path: Path, allow_failed: bool = False, command: str = 
 
     ds = open_run(run_path)
     status = ds.attrs.get("status")
+    outcome = outcome_of(ds.attrs)
     if "a2" not in ds or "a4" not in ds or "time" not in ds.dims:
         raise InputError(f"{run_path}: no records (no a2/a4 over time): fold_run wrote no results (status "
                          f"{status!r}); nothing to fit")
-    if status != "ok":
+    if outcome is None or not outcome.completed:
         if not allow_failed:
             raise InputError(f"{run_path}: the run did not finish: status {status!r}. Its records end at the "
                              "failure and may be wrong before it; refusing to fit them (give --allow-failed to fit "

@@ -26,7 +26,9 @@
 !>   complete copy (output_checkpoint); a resume verifies the checksums and takes the
 !>   newest complete copy.
 !> Root attributes written here: `mpi_ranks`, `fortran_creator`, `status`
-!>   ("running", "ok" or "failed: step ..., t = ...: cause"), `steps_done`, and
+!>   ("running", "ok" or "failed: step ..., t = ...: cause"), `steps_done`, the
+!>   outcome attributes of fold_outcome (`outcome`, `outcome_step`, `outcome_time`,
+!>   `outcome_cause`, `outcome_residual`: the same as data), and
 !>   `records_complete` / `snapshots_complete`: entries along `time` / `snapshot`
 !>   whole on disk (set after the entry's datasets are appended and flushed; a kill
 !>   can leave the datasets one longer, or their last entry unwritten: readers and
@@ -39,6 +41,7 @@
 module fold_output
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_IO_ERROR
+   use fold_outcome, only: outcome_t, outcome_in_progress, outcome_write
    use fold_version, only: fold_version_string, fold_git_revision
    use fold_particles, only: particle_set_t
    use, intrinsic :: iso_fortran_env, only: error_unit
@@ -491,15 +494,21 @@ contains
       end do
    end subroutine output_checkpoint
 
-   !> Set the root attributes `status` and `steps_done` and flush.
-   subroutine output_status(out, status, steps_done, stat, errmsg)
+   !> Set the root attributes `status`, `steps_done` and the outcome (fold_outcome)
+   !> and flush.
+   subroutine output_status(out, status, steps_done, stat, errmsg, outcome)
       type(run_output_t), intent(inout) :: out
       character(len=*), intent(in) :: status
       integer(i8), intent(in) :: steps_done
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> How the run ended (the same as `status`, as data)
+      type(outcome_t), intent(in), optional :: outcome
       call h5_attr_string(out%file, "status", status, stat, errmsg); if (stat /= FOLD_OK) return
       call h5_attr_int(out%file, "steps_done", steps_done, stat, errmsg); if (stat /= FOLD_OK) return
+      if (present(outcome)) then
+         call outcome_write(out%file, outcome, stat, errmsg); if (stat /= FOLD_OK) return
+      end if
       call h5_flush(out%file, stat, errmsg)
    end subroutine output_status
 
@@ -508,18 +517,27 @@ contains
    !> reopened file has nothing else to flush: two small attribute messages in the
    !> root's object header, the text in the global heap, where the previous status
    !> left room) and close it. Best effort: on a full disk this can fail too (stat,
-   !> errmsg say why; a failed flush is followed by output_abandon again).
-   subroutine output_failed_status(out, path, status, steps_done, stat, errmsg)
+   !> errmsg say why; a failed flush is followed by output_abandon again). The
+   !> outcome attributes follow in a second flush, so that a file with room for the
+   !> status alone still gets it (readers then see the outcome "running" beside a
+   !> failed status, and read the status).
+   subroutine output_failed_status(out, path, status, steps_done, stat, errmsg, outcome)
       type(run_output_t), intent(inout) :: out
       character(len=*), intent(in) :: path, status
       integer(i8), intent(in) :: steps_done
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> How the run ended (the same as `status`, as data)
+      type(outcome_t), intent(in), optional :: outcome
       integer :: s2
       character(len=msg_len) :: m2
       call output_abandon(out, stat, errmsg); if (stat /= FOLD_OK) return
       call h5_open_file(path, .true., out%file, stat, errmsg); if (stat /= FOLD_OK) return
       call output_status(out, status, steps_done, stat, errmsg)
+      if (stat == FOLD_OK .and. present(outcome)) then
+         call outcome_write(out%file, outcome, s2, m2)
+         if (s2 == FOLD_OK) call h5_flush(out%file, s2, m2)
+      end if
       if (stat /= FOLD_OK) then
          call output_abandon(out, s2, m2)
          if (s2 /= FOLD_OK) errmsg = trim(errmsg)//"; "//trim(m2)
@@ -767,6 +785,7 @@ contains
                           fold_git_revision//")", stat, errmsg)
       if (stat /= FOLD_OK) return
       call h5_attr_string(out%file, "status", "running", stat, errmsg); if (stat /= FOLD_OK) return
+      call outcome_write(out%file, outcome_in_progress(), stat, errmsg); if (stat /= FOLD_OK) return
       call h5_flush(out%file, stat, errmsg)
    end subroutine run_attributes
 

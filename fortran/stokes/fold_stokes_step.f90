@@ -11,7 +11,8 @@
 !> (docs/physics.md#lubrication-between-spheres). The per-step record holds what
 !> docs/physics.md#what-to-record-every-step lists, plus the lubricated pairs.
 !> stokes_march integrates a set in time (fold_time_scheme: explicit Euler or Adams-Bashforth 2,
-!> exact rotations) for tests and studies; the run driver has its own loop.
+!> exact rotations) for tests and studies, through the same time-scheme state
+!> (time_scheme_state_t) as the run driver's Stokes hydrodynamics (fold_hydro_stokes).
 module fold_stokes_step
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED
@@ -23,7 +24,7 @@ module fold_stokes_step
    use fold_voxelise, only: voxel_set_t, voxelise
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
    use fold_stokes_rigid, only: stokes_periodic_new
-   use fold_time_scheme, only: FOLD_EULER, FOLD_AB2, scheme_velocity
+   use fold_time_scheme, only: FOLD_EULER, FOLD_AB2, time_scheme_state_t
    use fold_rigid_fit, only: rigid_fit
    use fold_stress, only: bulk_stress_t, bulk_stress
    use fold_lubrication, only: lubrication_stats_t, lubrication_correct, lubrication_threshold, &
@@ -225,7 +226,9 @@ contains
       type(stokes_record_t), intent(out) :: recs(:)
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      real(dp), allocatable :: v_old(:, :), w_old(:, :), v_now(:, :), w_now(:, :)
+      type(time_scheme_state_t) :: scheme_state
+      real(dp), allocatable :: x_before(:, :)
+      real(dp) :: t
       integer(ip) :: step, k
 
       stat = FOLD_OK
@@ -241,28 +244,27 @@ contains
             ", nsteps ", nsteps
          return
       end if
-      allocate (v_old(parts%dim, parts%n), w_old(3, parts%n), v_now(parts%dim, parts%n), w_now(3, parts%n))
+      call scheme_state%init(scheme, 1_ip, parts%dim, parts%n)
       x_hist(:, :, 0) = parts%x
       p_hist(:, :, 0) = parts%p
       do step = 1, nsteps
-         call cell_set_time(cell, t0 + (step - 1)*dt)
+         t = t0 + (step - 1)*dt
+         call cell_set_time(cell, t)
          call stokes_rigid_velocities(ctx, cell, parts, recs(step), stat, errmsg)
          if (stat /= FOLD_OK) then
             write (errmsg, '(a,i0,a,a)') "stokes_march: step ", step, ": ", trim(errmsg)
             return
          end if
-         v_now = parts%v
-         w_now = parts%omega
-         call scheme_velocity(scheme, step > 1, v_now, v_old, parts%v)
-         call scheme_velocity(scheme, step > 1, w_now, w_old, parts%omega)
+         call scheme_state%push_solve(parts%v, parts%omega, t)
+         call scheme_state%step_velocity(t, parts%v, parts%omega)
          call rigid_update(parts, dt)
-         v_old = v_now
-         w_old = w_now
          ! wrapping applies the Lees-Edwards jump to the stored velocity too, so
          ! the AB2 combination at the next step stays in one frame
+         x_before = parts%x
          do k = 1, parts%n
-            call cell_wrap(cell, parts%x(:, k), v_old(:, k))
+            call cell_wrap(cell, parts%x(:, k), parts%v(:, k))
          end do
+         call scheme_state%carry_across_wrap(cell, x_before)
          x_hist(:, :, step) = parts%x
          p_hist(:, :, step) = parts%p
       end do

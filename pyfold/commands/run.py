@@ -692,6 +692,7 @@ def _mark_failed(path: Path, rc: int, cause: str = "") -> None:
     ``fold_run: failed: ...`` line from stderr when there is one."""
     import h5py
 
+    from pyfold.outcome import NO_CAUSE, write_status_outcome
     from pyfold.run_input import fixed_string
 
     try:
@@ -699,7 +700,8 @@ def _mark_failed(path: Path, rc: int, cause: str = "") -> None:
             status = f.attrs.get("status")
             if status is None or (bytes(status).decode(errors="replace") if not isinstance(status, str)
                                   else status).strip() in ("", "running", "ok"):
-                f.attrs["status"] = fixed_string(
-                    cause or f"failed: fold_run exited with status {rc} without recording a cause")
+                text = cause or f"failed: fold_run exited with status {rc} {NO_CAUSE}"
+                f.attrs["status"] = fixed_string(text)
+                write_status_outcome(f.attrs, text)
     except OSError:  # pragma: no cover - a file fold_run left unreadable
         pass

@@ -2,7 +2,8 @@
 
 Per run (dimensions: the sweep's axes, then ``seed``): ``status`` (``done``,
 ``failed``, ``interrupted``, ``running``, ``queued``, or ``absent`` for an axis
-combination that is not part of the sweep), ``run_id``, ``a2_mean`` and ``a4_mean``
+combination that is not part of the sweep), ``outcome`` (the run file's outcome code,
+:mod:`pyfold.outcome`), ``run_id``, ``a2_mean`` and ``a4_mean``
 (over the second half of the records), ``a2_final``, and the costs ``wall_seconds``
 (summed over attempts), ``attempts`` and ``ranks``. Per point (the axes): the report's
 C_I per closure (``ci``, ``ci_error``: :func:`pyfold.report.build_report` over the
@@ -21,6 +22,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from pyfold.errors import InputError
+from pyfold.outcome import OUTCOMES, UNKNOWN_FAILURE
 from pyfold.sweep import store
 
 #: Variables that record costs (they differ between machines and executors).
@@ -62,6 +64,7 @@ def gather(root: Path, closures: Sequence[str] | None = None, reports: bool = Tr
 
     status = np.full(shape + [len(seeds)], "absent", dtype=object)
     run_ids = np.full(shape + [len(seeds)], "", dtype=object)
+    outcomes = np.full(shape + [len(seeds)], "", dtype=object)
     wall = np.full(shape + [len(seeds)], math.nan)
     tries = np.zeros(shape + [len(seeds)], dtype=np.int32)
     ranks = np.zeros(shape + [len(seeds)], dtype=np.int32)
@@ -71,7 +74,7 @@ def gather(root: Path, closures: Sequence[str] | None = None, reports: bool = Tr
         idx = tuple(axes[n].index(v) for n, v in zip(names, p)) + (seeds.index(seed),)
         folder = store.run_folder(root, rid)
         state = store.run_state(folder)
-        status[idx], run_ids[idx] = state.state, rid
+        status[idx], run_ids[idx], outcomes[idx] = state.state, rid, state.outcome
         done = store.attempts(folder)
         tries[idx] = len(done)
         ranks[idx] = max((int(a.get("np", 0)) for a in done), default=0)
@@ -120,6 +123,10 @@ def gather(root: Path, closures: Sequence[str] | None = None, reports: bool = Tr
         {
             "status": (run_dims, status.astype(str), {"long_name": "run state: " + ", ".join(store.STATES)
                                                        + ", or absent (not part of the sweep)"}),
+            "outcome": (run_dims, outcomes.astype(str), {"long_name": "how the run file says the run ended: "
+                                                          + ", ".join(OUTCOMES) + " (pyfold.outcome), or "
+                                                          + UNKNOWN_FAILURE + " (an older file: see status), "
+                                                          "or empty (no run file)"}),
             "run_id": (run_dims, run_ids.astype(str), {"long_name": "content hash of the normalised scene "
                                                                      "(folder runs/<run_id>)"}),
             "a2_mean": (run_dims + ["i", "j"], a2_mean, {"long_name": "a2 averaged over the second half of the "

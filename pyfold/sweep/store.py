@@ -13,9 +13,10 @@ Layout of ``DIR``::
     sweep.nc              the gathered dataset (``pyfold sweep gather``)
     reports/<point>/      ``pyfold report`` of each point's seeds
 
-A run's state (:func:`run_state`) is read from its files alone, so any machine
-sharing ``DIR`` sees the same: ``done`` (``run.h5`` with status ``ok``), ``failed``
-(status ``failed: <cause>`` recorded by fold_run: a physical failure, not retried),
+A run's state (:func:`run_state`) is read from its files alone (the outcome
+attributes of ``run.h5``, :mod:`pyfold.outcome`), so any machine sharing ``DIR`` sees
+the same: ``done`` (outcome ``completed``, status ``ok``), ``failed`` (a failure
+recorded by fold_run, status ``failed: <cause>``: a physical failure, not retried),
 ``running`` (its destination lock is held), ``interrupted`` (a ``run.h5.partial``,
 or a ``run.h5`` whose fold_run was killed without recording a cause: resumed from its
 checkpoint), ``queued`` (nothing yet).
@@ -31,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from pyfold.errors import InputError
+from pyfold.outcome import read_outcome
 
 MANIFEST = "sweep.json"
 RUNS = "runs"
@@ -42,35 +44,17 @@ ATTEMPTS = "attempts.jsonl"
 LOG = "log.txt"
 #: Run states, in the order tables show them.
 STATES = ("done", "running", "interrupted", "queued", "failed")
-#: What ``pyfold run`` records as the status of a file whose fold_run ended without a cause of
-#: its own (killed by a signal: SIGKILL, the out-of-memory killer, a node lost):
-#: ``failed: fold_run exited with status N without recording a cause`` (pyfold/commands/run.py,
-#: _mark_failed). Such a run is resumed, not reported as a physical failure.
-NO_CAUSE = "without recording a cause"
 
 
 @dataclasses.dataclass(frozen=True)
 class RunState:
     state: str  # one of STATES
     detail: str = ""  # the cause of a failure, or what was found
+    outcome: str = ""  # the run file's outcome code (pyfold.outcome.OUTCOMES), "" without a run file
 
 
 def run_folder(root: Path, run_id: str) -> Path:
     return root / RUNS / run_id
-
-
-def file_status(path: Path) -> str | None:
-    """The root attribute ``status`` of a run file (None: none, or not readable)."""
-    import h5py
-
-    try:
-        with h5py.File(path, "r", locking=False) as f:
-            status = f.attrs.get("status")
-    except (OSError, ValueError):
-        return None
-    if status is None:
-        return None
-    return (status.decode(errors="replace") if isinstance(status, bytes) else str(status)).strip()
 
 
 def lock_held(path: Path) -> bool:
@@ -98,14 +82,14 @@ def run_state(folder: Path) -> RunState:
     if partial.exists():
         return RunState("interrupted", "run.h5.partial kept for --resume")
     if out.exists():
-        status = file_status(out)
-        if status == "ok":
-            return RunState("done")
-        if status is None:
+        outcome = read_outcome(out)
+        if outcome is None:
             return RunState("interrupted", "run.h5 without a readable status")
-        if NO_CAUSE in status:
-            return RunState("interrupted", status)
-        return RunState("failed", status)
+        if outcome.completed:
+            return RunState("done", outcome=outcome.code)
+        if outcome.interrupted:
+            return RunState("interrupted", outcome.status, outcome.code)
+        return RunState("failed", outcome.status, outcome.code)
     return RunState("queued")
 
 

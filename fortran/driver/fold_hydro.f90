@@ -1,0 +1,109 @@
+!> Hydrodynamics of a run as one component the time loop calls (fold_driver): the
+!> velocities of the particles over a step, the flow of a new configuration (its
+!> solve and what goes into the record), and the state carried from step to step
+!> (fold_time_scheme), which the loop saves for the rollback to the last good state
+!> and writes into the checkpoints.
+!>
+!> Implementations: fold_hydro_jeffery (the exact Jeffery kinematics of the imposed
+!> flow) and fold_hydro_stokes (the fictitious-domain Stokes solve, with or without
+!> the sphere lubrication correction); fold_hydro_select makes the one a run's
+!> /setup/resolved/hydrodynamics names.
+module fold_hydro
+   use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_particles, only: particle_set_t
+   use fold_cell, only: cell_t
+   use fold_run_file, only: run_setup_t
+   use fold_output, only: run_record_t
+   use fold_time_scheme, only: time_scheme_state_t
+   implicit none
+   private
+
+   !> Hydrodynamics of a run.
+   type, abstract, public :: hydro_model_t
+      !> The records hold the Stokes series (solver, stress; lubrication when on)
+      logical :: solves_flow = .false.
+      !> Velocity history of the time scheme (empty without a solver: no AB2 history
+      !> then, and the checkpoints carry none)
+      type(time_scheme_state_t) :: scheme
+      !> CG iterations of the solves made so far
+      integer(i8) :: cg_iterations = 0
+      !> Relative residual of the last solve [-] (NaN: none)
+      real(dp) :: residual = 0.0_dp
+   contains
+      !> Make the component for a run (rank 0 says what it is on stdout)
+      procedure(hydro_init_i), deferred :: init
+      !> v, omega of every particle for the step from t
+      procedure(hydro_velocities_i), deferred :: velocities
+      !> Carry the stored velocities across the Lees-Edwards wrap just made
+      procedure(hydro_carry_i), deferred :: carry_across_wrap
+      !> A solve of the configuration is due after `step`
+      procedure(hydro_due_i), deferred :: solve_due
+      !> Flow of the current configuration: the velocities of the next step and the
+      !> stress of its record
+      procedure(hydro_solve_i), deferred :: solve_configuration
+      procedure(hydro_destroy_i), deferred :: destroy
+   end type hydro_model_t
+
+   abstract interface
+      subroutine hydro_init_i(self, setup, cell, parts, rank, nranks, stat, errmsg)
+         import :: hydro_model_t, run_setup_t, cell_t, particle_set_t, msg_len
+         class(hydro_model_t), intent(inout) :: self
+         type(run_setup_t), intent(in) :: setup
+         !> The run's cell (its velocity gradient)
+         type(cell_t), intent(in) :: cell
+         type(particle_set_t), intent(in) :: parts
+         !> This process's rank and the number of ranks of MPI_COMM_WORLD
+         integer, intent(in) :: rank, nranks
+         integer, intent(out) :: stat
+         character(len=msg_len), intent(out) :: errmsg
+      end subroutine hydro_init_i
+
+      subroutine hydro_velocities_i(self, cell, parts, t, first, last)
+         import :: hydro_model_t, cell_t, particle_set_t, dp, ip
+         class(hydro_model_t), intent(inout) :: self
+         !> The cell at time t
+         type(cell_t), intent(in) :: cell
+         type(particle_set_t), intent(inout) :: parts
+         !> Start of the step [s]
+         real(dp), intent(in) :: t
+         !> This rank's block of particles
+         integer(ip), intent(in) :: first, last
+      end subroutine hydro_velocities_i
+
+      subroutine hydro_carry_i(self, cell, x_before)
+         import :: hydro_model_t, cell_t, dp
+         class(hydro_model_t), intent(inout) :: self
+         type(cell_t), intent(in) :: cell
+         !> Positions before the wrap (dim, n) [m]
+         real(dp), intent(in) :: x_before(:, :)
+      end subroutine hydro_carry_i
+
+      logical function hydro_due_i(self, step)
+         import :: hydro_model_t, i8
+         class(hydro_model_t), intent(in) :: self
+         integer(i8), intent(in) :: step
+      end function hydro_due_i
+
+      subroutine hydro_solve_i(self, cell, parts, t, rec, stat, errmsg, untrusted)
+         import :: hydro_model_t, cell_t, particle_set_t, run_record_t, dp, msg_len
+         class(hydro_model_t), intent(inout) :: self
+         type(cell_t), intent(in) :: cell
+         !> The configuration (its v, omega are left as they are)
+         type(particle_set_t), intent(inout) :: parts
+         !> Time of the configuration [s]
+         real(dp), intent(in) :: t
+         !> Record the solve's statistics and stress go into
+         type(run_record_t), intent(inout) :: rec
+         integer, intent(out) :: stat
+         character(len=msg_len), intent(out) :: errmsg
+         !> The solve failed the stress check: no number of it went into rec
+         logical, intent(out) :: untrusted
+      end subroutine hydro_solve_i
+
+      subroutine hydro_destroy_i(self)
+         import :: hydro_model_t
+         class(hydro_model_t), intent(inout) :: self
+      end subroutine hydro_destroy_i
+   end interface
+
+end module fold_hydro
