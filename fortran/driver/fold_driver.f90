@@ -61,7 +61,8 @@ module fold_driver
    use fold_jeffery_step, only: jeffery_stepper_t, jeffery_stepper_init, jeffery_step_velocities
    use fold_h5, only: h5_start, h5_stop
    use fold_run_file, only: run_setup_t, read_run_file, FOLD_HYDRO_STOKES
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_STOKES_HYPRE, FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT
+   use fold_stokes_backends, only: stokes_backend_name
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
                                stokes_rigid_velocities, stokes_context_lubrication
@@ -183,7 +184,7 @@ contains
             else
                write (m2, '(i0,"x",i0,"x",i0)') setup%stokes_grid(1:3)
             end if
-            m2 = trim(m2)//trim(merge(" (hypre)", " (fft)  ", setup%stokes%backend == FOLD_STOKES_HYPRE))
+            m2 = trim(m2)//" ("//stokes_backend_name(setup%stokes%backend)//")"
             if (setup%stokes%rigidity == FOLD_RIGIDITY_EXACT) then
                write (output_unit, '(a,a,a,i0,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(m2), " on ", nranks, &
                   " rank(s), exact rigidity, tol ", setup%stokes%tol, ", ", &

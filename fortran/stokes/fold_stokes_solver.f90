@@ -6,13 +6,15 @@
 !> mean velocity gradient G, and then gives u~, its strain and the viscosity at the
 !> voxel centres of this rank's part of the grid, plus the sums and maxima over
 !> ranks that rigid_fit (fold_rigid_fit) and bulk_stress (fold_stress) need. Those
-!> two and the step of fold_stokes_step take class(stokes_solver_t), so a second
-!> backend touches this file (a code), its own module and the factory
-!> (fold_stokes_factory) only.
+!> two and the step of fold_stokes_step take class(stokes_solver_t); what every
+!> backend shares above the seam (the checks that begin a solve, the chi -> eta
+!> mixing, the convergence verdict) is fold_penalty, and what each can do is its
+!> entry in fold_stokes_backends.
 !>
 !> Setting a backend up needs resources of its own kind (FFTW plans over an MPI slab
-!> decomposition for "fft"), so construction is not a binding here: the factory
-!> builds them from the settings and the communicator and returns the solver.
+!> decomposition for "fft"), so construction is not a binding here: fold_stokes_build
+!> makes a solver in one process (the Python extensions, and fold_run on one rank) and
+!> fold_stokes_factory over MPI ranks, both from the settings, which they check once.
 !>
 !> Every integer code below has the same table in Python (pyfold/native/stokes.py);
 !> tests/micro/test_code_tables.py checks that the two agree.
@@ -87,7 +89,7 @@ module fold_stokes_solver
       integer(ip) :: subsamples = 3
       !> Fibre ends for voxelisation (FOLD_ENDS_*)
       integer(ip) :: fibre_ends = FOLD_ENDS_FLAT
-      !> FFTW planning effort (fold_fft_backend FOLD_PLAN_ESTIMATE / FOLD_PLAN_MEASURE)
+      !> FFTW planning effort (fold_fft_transport FOLD_PLAN_ESTIMATE / FOLD_PLAN_MEASURE)
       integer :: plan_effort = 0
       !> Mixing rule of the viscosity in partially covered voxels (FOLD_MIX_*)
       integer(ip) :: mixing = FOLD_MIX_HARMONIC

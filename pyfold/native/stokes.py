@@ -27,7 +27,7 @@ from pyfold.native import load
 # Code tables of the Stokes settings, one per enumeration: the integers are those of
 # fortran/stokes/fold_stokes_solver.f90 (FOLD_STOKES_*, FOLD_DERIV_*, FOLD_MIX_*,
 # FOLD_ENDS_*, FOLD_GUESS_*), fold_time_scheme.f90 (FOLD_EULER, FOLD_AB2) and
-# fold_fft_backend.f90 (FOLD_PLAN_*); the scene schema, the normaliser (what
+# fold_fft_transport.f90 (FOLD_PLAN_*); the scene schema, the normaliser (what
 # /setup/resolved holds) and these bindings use them, and
 # tests/micro/test_code_tables.py checks them against the Fortran sources.
 BACKENDS = {"fft": 1, "hypre": 2}

@@ -34,7 +34,7 @@ TABLES = {
     "fibre_ends": (stokes.FIBRE_ENDS, "stokes/fold_stokes_solver.f90", "FOLD_ENDS_", None),
     "initial_guess": (stokes.GUESSES, "stokes/fold_stokes_solver.f90", "FOLD_GUESS_", None),
     "time_scheme": (stokes.SCHEMES, "stokes/fold_time_scheme.f90", "FOLD_", {"euler": "EULER", "ab2": "AB2"}),
-    "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_backend.f90", "FOLD_PLAN_", None),
+    "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_transport.f90", "FOLD_PLAN_", None),
     "fft_precision": (stokes.FFT_PRECISIONS, "stokes/fold_stokes_solver.f90", "FOLD_FFT_", None),
     "rigidity": (stokes.RIGIDITIES, "stokes/fold_stokes_solver.f90", "FOLD_RIGIDITY_", None),
     "hydrodynamics": (HYDRODYNAMICS_CODES, "io/fold_run_file.f90", "FOLD_HYDRO_", None),
