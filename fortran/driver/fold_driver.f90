@@ -61,8 +61,8 @@ module fold_driver
    use fold_jeffery_step, only: jeffery_stepper_t, jeffery_stepper_init, jeffery_step_velocities
    use fold_h5, only: h5_start, h5_stop
    use fold_run_file, only: run_setup_t, read_run_file, FOLD_HYDRO_STOKES
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT
-   use fold_stokes_backends, only: stokes_backend_name
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT, &
+                                 stokes_backend_name
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
                                stokes_rigid_velocities, stokes_context_lubrication

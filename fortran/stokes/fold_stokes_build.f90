@@ -11,8 +11,8 @@ module fold_stokes_build
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_fft_transport, only: fft_transport_t
    use fold_fft_serial, only: fft_serial_t, fft_serial_create
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_RIGIDITY_EXACT
-   use fold_stokes_backends, only: stokes_backend_t, stokes_backend, stokes_backend_name
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_RIGIDITY_EXACT, &
+                                 stokes_backend_t, stokes_backend, stokes_backend_name
    use fold_stokes_fft, only: stokes_fft_new
    use fold_stokes_rigid, only: stokes_rigid_new
    implicit none

@@ -1,6 +1,6 @@
 !> The construction of a Stokes solver for the executables: a solver of the backend
 !> named by its settings (fold_stokes_solver FOLD_STOKES_*, capabilities in
-!> fold_stokes_backends) on a grid of n voxels distributed over the ranks of comm.
+!> STOKES_BACKENDS) on a grid of n voxels distributed over the ranks of comm.
 !>
 !> On one rank a backend that runs serially is made by fold_stokes_build's
 !> stokes_serial_create, the routine the Python extensions use, so both construct it
@@ -16,8 +16,8 @@ module fold_stokes_factory
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_fft_transport, only: fft_transport_t
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_STOKES_HYPRE
-   use fold_stokes_backends, only: stokes_backend_t, stokes_backend, stokes_backend_name
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_STOKES_HYPRE, &
+                                 stokes_backend_t, stokes_backend, stokes_backend_name
    use fold_stokes_build, only: stokes_serial_create, stokes_transport_solver
    use fold_stokes_hypre, only: stokes_hypre_new
    implicit none

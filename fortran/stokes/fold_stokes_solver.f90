@@ -9,7 +9,7 @@
 !> two and the step of fold_stokes_step take class(stokes_solver_t); what every
 !> backend shares above the seam (the checks that begin a solve, the chi -> eta
 !> mixing, the convergence verdict) is fold_penalty, and what each can do is its
-!> entry in fold_stokes_backends.
+!> entry in STOKES_BACKENDS below.
 !>
 !> Setting a backend up needs resources of its own kind (FFTW plans over an MPI slab
 !> decomposition for "fft"), so construction is not a binding here: fold_stokes_build
@@ -153,6 +153,35 @@ module fold_stokes_solver
       procedure(compute_iface), deferred :: destroy
    end type stokes_solver_t
 
+   !> Name and capabilities of one backend: the construction (fold_stokes_build,
+   !> fold_stokes_factory), the checks and the messages ask them instead of testing codes.
+   type, public :: stokes_backend_t
+      !> Code of stokes_settings_t%backend (FOLD_STOKES_*)
+      integer(ip) :: code = 0
+      !> Name in messages and in the scene ("fft", "hypre")
+      character(len=8) :: name = ""
+      !> Built on an FFT transport (fold_fft_transport), serial or FFTW-MPI
+      logical :: fft_transport = .false.
+      !> Runs in one process without MPI (the Python extensions)
+      logical :: serial = .false.
+      !> No-slip walls (a Couette cell)
+      logical :: walls = .false.
+      !> A sheared (Lees-Edwards) or deforming lattice
+      logical :: lees_edwards = .false.
+      !> Exact rigidity (FOLD_RIGIDITY_EXACT) besides the penalty
+      logical :: exact_rigidity = .false.
+      !> Single-precision transforms (FOLD_FFT_SINGLE)
+      logical :: single_precision = .false.
+   end type stokes_backend_t
+
+   !> The backends: a new one adds its code above, its module, one entry here and its
+   !> construction call (fold_stokes_build or fold_stokes_factory)
+   type(stokes_backend_t), parameter, public :: STOKES_BACKENDS(2) = [ &
+      stokes_backend_t(FOLD_STOKES_FFT, "fft", fft_transport=.true., serial=.true., walls=.false., &
+                       lees_edwards=.true., exact_rigidity=.true., single_precision=.true.), &
+      stokes_backend_t(FOLD_STOKES_HYPRE, "hypre", fft_transport=.false., serial=.false., walls=.true., &
+                       lees_edwards=.false., exact_rigidity=.false., single_precision=.false.)]
+
    abstract interface
       subroutine set_lattice_iface(s, A, stat, errmsg)
          import :: stokes_solver_t, dp, msg_len
@@ -196,9 +225,35 @@ module fold_stokes_solver
       end subroutine reduce_iface
    end interface
 
-   public :: stokes_settings_check
+   public :: stokes_settings_check, stokes_backend, stokes_backend_name
 
 contains
+
+   !> The entry of backend code; an entry with code 0 and no capability for an unknown code.
+   pure function stokes_backend(code) result(b)
+      integer(ip), intent(in) :: code
+      type(stokes_backend_t) :: b
+      integer :: k
+      do k = 1, size(STOKES_BACKENDS)
+         if (STOKES_BACKENDS(k)%code == code) then
+            b = STOKES_BACKENDS(k)
+            return
+         end if
+      end do
+   end function stokes_backend
+
+   !> Name of backend code ("fft", "hypre"; "?" for an unknown code).
+   pure function stokes_backend_name(code) result(name)
+      integer(ip), intent(in) :: code
+      character(len=:), allocatable :: name
+      type(stokes_backend_t) :: b
+      b = stokes_backend(code)
+      if (b%code == 0) then
+         name = "?"
+      else
+         name = trim(b%name)
+      end if
+   end function stokes_backend_name
 
    !> Check a settings record; names the offending field and its allowed range.
    subroutine stokes_settings_check(set, stat, errmsg)
