@@ -1,17 +1,30 @@
-! Thin f2py layer over the fictitious-domain Stokes solver (serial FFTW backend).
-! Each call makes the FFTW plans, solves and frees everything, so Python holds no
-! native state; explicit-shape arguments let stokes.pyf hide the sizes.
+! Thin f2py layer over the fictitious-domain Stokes solver (backend fft, serial FFTW
+! transport). Each call makes the solver through fold_stokes_build::stokes_serial_create
+! (the construction fold_run uses on one rank), solves and frees everything, so Python
+! holds no native state; explicit-shape arguments let stokes.pyf hide the sizes.
 module fold_stokes_bind_util
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_backend, only: fft_backend_t
-   use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_stokes_fft, only: stokes_settings_t
+   use fold_stokes_solver, only: stokes_solver_t
    use fold_particles, only: particle_set_t, particles_init
    implicit none
    private
-   public :: make_settings, make_backend, make_particles
+   public :: make_settings, make_particles, velocity_out
 contains
+   !> u(:, :, :, c) <- component c of the solver's velocity at the voxel centres (after
+   !> compute_velocity), without the padding of its rows [m/s].
+   subroutine velocity_out(s, u)
+      class(stokes_solver_t), intent(in) :: s
+      real(dp), intent(inout) :: u(:, :, :, :)
+      real(dp), pointer, contiguous :: f(:, :, :)
+      integer(ip) :: c
+      do c = 1, int(size(u, 4), ip)
+         f => s%velocity_field(c)
+         u(:, :, :, c) = f(1:size(u, 1), :, :)
+      end do
+   end subroutine velocity_out
+
    function make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, &
                           plan_effort, rigidity) result(set)
       real(dp), intent(in) :: eta_f, kappa, tol
@@ -35,17 +48,6 @@ contains
       set%rigidity = rigidity
    end function make_settings
 
-   subroutine make_backend(dim, n, effort, fft, stat, errmsg)
-      integer(ip), intent(in) :: dim, n(3), effort
-      class(fft_backend_t), allocatable, intent(out) :: fft
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      type(fft_serial_t), allocatable :: serial
-      allocate (serial)
-      call fft_serial_create(serial, dim, n, effort, stat, errmsg)
-      call move_alloc(serial, fft)
-   end subroutine make_backend
-
    subroutine make_particles(dim, np, shape, radius, length, xi, x, p, parts, stat, errmsg)
       integer(ip), intent(in) :: dim, np, shape(np)
       real(dp), intent(in) :: radius(np), length(np), xi(np), x(dim, np), p(dim, np)
@@ -68,11 +70,10 @@ subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa,
                                  stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
-   use fold_fft_backend, only: fft_backend_t
    use fold_stokes_solver, only: stokes_solver_t
-   use fold_stokes_rigid, only: stokes_periodic_new
+   use fold_stokes_build, only: stokes_serial_create
    use fold_stress, only: bulk_stress_t, bulk_stress
-   use fold_stokes_bind_util, only: make_settings, make_backend
+   use fold_stokes_bind_util, only: make_settings, velocity_out
    implicit none
    integer(ip), intent(in) :: dim, n1, n2, n3, max_iter, derivative, mixing, plan_effort, rigidity_code
    real(dp), intent(in) :: lattice(3, 3), g(3, 3), chi(n1, n2, n3), eta_f, kappa, tol
@@ -80,12 +81,10 @@ subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa,
    integer(ip), intent(out) :: iterations
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
-   class(fft_backend_t), allocatable :: fft
    class(stokes_solver_t), allocatable :: s
    type(bulk_stress_t) :: b
-   integer :: solve_stat, c
+   integer :: solve_stat
    character(len=msg_len) :: solve_msg
-   real(dp), pointer, contiguous :: f(:, :, :)
 
    u = 0.0_dp
    stress = 0.0_dp
@@ -94,10 +93,8 @@ subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa,
    residual = 0.0_dp
    history = 0.0_dp
    iterations = 0
-   call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
-   if (stat /= FOLD_OK) return
-   call stokes_periodic_new(fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, 1_ip, 0_ip, 0_ip, &
-                                              plan_effort, rigidity_code), s, stat, errmsg)
+   call stokes_serial_create(make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, 1_ip, 0_ip, 0_ip, &
+                                           plan_effort, rigidity_code), dim, [n1, n2, n3], s, stat, errmsg)
    if (stat /= FOLD_OK) return
    call s%set_lattice(lattice, stat, errmsg)
    if (stat /= FOLD_OK) return
@@ -107,10 +104,7 @@ subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa,
    history(1:iterations + 1) = s%history(0:iterations)
    if (solve_stat == FOLD_OK .or. solve_stat == FOLD_NOT_CONVERGED) then
       call s%compute_velocity()
-      do c = 1, dim
-         f => s%velocity_field(int(c, ip))
-         u(:, :, :, c) = f(1:n1, :, :)
-      end do
+      call velocity_out(s, u)
       call bulk_stress(s, chi, b, stat, errmsg)
       stress = b%sigma
       eta_eff = b%eta_eff
@@ -127,11 +121,10 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
                                        iterations, history, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
-   use fold_fft_backend, only: fft_backend_t
    use fold_cell, only: cell_t, cell_init
    use fold_particles, only: particle_set_t
    use fold_stokes_step
-   use fold_stokes_bind_util, only: make_settings, make_backend, make_particles
+   use fold_stokes_bind_util, only: make_settings, make_particles, velocity_out
    implicit none
    integer(ip), intent(in) :: dim, n1, n2, n3, np, max_iter, derivative, mixing, subsamples, fibre_ends, plan_effort, rigidity_code
    integer(ip), intent(in) :: shape(np)
@@ -143,13 +136,10 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    integer(ip), intent(out) :: iterations
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
-   class(fft_backend_t), allocatable :: fft
    type(stokes_context_t) :: ctx
    type(cell_t) :: cell
    type(particle_set_t) :: parts
    type(stokes_record_t) :: rec
-   integer(ip) :: c
-   real(dp), pointer, contiguous :: uc(:, :, :)
 
    chi = 0.0_dp
    u = 0.0_dp
@@ -166,20 +156,16 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    cell%shear_offset = shear_offset
    call make_particles(dim, np, shape, radius, length, xi, x, p, parts, stat, errmsg)
    if (stat /= FOLD_OK) return
-   call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
-   if (stat /= FOLD_OK) return
-   call stokes_context_init(ctx, fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
-                                                    fibre_ends, 0_ip, plan_effort, rigidity_code), stat, errmsg)
+   call stokes_context_init(ctx, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
+                                               fibre_ends, 0_ip, plan_effort, rigidity_code), dim, [n1, n2, n3], &
+                            stat, errmsg)
    if (stat /= FOLD_OK) return
    call stokes_rigid_velocities(ctx, cell, parts, rec, stat, errmsg)
    iterations = ctx%solver%iterations
    history(1:iterations + 1) = ctx%solver%history(0:iterations)
    if (stat == FOLD_OK .or. stat == FOLD_NOT_CONVERGED) then
       chi = ctx%vox%chi
-      do c = 1, dim
-         uc => ctx%solver%velocity_field(c)
-         u(:, :, :, c) = uc(1:n1, :, :)
-      end do
+      call velocity_out(ctx%solver, u)
       v = parts%v
       omega = parts%omega
       rigidity = ctx%rigidity
@@ -196,11 +182,10 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
                              warm_start, plan_effort, rigidity_code, x_hist, p_hist, records, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
-   use fold_fft_backend, only: fft_backend_t
    use fold_cell, only: cell_t, cell_init
    use fold_particles, only: particle_set_t
    use fold_stokes_step
-   use fold_stokes_bind_util, only: make_settings, make_backend, make_particles
+   use fold_stokes_bind_util, only: make_settings, make_particles
    implicit none
    integer(ip), intent(in) :: dim, n1, n2, n3, np, nsteps, scheme, max_iter, derivative, mixing, subsamples
    integer(ip), intent(in) :: fibre_ends, warm_start, plan_effort, rigidity_code, shape(np)
@@ -212,7 +197,6 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    real(dp), intent(out) :: records(7, nsteps)
    integer, intent(out) :: stat
    character(len=msg_len), intent(out) :: errmsg
-   class(fft_backend_t), allocatable :: fft
    type(stokes_context_t) :: ctx
    type(cell_t) :: cell
    type(particle_set_t) :: parts
@@ -226,11 +210,9 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    if (stat /= FOLD_OK) return
    call make_particles(dim, np, shape, radius, length, xi, x0, p0, parts, stat, errmsg)
    if (stat /= FOLD_OK) return
-   call make_backend(dim, [n1, n2, n3], plan_effort, fft, stat, errmsg)
-   if (stat /= FOLD_OK) return
-   call stokes_context_init(ctx, fft, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
-                                                    fibre_ends, warm_start, plan_effort, rigidity_code), stat, &
-                                                    errmsg)
+   call stokes_context_init(ctx, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
+                                               fibre_ends, warm_start, plan_effort, rigidity_code), dim, &
+                            [n1, n2, n3], stat, errmsg)
    if (stat /= FOLD_OK) return
    allocate (recs(max(nsteps, 1)))
    call stokes_march(ctx, cell, parts, t0, dt, nsteps, scheme, x_hist, p_hist, recs, stat, errmsg)

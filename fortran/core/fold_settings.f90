@@ -129,6 +129,10 @@ module fold_settings
    logical, parameter, public :: FOLD_BACKEND_DEFORMING(2) = [.false., .false.]
    !> runs on several MPI ranks
    logical, parameter, public :: FOLD_BACKEND_MPI(2) = [.true., .true.]
+   !> built on an FFT transport (fold_fft_transport: serial FFTW or FFTW-MPI slabs)
+   logical, parameter, public :: FOLD_BACKEND_FFT_TRANSPORT(2) = [.true., .false.]
+   !> runs in one process without MPI (the Python extensions)
+   logical, parameter, public :: FOLD_BACKEND_SERIAL(2) = [.true., .false.]
    !> has single-precision transforms (FOLD_FFT_SINGLE)
    logical, parameter, public :: FOLD_BACKEND_SINGLE(2) = [.true., .false.]
    !> rigidity formulations (FOLD_RIGIDITY_* code, backend)

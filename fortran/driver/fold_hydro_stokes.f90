@@ -24,7 +24,7 @@ module fold_hydro_stokes
    use fold_run_file, only: run_setup_t
    use fold_output, only: run_record_t
    use fold_time_scheme, only: FOLD_AB2
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_STOKES_HYPRE, FOLD_RIGIDITY_PENALTY, &
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_backend_name, FOLD_RIGIDITY_PENALTY, &
                                  FOLD_RIGIDITY_EXACT
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
@@ -109,7 +109,7 @@ contains
       else
          write (grid, '(i0,"x",i0,"x",i0)') setup%stokes_grid(1:3)
       end if
-      grid = trim(grid)//trim(merge(" (hypre)", " (fft)  ", setup%stokes%backend == FOLD_STOKES_HYPRE))
+      grid = trim(grid)//" ("//stokes_backend_name(setup%stokes%backend)//")"
       if (setup%stokes%rigidity == FOLD_RIGIDITY_EXACT) then
          write (output_unit, '(a,a,a,i0,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(grid), " on ", nranks, &
             " rank(s), exact rigidity, tol ", setup%stokes%tol, ", ", &

@@ -1,30 +1,27 @@
-!> FFTW-MPI slab backend: each rank owns a slab of the slowest Fortran index
+!> FFTW-MPI slab transport: each rank owns a slab of the slowest Fortran index
 !> (z in 3-D, y in 2-D) in real space. A distributed transform is local 1-D/2-D
 !> FFTs plus global transposes (all-to-alls); FFTW-MPI's natural output needs two
 !> (to distribute y for the z transform, and back), the transposed output only one.
 !> In 3-D the spectrum is therefore left transposed by default: c(nxh, n3, local
 !> n2), y distributed (FFTW_MPI_TRANSPOSED_OUT on r2c, FFTW_MPI_TRANSPOSED_IN on
-!> c2r); the solver works mode by mode through the backend's spectral map
-!> (fold_fft_backend). In 2-D the transposed output would distribute the x
+!> c2r); the solver works mode by mode through the transport's spectral map
+!> (fold_fft_transport). In 2-D the transposed output would distribute the x
 !> wavenumbers and put them second, so the 2-D spectrum keeps the natural layout.
-!> Executable only (needs MPI); the solver sees it as an fft_backend_t.
+!> Executable only (needs MPI); the solver sees it as an fft_transport_t.
 module fold_fft_mpi
    use, intrinsic :: iso_c_binding
    use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Allreduce, MPI_IN_PLACE, &
                       MPI_DOUBLE_PRECISION, MPI_SUM, MPI_MAX, MPI_Sendrecv, MPI_STATUS_IGNORE
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag, spectral_natural
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural
    implicit none
    private
 
    include 'fftw3-mpi.f03'
 
    !> FFTW-MPI in-place r2c/c2r plans of one slab-decomposed grid.
-   type, extends(fft_backend_t), public :: fft_mpi_t
-      type(c_ptr) :: fwd = c_null_ptr, bwd = c_null_ptr
-      !> Single-precision (fftwf_mpi) plans, made by plan_single only
-      type(c_ptr) :: fwd_sp = c_null_ptr, bwd_sp = c_null_ptr
+   type, extends(fft_transport_t), public :: fft_mpi_t
       type(MPI_Comm) :: comm
       !> The spectrum is left transposed (3-D default)
       logical :: transposed = .false.
@@ -255,14 +252,7 @@ contains
 
    subroutine slab_destroy(self)
       class(fft_mpi_t), intent(inout) :: self
-      if (c_associated(self%fwd)) call fftw_destroy_plan(self%fwd)
-      if (c_associated(self%bwd)) call fftw_destroy_plan(self%bwd)
-      if (c_associated(self%fwd_sp)) call fftwf_destroy_plan(self%fwd_sp)
-      if (c_associated(self%bwd_sp)) call fftwf_destroy_plan(self%bwd_sp)
-      self%fwd = c_null_ptr
-      self%bwd = c_null_ptr
-      self%fwd_sp = c_null_ptr
-      self%bwd_sp = c_null_ptr
+      call plans_free(self)
    end subroutine slab_destroy
 
 end module fold_fft_mpi

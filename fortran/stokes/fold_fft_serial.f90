@@ -1,20 +1,17 @@
-!> Serial FFTW backend: the whole grid on one process (used by the Python
+!> Serial FFTW transport: the whole grid on one process (used by the Python
 !> extension, the tests and single-rank runs).
 module fold_fft_serial
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, plan_flag, spectral_natural
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural
    implicit none
    private
 
    include 'fftw3.f03'
 
    !> Serial in-place r2c/c2r plans of one grid.
-   type, extends(fft_backend_t), public :: fft_serial_t
-      type(c_ptr) :: fwd = c_null_ptr, bwd = c_null_ptr
-      !> Single-precision (fftwf) plans, made by plan_single only
-      type(c_ptr) :: fwd_sp = c_null_ptr, bwd_sp = c_null_ptr
+   type, extends(fft_transport_t), public :: fft_serial_t
    contains
       procedure :: r2c => serial_r2c
       procedure :: c2r => serial_c2r
@@ -138,14 +135,7 @@ contains
 
    subroutine serial_destroy(self)
       class(fft_serial_t), intent(inout) :: self
-      if (c_associated(self%fwd)) call fftw_destroy_plan(self%fwd)
-      if (c_associated(self%bwd)) call fftw_destroy_plan(self%bwd)
-      if (c_associated(self%fwd_sp)) call fftwf_destroy_plan(self%fwd_sp)
-      if (c_associated(self%bwd_sp)) call fftwf_destroy_plan(self%bwd_sp)
-      self%fwd = c_null_ptr
-      self%bwd = c_null_ptr
-      self%fwd_sp = c_null_ptr
-      self%bwd_sp = c_null_ptr
+      call plans_free(self)
    end subroutine serial_destroy
 
    !> One slab closes the ring on itself.

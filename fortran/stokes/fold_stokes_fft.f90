@@ -85,16 +85,16 @@
 !> working tolerances 1e-3..1e-5 are 2..4 orders above the perturbation; the default
 !> 1e-6 and the reference 1e-10 of the benchmarks stay double.
 module fold_stokes_fft
-   use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
    use, intrinsic :: iso_c_binding, only: c_float, c_float_complex
    use fold_kinds, only: dp, ip, i8, msg_len
-   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
-   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free, FOLD_PLAN_ESTIMATE
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, FOLD_PLAN_ESTIMATE
    use fold_grid, only: grid_t, grid_init, grid_set_lattice, grid_total
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, &
                                  FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, FOLD_MIX_HARMONIC, &
                                  FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, &
                                  FOLD_FFT_SINGLE
+   use fold_penalty, only: solve_begin, penalty_viscosity, solve_verdict
    use fold_cg_kernels_dp, only: direction_strain3, direction_strain2, viscous_energy3, viscous_energy2, &
                                  apply_update3, apply_update2, direction_velocity3, stencil_update3, stencil_force
    use fold_cg_kernels_sp, only: direction_strain3_sp => direction_strain3, direction_strain2_sp => direction_strain2, &
@@ -118,7 +118,7 @@ module fold_stokes_fft
 
    !> Solver state: plans, grid, work fields and the Fourier-space solution.
    type, extends(stokes_solver_t), public :: stokes_fft_t
-      class(fft_backend_t), allocatable :: fft
+      class(fft_transport_t), allocatable :: fft
       !> Strain components transformed in a CG iteration (traceless: 33 or 22 dropped)
       integer(ip) :: ncg = 5, cg_comp(5) = 0
       !> Strain/stress work fields (nc); after a solve: strain of u~ if requested
@@ -162,7 +162,7 @@ module fold_stokes_fft
       !> Velocity u~ at voxel centres after stokes_fft_velocity (dim fields) [m/s]
       type(fft_field_t), allocatable :: vel(:)
       !> Staggered Fourier coefficients i phase u^ (unnormalised FFT) of u~ and the CG vectors
-      !> (nxh, nsl(2), nsl(3), dim; spectral layout of the backend)
+      !> (nxh, nsl(2), nsl(3), dim; spectral layout of the transport)
       complex(dp), allocatable :: x(:, :, :, :), r(:, :, :, :), p(:, :, :, :), q(:, :, :, :)
       !> Solution of the solve before the last one (FOLD_GUESS_EXTRAPOLATE only; else size 0)
       complex(dp), allocatable :: x_prev(:, :, :, :)
@@ -204,22 +204,22 @@ module fold_stokes_fft
 
 contains
 
-   !> Take over an FFT backend (serial or MPI, plans already made) and allocate
-   !> every work array once.
+   !> Take over an FFT transport (serial or MPI, plans already made) and allocate
+   !> every work array once. The settings are checked by the construction
+   !> (fold_stokes_build, fold_stokes_factory); here only what needs the grid.
    subroutine stokes_fft_init(s, fft, set, stat, errmsg)
       type(stokes_fft_t), intent(inout) :: s
-      !> Backend; moved into s (deallocated on return)
-      class(fft_backend_t), allocatable, intent(inout) :: fft
+      !> Transport; moved into s (deallocated on return)
+      class(fft_transport_t), allocatable, intent(inout) :: fft
       type(stokes_settings_t), intent(in) :: set
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(ip) :: c, nxh, n2, n3
 
-      call stokes_settings_check(set, stat, errmsg)
-      if (stat /= FOLD_OK) return
+      errmsg = ""
       if (.not. allocated(fft)) then
          stat = FOLD_INPUT_ERROR
-         errmsg = "stokes_fft_init: no FFT backend given"
+         errmsg = "stokes_fft_init: no FFT transport given"
          return
       end if
       stat = FOLD_INPUT_ERROR
@@ -274,7 +274,7 @@ contains
          allocate (s%eta_sp(0, 0, 0))
       end if
       s%eta_sp = 0.0_c_float
-      ! Fourier-space arrays take the backend's spectral layout (fold_fft_backend)
+      ! Fourier-space arrays take the transport's spectral layout (fold_fft_transport)
       nxh = s%fft%nxh
       n2 = s%fft%nsl(2)
       n3 = s%fft%nsl(3)
@@ -303,8 +303,8 @@ contains
    !> An FFT solver seen through the abstract type: stokes_fft_init on a new object,
    !> which becomes solver on success (on failure solver stays unallocated).
    subroutine stokes_fft_new(fft, set, solver, stat, errmsg)
-      !> Backend; moved into the solver (deallocated on return)
-      class(fft_backend_t), allocatable, intent(inout) :: fft
+      !> Transport; moved into the solver (deallocated on return)
+      class(fft_transport_t), allocatable, intent(inout) :: fft
       type(stokes_settings_t), intent(in) :: set
       class(stokes_solver_t), allocatable, intent(out) :: solver
       integer, intent(out) :: stat
@@ -348,7 +348,7 @@ contains
       do k = 1, s%fft%nsl(3)
          do j = 1, s%fft%nsl(2)
             do i = 1, s%fft%nxh
-               ! global wavenumber index of the local mode (spectral layout of the backend)
+               ! global wavenumber index of the local mode (spectral layout of the transport)
                m(s%fft%saxis) = [i - 1, j - 1, k - 1] + s%fft%soff
                nnyq = count(2*m(1:dim) == s%grid%n(1:dim))
                lat = 0.0_dp
@@ -392,7 +392,7 @@ contains
 
    !> Decide the stencil form (3-D, rotated finite differences, >= 1 z-plane on every
    !> rank: the halo exchange passes planes between neighbours) and allocate its tables.
-   !> Collective over the backend's ranks.
+   !> Collective over the transport's ranks.
    subroutine stencil_init(s)
       type(stokes_fft_t), intent(inout) :: s
       real(dp) :: ext(1)
@@ -476,35 +476,14 @@ contains
       integer(ip) :: nx, it, dim
       real(dp) :: ext(2), red(2), bb, rz, rz_new, alpha, beta, pq, emin, emax
 
-      stat = FOLD_OK
-      errmsg = ""
-      if (.not. s%lattice_set) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = "stokes_fft_solve: call stokes_fft_set_lattice first"
-         return
-      end if
+      call solve_begin(s, s%lattice_set, chi, G, "stokes_fft_solve", stat, errmsg)
+      if (stat /= FOLD_OK) return
       nx = s%grid%n(1)
       dim = s%dim
-      if (any(shape(chi) /= [nx, s%grid%nl(2), s%grid%nl(3)])) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,3(1x,i0),a,3(1x,i0))') "stokes_fft_solve: chi must have shape", nx, s%grid%nl(2:3), &
-            ", got", shape(chi)
-         return
-      end if
-      s%E = 0.5_dp*(G + transpose(G))
-      if (dim == 2) s%E(3, :) = 0.0_dp
-      if (dim == 2) s%E(:, 3) = 0.0_dp
 
       ! viscosity and the reference viscosity (geometric mean of the extremes)
       s%eta%r = 0.0_dp
-      select case (s%set%mixing)
-      case (FOLD_MIX_HARMONIC)
-         s%eta%r(1:nx, :, :) = s%set%eta_f/((1.0_dp - chi) + chi/s%set%kappa)
-      case (FOLD_MIX_GEOMETRIC)
-         s%eta%r(1:nx, :, :) = s%set%eta_f*s%set%kappa**chi
-      case default
-         s%eta%r(1:nx, :, :) = s%set%eta_f*(1.0_dp + (s%set%kappa - 1.0_dp)*chi)
-      end select
+      call penalty_viscosity(s%set, chi, s%eta%r(1:nx, :, :))
       emin = huge(1.0_dp)
       emax = 0.0_dp
       if (size(chi) > 0) then
@@ -601,16 +580,7 @@ contains
       if (s%stencil) call stagger(s, s%x, .true.)
       s%iterations = it
       s%have_guess = .true.
-      if (.not. (s%residual <= s%set%tol)) then
-         if (ieee_is_nan(s%residual)) then
-            stat = FOLD_NUMERICAL
-            errmsg = "stokes_fft_solve: residual is NaN"
-         else
-            stat = FOLD_NOT_CONVERGED
-            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a,es10.3,a)') "stokes_fft_solve: not converged after ", it, &
-               " CG iterations: residual ", s%residual, " > tol ", s%set%tol, " (kappa ", s%set%kappa, ")"
-         end if
-      end if
+      call solve_verdict(s%set, "stokes_fft_solve", "CG", it, s%residual, stat, errmsg)
    end subroutine stokes_fft_solve
 
    !> u~ at the voxel centres into s%vel(1:dim)%r(1:nx, :, :) [m/s] (dim c2r FFTs).

@@ -74,12 +74,11 @@
 module fold_stokes_hypre
    use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Allreduce, MPI_Sendrecv, MPI_IN_PLACE, &
                       MPI_DOUBLE_PRECISION, MPI_SUM, MPI_MAX, MPI_STATUS_IGNORE
-   use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
    use fold_kinds, only: dp, ip, i8, msg_len
-   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
    use fold_grid, only: grid_t, grid_init, grid_set_lattice
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, FOLD_MIX_HARMONIC, &
-                                 FOLD_MIX_GEOMETRIC
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
+   use fold_penalty, only: solve_begin, penalty_viscosity, solve_verdict
    implicit none
    private
 
@@ -146,7 +145,8 @@ module fold_stokes_hypre
 contains
 
    !> A hypre solver on a dim-dimensional grid of n voxels shared by the ranks of comm
-   !> (slabs along the last axis). Collective. On failure solver stays unallocated.
+   !> (slabs along the last axis), settings checked by the caller (fold_stokes_factory).
+   !> Collective. On failure solver stays unallocated.
    subroutine stokes_hypre_new(set, dim, n, comm, solver, stat, errmsg)
       type(stokes_settings_t), intent(in) :: set
       integer(ip), intent(in) :: dim, n(3)
@@ -158,8 +158,7 @@ contains
       integer(ip) :: nl(3), off(3), r, a, d, q, nax
       integer :: ierr, tot
 
-      call stokes_settings_check(set, stat, errmsg)
-      if (stat /= FOLD_OK) return
+      errmsg = ""
       stat = FOLD_INPUT_ERROR
       if (dim /= 2 .and. dim /= 3) then
          write (errmsg, '(a,i0)') "hypre: dim must be 2 or 3, got ", dim
@@ -314,33 +313,10 @@ contains
       real(dp) :: red(2), bb, rz, rz_new, alpha, beta, dq, fmax
       integer :: st
 
-      stat = FOLD_OK
-      errmsg = ""
-      if (.not. s%lattice_set) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = "hypre: call set_lattice first"
-         return
-      end if
-      if (any(shape(chi) /= [s%grid%n(1), s%grid%nl(2), s%grid%nl(3)])) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,3(1x,i0),a,3(1x,i0))') "hypre: chi must have shape", s%grid%n(1), s%grid%nl(2:3), &
-            ", got", shape(chi)
-         return
-      end if
-      s%E = 0.5_dp*(G + transpose(G))
-      if (s%dim == 2) then
-         s%E(3, :) = 0.0_dp
-         s%E(:, 3) = 0.0_dp
-      end if
+      call solve_begin(s, s%lattice_set, chi, G, "hypre", stat, errmsg)
+      if (stat /= FOLD_OK) return
       ! viscosity at the cell centres (settings' mixing rule, as fold_stokes_fft)
-      select case (s%set%mixing)
-      case (FOLD_MIX_HARMONIC)
-         s%eta = s%set%eta_f/((1.0_dp - chi) + chi/s%set%kappa)
-      case (FOLD_MIX_GEOMETRIC)
-         s%eta = s%set%eta_f*s%set%kappa**chi
-      case default
-         s%eta = s%set%eta_f*(1.0_dp + (s%set%kappa - 1.0_dp)*chi)
-      end select
+      call penalty_viscosity(s%set, chi, s%eta)
       do k = 1, s%grid%nl(3)
          do j = 1, s%grid%nl(2)
             do i = 1, s%grid%n(1)
@@ -413,16 +389,7 @@ contains
       end do
       s%iterations = it
       call finish(s)
-      if (.not. (s%residual <= s%set%tol)) then
-         if (ieee_is_nan(s%residual)) then
-            stat = FOLD_NUMERICAL
-            errmsg = "hypre: residual is NaN"
-         else
-            stat = FOLD_NOT_CONVERGED
-            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a,es10.3,a)') "hypre: not converged after ", it, &
-               " Schur CG iterations: residual ", s%residual, " > tol ", s%set%tol, " (kappa ", s%set%kappa, ")"
-         end if
-      end if
+      call solve_verdict(s%set, "hypre", "Schur CG", it, s%residual, stat, errmsg)
    end subroutine hypre_solve
 
    !> Fully periodic: remove the mean of each velocity component; fill the halos.

@@ -15,7 +15,7 @@
 !> the rigidity constraint D(u) = 0 with a stress-like multiplier of Patankar, Singh,
 !> Joseph, Glowinski & Pan (2000, Int. J. Multiphase Flow 26:1509). With the uniform
 !> fluid, u~ = -A^-1 P B^H (chi_s lambda), A = eta_f |kv|^2 on the divergence-free
-!> modes (the Green operator of the FFT backend, exact and diagonal in Fourier space),
+!> modes (the Green operator of the FFT solver, exact and diagonal in Fourier space),
 !> and the multiplier solves the Schur-complement system
 !>     S lambda = chi_s E,   S = chi_s B A^-1 P B^H chi_s,
 !> symmetric positive semi-definite in the Frobenius product (its null space, the
@@ -58,14 +58,13 @@
 !> Works serially and over FFTW-MPI slabs (every operation is local to the slab except
 !> the transforms and the dot products).
 module fold_stokes_rigid
-   use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
    use fold_kinds, only: dp, ip, i8, msg_len
-   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
-   use fold_fft_backend, only: fft_backend_t
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
+   use fold_penalty, only: solve_begin, solve_verdict
+   use fold_fft_transport, only: fft_transport_t
    use fold_grid, only: grid_total
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_FFT_DOUBLE, FOLD_RIGID_COVERAGE, &
-                                 FOLD_RIGIDITY_EXACT
-   use fold_stokes_fft, only: stokes_fft_t, stokes_fft_init, stokes_fft_destroy, stokes_fft_new
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_FFT_DOUBLE, FOLD_RIGID_COVERAGE
+   use fold_stokes_fft, only: stokes_fft_t, stokes_fft_init, stokes_fft_destroy
    implicit none
    private
 
@@ -90,31 +89,15 @@ module fold_stokes_rigid
       procedure :: destroy => stokes_rigid_destroy
    end type stokes_rigid_t
 
-   public :: stokes_rigid_new, stokes_periodic_new
+   public :: stokes_rigid_new
 
 contains
-
-   !> The solver of the periodic cell that the settings ask for: exact rigidity
-   !> (stokes_rigid_new) or the penalty (stokes_fft_new); on failure solver stays
-   !> unallocated.
-   subroutine stokes_periodic_new(fft, set, solver, stat, errmsg)
-      class(fft_backend_t), allocatable, intent(inout) :: fft
-      type(stokes_settings_t), intent(in) :: set
-      class(stokes_solver_t), allocatable, intent(out) :: solver
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      if (set%rigidity == FOLD_RIGIDITY_EXACT) then
-         call stokes_rigid_new(fft, set, solver, stat, errmsg)
-      else
-         call stokes_fft_new(fft, set, solver, stat, errmsg)
-      end if
-   end subroutine stokes_periodic_new
 
    !> An exact-rigidity solver seen through the abstract type (stokes_fft_init on a new
    !> object); on failure solver stays unallocated and errmsg names the setting.
    subroutine stokes_rigid_new(fft, set, solver, stat, errmsg)
-      !> Backend; moved into the solver (deallocated on return)
-      class(fft_backend_t), allocatable, intent(inout) :: fft
+      !> Transport; moved into the solver (deallocated on return)
+      class(fft_transport_t), allocatable, intent(inout) :: fft
       type(stokes_settings_t), intent(in) :: set
       class(stokes_solver_t), allocatable, intent(out) :: solver
       integer, intent(out) :: stat
@@ -151,32 +134,16 @@ contains
    !> (the message gives the rigidity error reached) keeps the last iterate.
    subroutine stokes_rigid_solve(s, chi, G, stat, errmsg)
       class(stokes_rigid_t), intent(inout) :: s
-      !> Solid volume fraction of each local voxel [-]
-      real(dp), intent(in) :: chi(:, :, :)
-      !> Mean velocity gradient [1/s]
-      real(dp), intent(in) :: G(3, 3)
+      !> Solid volume fraction of each local voxel [-] and mean velocity gradient [1/s]
+      real(dp), intent(in) :: chi(:, :, :), G(3, 3)
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(ip) :: nx, it, v
       real(dp) :: red(2), bb, rr, rz, alpha, beta, pq, eb(5)
 
-      stat = FOLD_OK
-      errmsg = ""
-      if (.not. s%lattice_set) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = "stokes_rigid_solve: call set_lattice first"
-         return
-      end if
+      call solve_begin(s, s%lattice_set, chi, G, "stokes_rigid_solve", stat, errmsg)
+      if (stat /= FOLD_OK) return
       nx = s%grid%n(1)
-      if (any(shape(chi) /= [nx, s%grid%nl(2), s%grid%nl(3)])) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,3(1x,i0),a,3(1x,i0))') "stokes_rigid_solve: chi must have shape", nx, s%grid%nl(2:3), &
-            ", got", shape(chi)
-         return
-      end if
-      s%E = 0.5_dp*(G + transpose(G))
-      if (s%dim == 2) s%E(3, :) = 0.0_dp
-      if (s%dim == 2) s%E(:, 3) = 0.0_dp
       ! the fluid fills the cell; the particles' stress is the polarisation's (on the partly
       ! covered voxels too: 2 (eta - eta_f) eps from the strain would amplify the CG error
       ! of eps there by eta / eta_f)
@@ -271,16 +238,7 @@ contains
          s%lam_field(:, s%sol(1, v), s%sol(2, v), s%sol(3, v)) = s%lam(:, v)
       end do
       call multiplier_mean(s)
-      if (.not. (s%residual <= s%set%tol)) then
-         if (ieee_is_nan(s%residual)) then
-            stat = FOLD_NUMERICAL
-            errmsg = "stokes_rigid_solve: residual is NaN"
-         else
-            stat = FOLD_NOT_CONVERGED
-            write (errmsg, '(a,i0,a,es10.3,a,es10.3,a)') "stokes_rigid_solve: not converged after ", it, &
-               " CG iterations: rigidity error ", s%residual, " > tol ", s%set%tol, " (rigidity exact)"
-         end if
-      end if
+      call solve_verdict(s%set, "stokes_rigid_solve", "CG", it, s%residual, stat, errmsg)
    end subroutine stokes_rigid_solve
 
    ! ------------------------------------------------------------------ internals

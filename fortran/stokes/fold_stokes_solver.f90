@@ -6,13 +6,15 @@
 !> mean velocity gradient G, and then gives u~, its strain and the viscosity at the
 !> voxel centres of this rank's part of the grid, plus the sums and maxima over
 !> ranks that rigid_fit (fold_rigid_fit) and bulk_stress (fold_stress) need. Those
-!> two and the step of fold_stokes_step take class(stokes_solver_t), so a second
-!> backend touches this file (a code), its own module and the factory
-!> (fold_stokes_factory) only.
+!> two and the step of fold_stokes_step take class(stokes_solver_t); what every
+!> backend shares above the seam (the checks that begin a solve, the chi -> eta
+!> mixing, the convergence verdict) is fold_penalty, and what each can do is its
+!> entry in the settings registry's backend table (stokes_backend below).
 !>
 !> Setting a backend up needs resources of its own kind (FFTW plans over an MPI slab
-!> decomposition for "fft"), so construction is not a binding here: the factory
-!> builds them from the settings and the communicator and returns the solver.
+!> decomposition for "fft"), so construction is not a binding here: fold_stokes_build
+!> makes a solver in one process (the Python extensions, and fold_run on one rank) and
+!> fold_stokes_factory over MPI ranks, both from the settings, which they check once.
 !>
 !> The integer codes, ranges, defaults and backend capabilities come from the settings
 !> registry (pyfold/scene/registry.py) through the generated fortran/core/fold_settings.f90;
@@ -26,7 +28,8 @@ module fold_stokes_solver
                             FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE, &
                             FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT, FOLD_ENDS_FLAT, FOLD_ENDS_CAPPED, &
                             FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, FOLD_N_BACKENDS, FOLD_BACKEND_NAME, FOLD_BACKEND_WALLS, &
-                            FOLD_BACKEND_RIGIDITY, &
+                            FOLD_BACKEND_RIGIDITY, FOLD_BACKEND_FFT_TRANSPORT, FOLD_BACKEND_SERIAL, &
+                            FOLD_BACKEND_LEES_EDWARDS, FOLD_BACKEND_SINGLE, &
                             FOLD_LO_STOKES_TOLERANCE, FOLD_HI_STOKES_TOLERANCE, &
                             FOLD_LO_STOKES_MAX_ITERATIONS, FOLD_HI_STOKES_MAX_ITERATIONS, &
                             FOLD_LO_STOKES_SUBSAMPLES, FOLD_HI_STOKES_SUBSAMPLES, &
@@ -77,7 +80,7 @@ module fold_stokes_solver
       integer(ip) :: subsamples = FOLD_DEF_STOKES_SUBSAMPLES
       !> Fibre ends for voxelisation (FOLD_ENDS_*)
       integer(ip) :: fibre_ends = FOLD_DEF_STOKES_FIBRE_ENDS
-      !> FFTW planning effort (fold_fft_backend FOLD_PLAN_ESTIMATE / FOLD_PLAN_MEASURE)
+      !> FFTW planning effort (fold_fft_transport FOLD_PLAN_ESTIMATE / FOLD_PLAN_MEASURE)
       integer :: plan_effort = FOLD_DEF_STOKES_FFT_PLAN
       !> Mixing rule of the viscosity in partially covered voxels (FOLD_MIX_*)
       integer(ip) :: mixing = FOLD_DEF_STOKES_MIXING
@@ -141,6 +144,27 @@ module fold_stokes_solver
       procedure(compute_iface), deferred :: destroy
    end type stokes_solver_t
 
+   !> Name and capabilities of one backend: the construction (fold_stokes_build,
+   !> fold_stokes_factory), the checks and the messages ask them instead of testing codes.
+   type, public :: stokes_backend_t
+      !> Code of stokes_settings_t%backend (FOLD_STOKES_*)
+      integer(ip) :: code = 0
+      !> Name in messages and in the scene ("fft", "hypre")
+      character(len=8) :: name = ""
+      !> Built on an FFT transport (fold_fft_transport), serial or FFTW-MPI
+      logical :: fft_transport = .false.
+      !> Runs in one process without MPI (the Python extensions)
+      logical :: serial = .false.
+      !> No-slip walls (a Couette cell)
+      logical :: walls = .false.
+      !> A sheared (Lees-Edwards) or deforming lattice
+      logical :: lees_edwards = .false.
+      !> Exact rigidity (FOLD_RIGIDITY_EXACT) besides the penalty
+      logical :: exact_rigidity = .false.
+      !> Single-precision transforms (FOLD_FFT_SINGLE)
+      logical :: single_precision = .false.
+   end type stokes_backend_t
+
    abstract interface
       subroutine set_lattice_iface(s, A, stat, errmsg)
          import :: stokes_solver_t, dp, msg_len
@@ -184,9 +208,35 @@ module fold_stokes_solver
       end subroutine reduce_iface
    end interface
 
-   public :: stokes_settings_check
+   public :: stokes_settings_check, stokes_backend, stokes_backend_name
 
 contains
+
+   !> The entry of backend code, from the generated capability table of fold_settings (the
+   !> settings registry's BACKENDS); an entry with code 0 and no capability for an unknown code.
+   pure function stokes_backend(code) result(b)
+      integer(ip), intent(in) :: code
+      type(stokes_backend_t) :: b
+      if (code < 1 .or. code > FOLD_N_BACKENDS) return
+      b = stokes_backend_t(code=code, name=FOLD_BACKEND_NAME(code), fft_transport=FOLD_BACKEND_FFT_TRANSPORT(code), &
+                           serial=FOLD_BACKEND_SERIAL(code), walls=FOLD_BACKEND_WALLS(code), &
+                           lees_edwards=FOLD_BACKEND_LEES_EDWARDS(code), &
+                           exact_rigidity=FOLD_BACKEND_RIGIDITY(FOLD_RIGIDITY_EXACT, code), &
+                           single_precision=FOLD_BACKEND_SINGLE(code))
+   end function stokes_backend
+
+   !> Name of backend code ("fft", "hypre"; "?" for an unknown code).
+   pure function stokes_backend_name(code) result(name)
+      integer(ip), intent(in) :: code
+      character(len=:), allocatable :: name
+      type(stokes_backend_t) :: b
+      b = stokes_backend(code)
+      if (b%code == 0) then
+         name = "?"
+      else
+         name = trim(b%name)
+      end if
+   end function stokes_backend_name
 
    !> Check a settings record against the registry's ranges and the backend's capabilities
    !> (fold_settings); names the offending field and its allowed range.

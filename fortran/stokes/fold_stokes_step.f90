@@ -16,14 +16,13 @@
 module fold_stokes_step
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED
-   use fold_fft_backend, only: fft_backend_t
    use fold_cell, only: cell_t, cell_set_time, cell_wrap
    use fold_particles, only: particle_set_t, particles_check, FOLD_SPHERE
    use fold_kinematics, only: rigid_update
    use fold_grid, only: shear_lattice
    use fold_voxelise, only: voxel_set_t, voxelise
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
-   use fold_stokes_rigid, only: stokes_periodic_new
+   use fold_stokes_build, only: stokes_serial_create
    use fold_time_scheme, only: FOLD_EULER, FOLD_AB2, time_scheme_state_t
    use fold_rigid_fit, only: rigid_fit
    use fold_stress, only: bulk_stress_t, bulk_stress
@@ -67,16 +66,19 @@ module fold_stokes_step
 
 contains
 
-   !> Take over an FFT backend (serial or MPI) and allocate once: an FFT solver
-   !> (fold_stokes_factory makes a solver of any backend from the settings).
-   subroutine stokes_context_init(ctx, fft, set, stat, errmsg)
+   !> Make the solver of the settings on a grid of n voxels in this process and
+   !> allocate once (fold_stokes_build::stokes_serial_create, the construction that
+   !> fold_stokes_factory uses on one rank; over MPI ranks the factory's solver is
+   !> taken over by stokes_context_attach).
+   subroutine stokes_context_init(ctx, set, dim, n, stat, errmsg)
       type(stokes_context_t), intent(inout) :: ctx
-      class(fft_backend_t), allocatable, intent(inout) :: fft
       type(stokes_settings_t), intent(in) :: set
+      !> Spatial dimension (2 or 3) and voxel counts (n(3) = 1 in 2-D)
+      integer(ip), intent(in) :: dim, n(3)
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       call stokes_context_destroy(ctx)
-      call stokes_periodic_new(fft, set, ctx%solver, stat, errmsg)
+      call stokes_serial_create(set, dim, n, ctx%solver, stat, errmsg)
    end subroutine stokes_context_init
 
    !> Take over a solver made by the factory.

@@ -28,7 +28,7 @@ from pyfold.scene import registry as _registry
 # Code tables of the Stokes settings: views of the settings registry
 # (pyfold/scene/registry.py), which also generates the Fortran constants
 # (fortran/core/fold_settings.f90); tests/micro/test_stokes_code_tables.py checks the
-# constants of the Fortran modules that are not generated (fold_time_scheme, fold_fft_backend).
+# constants of the Fortran modules that are not generated (fold_time_scheme, fold_fft_transport).
 BACKENDS = _registry.codes("numerics.stokes.backend")
 DERIVATIVES = _registry.codes("numerics.stokes.derivative")
 MIXINGS = _registry.codes("numerics.stokes.mixing")

@@ -275,6 +275,10 @@ class Backend:
     mpi: bool
     #: rigidity formulations (numerics.stokes.rigidity words)
     rigidities: tuple[str, ...]
+    #: built on an FFT transport (fortran/stokes/fold_fft_transport.f90: serial FFTW or FFTW-MPI slabs)
+    fft_transport: bool
+    #: runs in one process without MPI (the Python extensions, pyfold.native.stokes)
+    serial: bool
     #: what it is, for messages
     summary: str
 
@@ -286,10 +290,11 @@ class Backend:
 
 BACKENDS: Mapping[str, Backend] = MappingProxyType({
     "fft": Backend("fft", walls=False, lees_edwards=True, deforming_lattice=False, fft_precisions=("double", "single"),
-                   mpi=True, rigidities=("penalty", "exact"),
+                   mpi=True, rigidities=("penalty", "exact"), fft_transport=True, serial=True,
                    summary="FFT-preconditioned CG on the periodic, Lees-Edwards cell"),
     "hypre": Backend("hypre", walls=True, lees_edwards=False, deforming_lattice=False, fft_precisions=(),
-                     mpi=True, rigidities=("penalty",), summary="staggered grid with no-slip walls"),
+                     mpi=True, rigidities=("penalty",), fft_transport=False, serial=False,
+                     summary="staggered grid with no-slip walls"),
 })
 
 

@@ -4,7 +4,7 @@ Fortran, and both sides refuse the same Stokes settings.
 Each enumeration is declared once, in the settings registry (pyfold/scene/registry.py),
 whose views are pyfold.native.stokes, pyfold.scene.normalise and pyfold.scene.shapes; its
 Fortran constants are generated into fortran/core/fold_settings.f90 or, for modules not
-generated (fold_time_scheme, fold_fft_backend, fold_contacts, fold_particles), written by
+generated (fold_time_scheme, fold_fft_transport, fold_contacts, fold_particles), written by
 hand. The tables are compared in both directions against the Fortran sources, so a
 constant added on one side only (a new backend, a new mixing rule) fails here. The kappa
 range is stated once (the registry's KAPPA_MIN, KAPPA_MAX); the scene schema must accept
@@ -37,7 +37,7 @@ TABLES = {
     "fibre_ends": (stokes.FIBRE_ENDS, "core/fold_settings.f90", "FOLD_ENDS_", None),
     "initial_guess": (stokes.GUESSES, "core/fold_settings.f90", "FOLD_GUESS_", None),
     "time_scheme": (stokes.SCHEMES, "stokes/fold_time_scheme.f90", "FOLD_", {"euler": "EULER", "ab2": "AB2"}),
-    "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_backend.f90", "FOLD_PLAN_", None),
+    "fft_plan": (stokes.FFT_PLANS, "stokes/fold_fft_transport.f90", "FOLD_PLAN_", None),
     "fft_precision": (stokes.FFT_PRECISIONS, "core/fold_settings.f90", "FOLD_FFT_", None),
     "rigidity": (stokes.RIGIDITIES, "core/fold_settings.f90", "FOLD_RIGIDITY_", None),
     "hydrodynamics": (HYDRODYNAMICS_CODES, "core/fold_settings.f90", "FOLD_HYDRO_", None),

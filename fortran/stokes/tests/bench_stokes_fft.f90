@@ -1,10 +1,10 @@
 !> Benchmark of the Stokes solver (run through benchmarks/bench_stokes_fft.py).
 !>
-!> Usage: bench_stokes_fft N [kappa] [repeats] [mode] [shape] [backend] [precision]
+!> Usage: bench_stokes_fft N [kappa] [repeats] [mode] [shape] [transport] [precision]
 !>   precision "double" (default) or "single": fft_precision of the solver (fold_stokes_fft);
 !>     the FFT units stay the double transforms, and mode "cost" adds t_fft_sp, the hot
 !>     single-precision FFT, and the CPU times t_iter_cpu, t_fft_cpu of this process.
-!>   backend "auto" (default): serial FFTW on one rank (what fold_run and the Python
+!>   transport "auto" (default): serial FFTW on one rank (what fold_run and the Python
 !>     extension use), FFTW-MPI slabs on several (spectrum left transposed: one
 !>     all-to-all per transform); "mpi": FFTW-MPI slabs even on one rank;
 !>     "natural": FFTW-MPI slabs with the spectrum in the real-space order (two
@@ -27,7 +27,7 @@
 !>   mode "iters": CG iterations from a zero guess to tol 1e-6 (relative
 !>     preconditioned residual); one line: ITERS n= kappa= iterations= residual=
 !>   mode "batch": the ncg = 5 strain fields of an iteration transformed c2r + r2c
-!>     one field at a time through the backend (t_sep) and as one FFTW-MPI plan of
+!>     one field at a time through the transport (t_sep) and as one FFTW-MPI plan of
 !>     howmany = 5 interleaved fields (transposed spectrum; t_batch), which merges the
 !>     5 all-to-alls of a pass into one of 5 times the size; seconds per field and
 !>     transform, one line per repeat: BATCH n= ranks= t_sep= t_batch= ratio=
@@ -48,7 +48,7 @@ program bench_stokes_fft
    use, intrinsic :: iso_c_binding
    use mpi_f08
    use fold_kinds, only: dp, ip, i8, msg_len
-   use fold_fft_backend, only: fft_backend_t, FOLD_PLAN_MEASURE, FOLD_PLAN_ESTIMATE
+   use fold_fft_transport, only: fft_transport_t, FOLD_PLAN_MEASURE, FOLD_PLAN_ESTIMATE
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create, fft_mpi_start
    use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_stokes_fft
@@ -56,7 +56,7 @@ program bench_stokes_fft
    use fold_grid, only: shear_lattice
    implicit none
    include 'fftw3-mpi.f03'
-   class(fft_backend_t), allocatable :: fft
+   class(fft_transport_t), allocatable :: fft
    type(fft_mpi_t), allocatable :: slab
    type(fft_serial_t), allocatable :: serial
    type(stokes_fft_t) :: s
@@ -66,7 +66,7 @@ program bench_stokes_fft
    integer :: stat, rank, nranks, rep, nrep, i, j, k, c
    integer(ip) :: n
    character(len=msg_len) :: msg
-   character(len=32) :: arg, mode, shape, backend, precision
+   character(len=32) :: arg, mode, shape, transport, precision
    real(dp) :: t_fft_sp, c_fft, c_it
    real(dp) :: ax(3), along
    type(c_ptr) :: bmem, bfwd, bbwd
@@ -100,8 +100,8 @@ program bench_stokes_fft
    if (command_argument_count() >= 4) call get_command_argument(4, mode)
    shape = "sphere"
    if (command_argument_count() >= 5) call get_command_argument(5, shape)
-   backend = "auto"
-   if (command_argument_count() >= 6) call get_command_argument(6, backend)
+   transport = "auto"
+   if (command_argument_count() >= 6) call get_command_argument(6, transport)
    precision = "double"
    if (command_argument_count() >= 7) call get_command_argument(7, precision)
    ax = 1.0_dp/sqrt(3.0_dp)
@@ -121,7 +121,7 @@ program bench_stokes_fft
       ! the smallest tolerance the setting accepts (cost: 20 iterations stop far above it)
       set%tol = max(set%tol, single_tol_min(int(n, i8)**3))
    end if
-   if (nranks == 1 .and. trim(backend) /= "mpi") then
+   if (nranks == 1 .and. trim(transport) /= "mpi") then
       allocate (serial)
       call fft_serial_create(serial, 3, [n, n, n], set%plan_effort, stat, msg)
       call check("fft_serial_create")
@@ -129,13 +129,13 @@ program bench_stokes_fft
    else
       allocate (slab)
       call fft_mpi_create(slab, MPI_COMM_WORLD, 3, [n, n, n], set%plan_effort, stat, msg, &
-                          transposed=(trim(backend) /= "natural"))
+                          transposed=(trim(transport) /= "natural"))
       call check("fft_mpi_create")
       call move_alloc(slab, fft)
    end if
    call stokes_fft_init(s, fft, set, stat, msg)
    call check("stokes_fft_init")
-   if (trim(backend) == "spectral") s%stencil_fraction_max = -1.0_dp
+   if (trim(transport) == "spectral") s%stencil_fraction_max = -1.0_dp
    call stokes_fft_set_lattice(s, shear_lattice([1.0_dp, 1.0_dp, 1.0_dp], 0.2_dp), stat, msg)
    call check("stokes_fft_set_lattice")
    allocate (chi(n, s%grid%nl(2), s%grid%nl(3)))

@@ -20,35 +20,23 @@ program test_lubrication
    use fold_cell, only: cell_t, cell_init, cell_set_time, cell_mean_velocity, cell_min_image
    use fold_lubrication, only: lubrication_stats_t, lubrication_correct, lubrication_coefficient, &
                                lubrication_force, lubrication_threshold, lubrication_gap_floor
+   use stokes_test_check, only: check, check_start, check_passed
    implicit none
    real(dp), parameter :: pi = acos(-1.0_dp), eps = epsilon(1.0_dp)
    real(dp), parameter :: R = 1.0e-4_dp, eta = 2.0e-3_dp, U = 3.0e-5_dp
    integer :: failures
 
    failures = 0
+   call check_start("test_lubrication", .true.)
    call two_spheres_closed_form(failures)
    call exponent_fits(failures)
    call untouched(failures)
    call lees_edwards_image(failures)
    call three_in_a_row(failures)
    call one_formula(failures)
-   if (failures > 0) then
-      print '(a,i0,a)', "test_lubrication: ", failures, " check(s) failed"
-      error stop 1
-   end if
-   print '(a)', "test_lubrication: ok"
+   if (.not. check_passed(failures)) error stop 1
 
 contains
-
-   subroutine check(ok, what, failures)
-      logical, intent(in) :: ok
-      character(len=*), intent(in) :: what
-      integer, intent(inout) :: failures
-      if (.not. ok) then
-         failures = failures + 1
-         print '(a,a)', "FAIL: ", what
-      end if
-   end subroutine check
 
    !> A 3-D periodic cell of side L (at rest, or in simple shear at time t).
    function make_cell(L, gdot, t) result(cell)

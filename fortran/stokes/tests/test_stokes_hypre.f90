@@ -28,6 +28,7 @@ program test_stokes_hypre
    use fold_particles, only: particle_set_t, particles_init, FOLD_SPHERE
    use fold_voxelise, only: voxel_set_t, voxelise
    use fold_rigid_fit, only: rigid_fit
+   use stokes_test_check, only: check, check_start, check_passed
    implicit none
    integer :: rank, failures
    character(len=32) :: group
@@ -37,6 +38,7 @@ program test_stokes_hypre
    failures = 0
    group = "couette"
    if (command_argument_count() >= 1) call get_command_argument(1, group)
+   call check_start("test_stokes_hypre "//trim(group), rank == 0)
    select case (trim(group))
    case ("couette")
       call couette_layers(2, [16_ip, 32_ip, 1_ip], 10.0_dp, failures)
@@ -67,24 +69,10 @@ program test_stokes_hypre
       if (rank == 0) print '(a,a)', "test_stokes_hypre: unknown group ", trim(group)
       failures = failures + 1
    end select
-   if (failures > 0) then
-      if (rank == 0) print '(a,a,a,i0,a)', "test_stokes_hypre ", trim(group), ": ", failures, " check(s) failed"
-      call MPI_Abort(MPI_COMM_WORLD, 1)
-   end if
-   if (rank == 0) print '(a,a,a)', "test_stokes_hypre ", trim(group), ": ok"
+   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
    call MPI_Finalize()
 
 contains
-
-   subroutine check(ok, what, failures)
-      logical, intent(in) :: ok
-      character(len=*), intent(in) :: what
-      integer, intent(inout) :: failures
-      if (.not. ok) then
-         failures = failures + 1
-         if (rank == 0) print '(a,a)', "FAILED: ", trim(what)
-      end if
-   end subroutine check
 
    function walled_settings(kappa, tol) result(set)
       real(dp), intent(in) :: kappa, tol
@@ -714,6 +702,23 @@ contains
       call HYPRE_IJVectorGetValues(s%hb, s%nloc, s%rows, y, ierr)
    end subroutine apply_a
 
+   !> Two spheres of radii radius at x1 and x2 (the first dim coordinates), axes along x.
+   subroutine two_spheres(dim, radius, x1, x2, parts)
+      integer(ip), intent(in) :: dim
+      real(dp), intent(in) :: radius(2), x1(3), x2(3)
+      type(particle_set_t), intent(out) :: parts
+      integer :: stat
+      character(len=msg_len) :: msg
+      call particles_init(parts, dim, 2_ip, stat, msg)
+      parts%shape = FOLD_SPHERE
+      parts%radius = radius
+      parts%length = 2.0_dp*parts%radius
+      parts%x(:, 1) = x1(1:dim)
+      parts%x(:, 2) = x2(1:dim)
+      parts%p = 0.0_dp
+      parts%p(1, :) = 1.0_dp
+   end subroutine two_spheres
+
    !> Rigid (V, omega) of a periodic scene with backend 1 or 2 (n cells per side)
    subroutine scene_rigid(backend, dim, cr, v, om, failures)
       integer(ip), intent(in) :: backend, dim, cr
@@ -741,17 +746,7 @@ contains
       call cell_init(cell, dim, L, .false., G, stat, msg)
       call s%set_lattice(box(L), stat, msg)
       call check(stat == FOLD_OK, "scene lattice: "//msg, failures)
-      call particles_init(parts, dim, 2_ip, stat, msg)
-      parts%shape = FOLD_SPHERE
-      parts%radius = [1.0_dp, 0.6_dp]
-      parts%length = 2.0_dp*parts%radius
-      if (dim == 2) then
-         parts%x = reshape([1.3_dp, 1.2_dp, 2.9_dp, 2.3_dp], [2, 2])
-      else
-         parts%x = reshape([1.3_dp, 1.2_dp, 1.5_dp, 2.9_dp, 2.3_dp, 2.6_dp], [3, 2])
-      end if
-      parts%p = 0.0_dp
-      parts%p(1, :) = 1.0_dp
+      call two_spheres(dim, [1.0_dp, 0.6_dp], [1.3_dp, 1.2_dp, 1.5_dp], [2.9_dp, 2.3_dp, 2.6_dp], parts)
       call voxelise(s%grid, parts, set%subsamples, set%fibre_ends, vox, stat, msg)
       call s%solve(vox%chi, G, stat, msg)
       call check(stat == FOLD_OK, "scene solve: "//msg, failures)
@@ -817,17 +812,7 @@ contains
       call cell_init(cell, dim, L, walls, G, stat, msg)
       call sw%set_lattice(box(L), stat, msg)
       call ss%set_lattice(box(L), stat, msg)
-      call particles_init(parts, dim, 2_ip, stat, msg)
-      parts%shape = FOLD_SPHERE
-      parts%radius = [0.8_dp, 0.5_dp]
-      parts%length = 2.0_dp*parts%radius
-      if (dim == 2) then
-         parts%x = reshape([1.3_dp, 1.4_dp, 2.9_dp, 2.5_dp], [2, 2])
-      else
-         parts%x = reshape([1.3_dp, 1.4_dp, 1.5_dp, 2.9_dp, 2.5_dp, 2.6_dp], [3, 2])
-      end if
-      parts%p = 0.0_dp
-      parts%p(1, :) = 1.0_dp
+      call two_spheres(dim, [0.8_dp, 0.5_dp], [1.3_dp, 1.4_dp, 1.5_dp], [2.9_dp, 2.5_dp, 2.6_dp], parts)
       call voxelise(sw%grid, parts, set%subsamples, set%fibre_ends, vw, stat, msg)
       call voxelise(ss%grid, parts, set%subsamples, set%fibre_ends, vs, stat, msg)
       call sw%solve(vw%chi, G, stat, msg)

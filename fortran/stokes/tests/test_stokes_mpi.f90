@@ -3,8 +3,8 @@
 !> transposed spectrum, y distributed, and the natural one; an odd n2 that splits
 !> unevenly) and 2-D (slabs in y), on a sheared (Lees-Edwards) lattice with spheres,
 !> a spheroid and a fibre. Every rank also runs the serial solve on the whole grid
-!> and compares its own slab. Before that, the spectral map of every backend
-!> (nsl, soff, saxis of fold_fft_backend) is checked on one plane wave: its r2c
+!> and compares its own slab. Before that, the spectral map of every transport
+!> (nsl, soff, saxis of fold_fft_transport) is checked on one plane wave: its r2c
 !> has one nonzero coefficient, N/2 at the wave's mode, and c2r gives N times it
 !> back. Run with mpirun -np 1 or 2 (meson suite 'stokes').
 program test_stokes_mpi
@@ -12,14 +12,17 @@ program test_stokes_mpi
    use mpi_f08
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
-   use fold_fft_backend, only: fft_backend_t, fft_field_t, field_free
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free
    use fold_fft_serial, only: fft_serial_t, fft_serial_create
    use fold_fft_mpi, only: fft_mpi_t, fft_mpi_create
    use fold_cell, only: cell_t, cell_init
    use fold_particles, only: particle_set_t, particles_init, FOLD_SPHERE, FOLD_SPHEROID, FOLD_FIBRE
    use fold_stokes_fft, only: stokes_settings_t
-   use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_init, stokes_rigid_velocities, &
-                               stokes_context_destroy
+   use fold_stokes_solver, only: stokes_solver_t
+   use fold_stokes_build, only: stokes_transport_solver
+   use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_init, stokes_context_attach, &
+                               stokes_rigid_velocities, stokes_context_destroy
+   use stokes_test_check, only: check_start, check_passed
    implicit none
    include 'fftw3-mpi.f03'
    integer :: rank, failures
@@ -28,6 +31,7 @@ program test_stokes_mpi
    call fftw_mpi_init()
    call MPI_Comm_rank(MPI_COMM_WORLD, rank)
    failures = 0
+   call check_start("test_stokes_mpi", rank == 0)
    call check_spectral_map(3, [12, 10, 9], 0, failures)
    call check_spectral_map(3, [12, 10, 9], 1, failures)
    call check_spectral_map(3, [12, 10, 9], 2, failures)
@@ -38,25 +42,21 @@ program test_stokes_mpi
    call compare(3, [16, 15, 12], .true., failures)
    call compare(2, [40, 30, 1], .true., failures)
    call fftw_mpi_cleanup()
-   if (failures > 0) then
-      if (rank == 0) print '(a,i0,a)', "test_stokes_mpi: ", failures, " check(s) failed"
-      call MPI_Abort(MPI_COMM_WORLD, 1)
-   end if
-   if (rank == 0) print '(a)', "test_stokes_mpi: ok"
+   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
    call MPI_Finalize()
 
 contains
 
-   !> One backend (kind 0 serial, 1 FFTW-MPI natural, 2 FFTW-MPI transposed) on the
+   !> One transport (kind 0 serial, 1 FFTW-MPI natural, 2 FFTW-MPI transposed) on the
    !> plane wave cos(2 pi (a x/nx + b y/ny + c z/nz)), a > 0: the half spectrum holds
-   !> N/2 at m = (a, b, c) (read through the backend's map) and zero elsewhere.
+   !> N/2 at m = (a, b, c) (read through the transport's map) and zero elsewhere.
    !> Round-off bound of an FFT of N values bounded by 1: log2(N) eps sum|f| <= log2(N) eps N
    !> per coefficient (and per value of the c2r of that spectrum); 4 times that is allowed.
    subroutine check_spectral_map(dim, n, kind, failures)
       integer(ip), intent(in) :: dim, n(3)
       integer, intent(in) :: kind
       integer, intent(inout) :: failures
-      class(fft_backend_t), allocatable :: fft
+      class(fft_transport_t), allocatable :: fft
       type(fft_serial_t), allocatable :: serial
       type(fft_mpi_t), allocatable :: slab
       type(fft_field_t) :: f
@@ -77,7 +77,7 @@ contains
          call fft_mpi_create(slab, MPI_COMM_WORLD, dim, n, 0, stat, msg, transposed=(kind == 2))
          call move_alloc(slab, fft)
       end if
-      call check(stat == FOLD_OK, "spectral map: backend: "//trim(msg))
+      call check(stat == FOLD_OK, "spectral map: transport: "//trim(msg))
       if (stat /= FOLD_OK) return
       if (kind == 2 .and. dim == 3) call check(all(fft%saxis == [1, 3, 2]), "spectral map: 3-D MPI spectrum not transposed")
       call check(fft%nsl(1) == fft%nxh, "spectral map: first spectral extent is not nx/2 + 1")
@@ -134,9 +134,9 @@ contains
       logical, intent(in) :: transposed
       integer, intent(inout) :: failures
       real(dp), parameter :: thr = 1.0e-7_dp
-      class(fft_backend_t), allocatable :: fft
-      type(fft_serial_t), allocatable :: serial
+      class(fft_transport_t), allocatable :: fft
       type(fft_mpi_t), allocatable :: slab
+      class(stokes_solver_t), allocatable :: solver
       type(stokes_context_t) :: ctx_s, ctx_p
       type(stokes_settings_t) :: set
       type(stokes_record_t) :: rec_s, rec_p
@@ -169,19 +169,18 @@ contains
       set%kappa = 1.0e3_dp
       set%tol = 1.0e-10_dp
 
-      allocate (serial)
-      call fft_serial_create(serial, dim, n, 0, stat, msg)
-      call check(stat == FOLD_OK, "fft_serial_create: "//trim(msg))
-      call move_alloc(serial, fft)
-      call stokes_context_init(ctx_s, fft, set, stat, msg)
+      call stokes_context_init(ctx_s, set, dim, n, stat, msg)
+      call check(stat == FOLD_OK, "stokes_context_init: "//trim(msg))
       call stokes_rigid_velocities(ctx_s, cell, parts_s, rec_s, stat, msg)
       call check(stat == FOLD_OK, "serial solve: "//trim(msg))
 
       allocate (slab)
       call fft_mpi_create(slab, MPI_COMM_WORLD, dim, n, 0, stat, msg, transposed=transposed)
       call check(stat == FOLD_OK, "fft_mpi_create: "//trim(msg))
-      call move_alloc(slab, fft)
-      call stokes_context_init(ctx_p, fft, set, stat, msg)
+      if (stat == FOLD_OK) call move_alloc(slab, fft)
+      call stokes_transport_solver(set, fft, solver, stat, msg)
+      call check(stat == FOLD_OK, "stokes_transport_solver: "//trim(msg))
+      call stokes_context_attach(ctx_p, solver)
       call stokes_rigid_velocities(ctx_p, cell, parts, rec_p, stat, msg)
       call check(stat == FOLD_OK, "slab solve: "//trim(msg))
 

@@ -14,10 +14,10 @@ program test_stokes_rigid
    use mpi_f08
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
-   use fold_grid, only: shear_lattice
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_RIGIDITY_EXACT
-   use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_rigid, only: stokes_rigid_t
+   use stokes_test_check, only: check, check_start, check_passed, ball_chi
+   use stokes_test_solver, only: sheared_solver
    implicit none
    integer :: rank, failures
    real(dp) :: sig(3, 3, 2), vel(2), tol
@@ -27,6 +27,7 @@ program test_stokes_rigid
    call MPI_Init()
    call MPI_Comm_rank(MPI_COMM_WORLD, rank)
    failures = 0
+   call check_start("test_stokes_rigid", rank == 0)
    tol = 1.0e-11_dp
    do form = 1, 2
       call solve([14_ip, 12_ip, 10_ip], form == 1, tol, sig(:, :, form), vel(form), its(form), failures)
@@ -39,11 +40,7 @@ program test_stokes_rigid
               "same particle stress within the solve's error", failures)
    call check(abs(vel(1) - vel(2)) <= 2.0e4_dp*tol*vel(2), "same velocity field within the solve's error", &
               failures)
-   if (failures > 0) then
-      if (rank == 0) print '(a,i0,a)', "test_stokes_rigid: ", failures, " check(s) failed"
-      call MPI_Abort(MPI_COMM_WORLD, 1)
-   end if
-   if (rank == 0) print '(a)', "test_stokes_rigid: ok"
+   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
    call MPI_Finalize()
 
 contains
@@ -58,33 +55,20 @@ contains
       class(stokes_solver_t), allocatable :: s
       type(stokes_settings_t) :: set
       real(dp), allocatable :: chi(:, :, :)
-      real(dp) :: G(3, 3), nv, red(1)
+      real(dp) :: G(3, 3), red(1)
       real(dp), pointer, contiguous :: f(:, :, :)
-      integer :: stat, i, j, k, c
+      integer :: stat, c
       character(len=msg_len) :: msg
 
       set%rigidity = FOLD_RIGIDITY_EXACT
       set%tol = tol
       set%max_iter = 5000
       set%warm_start = .false.
-      call stokes_solver_create(set, 3, n, MPI_COMM_WORLD, s, stat, msg)
-      call check(stat == FOLD_OK, "create: "//trim(msg), failures)
-      if (stat /= FOLD_OK) call MPI_Abort(MPI_COMM_WORLD, 1)
-      call s%set_lattice(shear_lattice([1.0_dp, 0.9_dp, 1.1_dp], 0.3_dp), stat, msg)
-      call check(stat == FOLD_OK, "set_lattice: "//trim(msg), failures)
+      call sheared_solver(set, n, s, failures)
       select type (s)
       type is (stokes_rigid_t)
-         call check(s%stencil_ok, "the 3-D rotated-difference solver has the stencil form", failures)
          if (.not. stencil) s%stencil_fraction_max = -1.0_dp
-         allocate (chi(n(1), s%grid%nl(2), s%grid%nl(3)))
-         do k = 1, s%grid%nl(3)
-            do j = 1, s%grid%nl(2)
-               do i = 1, n(1)
-                  nv = sqrt(sum(((real([i - 1, j - 1, k - 1 + s%grid%off(3)], dp) + 0.5_dp)/real(n, dp) - 0.45_dp)**2))
-                  chi(i, j, k) = min(1.0_dp, max(0.0_dp, (0.3_dp - nv)*real(n(1), dp) + 0.5_dp))
-               end do
-            end do
-         end do
+         chi = ball_chi(n, s%grid%nl(2), s%grid%nl(3), s%grid%off(3), 0.45_dp)
          G = 0.0_dp
          G(1, 2) = 1.0_dp
          call s%solve(chi, G, stat, msg)
@@ -106,17 +90,5 @@ contains
       end select
       call s%destroy()
    end subroutine solve
-
-   subroutine check(ok, what, failures)
-      logical, intent(in) :: ok
-      character(len=*), intent(in) :: what
-      integer, intent(inout) :: failures
-      integer :: rank
-      call MPI_Comm_rank(MPI_COMM_WORLD, rank)
-      if (.not. ok) then
-         failures = failures + 1
-         if (rank == 0) print '(a,a)', "FAILED: ", what
-      end if
-   end subroutine check
 
 end program test_stokes_rigid

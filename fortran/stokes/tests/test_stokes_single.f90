@@ -25,21 +25,19 @@ program test_stokes_single
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_fft, only: stokes_fft_t, stokes_fft_true_residual, stokes_fft_apply, single_tol_min
+   use stokes_test_check, only: check, check_start, check_passed
    implicit none
    integer :: rank, failures
 
    call MPI_Init()
    call MPI_Comm_rank(MPI_COMM_WORLD, rank)
    failures = 0
+   call check_start("test_stokes_single", rank == 0)
    call compare(3, [24, 24, 20], 10.0_dp, failures)
    call compare(3, [24, 24, 20], 1.0e3_dp, failures)
    call compare(2, [48, 40, 1], 1.0e3_dp, failures)
    call refusals(failures)
-   if (failures > 0) then
-      if (rank == 0) print '(a,i0,a)', "test_stokes_single: ", failures, " check(s) failed"
-      call MPI_Abort(MPI_COMM_WORLD, 1)
-   end if
-   if (rank == 0) print '(a)', "test_stokes_single: ok"
+   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
    call MPI_Finalize()
 
 contains
@@ -177,15 +175,5 @@ contains
       call check(stat == FOLD_INPUT_ERROR .and. index(msg, "fft_precision must be 0 (double) or 1 (single)") > 0, &
                  "an unknown precision code is refused (got: "//trim(msg)//")", failures)
    end subroutine refusals
-
-   subroutine check(ok, what, failures)
-      logical, intent(in) :: ok
-      character(len=*), intent(in) :: what
-      integer, intent(inout) :: failures
-      if (.not. ok) then
-         failures = failures + 1
-         if (rank == 0) print '(a)', "FAIL: "//what
-      end if
-   end subroutine check
 
 end program test_stokes_single

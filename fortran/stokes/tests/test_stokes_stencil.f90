@@ -23,26 +23,23 @@ program test_stokes_stencil
    use mpi_f08
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
-   use fold_grid, only: shear_lattice
-   use fold_fft_backend, only: fft_field_t, field_free
+   use fold_fft_transport, only: fft_field_t, field_free
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE
-   use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_fft, only: stokes_fft_t, stokes_fft_apply, stokes_fft_apply_cg, stokes_fft_project, &
                               stokes_fft_true_residual, FOLD_SINGLE_ROUNDOFF
+   use stokes_test_check, only: check, check_start, check_passed, ball_chi
+   use stokes_test_solver, only: sheared_solver
    implicit none
    integer :: rank, failures
 
    call MPI_Init()
    call MPI_Comm_rank(MPI_COMM_WORLD, rank)
    failures = 0
+   call check_start("test_stokes_stencil", rank == 0)
    call compare([12_ip, 10_ip, 8_ip], 1.0e3_dp, FOLD_FFT_DOUBLE, failures)
    call compare([15_ip, 9_ip, 13_ip], 10.0_dp, FOLD_FFT_DOUBLE, failures)
    call compare([12_ip, 10_ip, 8_ip], 1.0e3_dp, FOLD_FFT_SINGLE, failures)
-   if (failures > 0) then
-      if (rank == 0) print '(a,i0,a)', "test_stokes_stencil: ", failures, " check(s) failed"
-      call MPI_Abort(MPI_COMM_WORLD, 1)
-   end if
-   if (rank == 0) print '(a)', "test_stokes_stencil: ok"
+   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
    call MPI_Finalize()
 
 contains
@@ -56,8 +53,8 @@ contains
       real(dp), allocatable :: chi(:, :, :)
       complex(dp), allocatable :: u(:, :, :, :), a_sp(:, :, :, :), a_st(:, :, :, :)
       type(fft_field_t) :: f
-      real(dp) :: G(3, 3), red(2), err, bound, res, nv, kmax(1), fac
-      integer :: stat, c, i, j, k, seed_size
+      real(dp) :: G(3, 3), red(2), err, bound, res, kmax(1), fac
+      integer :: stat, c, j, k, seed_size
       integer, allocatable :: seed(:)
       character(len=msg_len) :: msg
 
@@ -66,24 +63,11 @@ contains
       set%max_iter = 5000
       set%warm_start = .false.
       set%fft_precision = precision
-      call stokes_solver_create(set, 3, n, MPI_COMM_WORLD, s, stat, msg)
-      call check(stat == FOLD_OK, "create: "//trim(msg), failures)
-      if (stat /= FOLD_OK) call MPI_Abort(MPI_COMM_WORLD, 1)
-      call s%set_lattice(shear_lattice([1.0_dp, 0.9_dp, 1.1_dp], 0.3_dp), stat, msg)
-      call check(stat == FOLD_OK, "set_lattice: "//trim(msg), failures)
+      call sheared_solver(set, n, s, failures)
       select type (s)
       type is (stokes_fft_t)
-         call check(s%stencil_ok, "the 3-D rotated-difference solver has the stencil form", failures)
          ! a sphere of radius 0.3 of the cell with a one-voxel partial-volume ramp
-         allocate (chi(n(1), s%grid%nl(2), s%grid%nl(3)))
-         do k = 1, s%grid%nl(3)
-            do j = 1, s%grid%nl(2)
-               do i = 1, n(1)
-                  nv = sqrt(sum(((real([i - 1, j - 1, k - 1 + s%grid%off(3)], dp) + 0.5_dp)/real(n, dp) - 0.5_dp)**2))
-                  chi(i, j, k) = min(1.0_dp, max(0.0_dp, (0.3_dp - nv)*real(n(1), dp) + 0.5_dp))
-               end do
-            end do
-         end do
+         chi = ball_chi(n, s%grid%nl(2), s%grid%nl(3), s%grid%off(3), 0.5_dp)
          G = 0.0_dp
          G(1, 2) = 1.0_dp
          call s%solve(chi, G, stat, msg)
@@ -150,15 +134,5 @@ contains
          t = t + wx(i)*sum(abs(v(i, :, :, :))**2)
       end do
    end function weighted
-
-   subroutine check(ok, what, failures)
-      logical, intent(in) :: ok
-      character(len=*), intent(in) :: what
-      integer, intent(inout) :: failures
-      if (.not. ok) then
-         failures = failures + 1
-         if (rank == 0) print '(a,a)', "test_stokes_stencil: FAILED: ", trim(what)
-      end if
-   end subroutine check
 
 end program test_stokes_stencil

@@ -1,4 +1,6 @@
-!> Distributed-or-not real-to-complex FFTs behind one abstract type.
+!> The FFT transport of the FFT Stokes solver: distributed-or-not real-to-complex FFTs
+!> behind one abstract type (fft_transport_t). "Backend" names a Stokes solver
+!> (fold_stokes_solver); a transport is what the FFT-based solvers transform with.
 !>
 !> The Stokes solver does its real-space arithmetic on the rank-local slab of a
 !> padded real array r(nxp, nl(2), nl(3)) and its Fourier-space arithmetic on the
@@ -7,16 +9,16 @@
 !> along the slowest Fortran index that is > 1: z in 3-D, y in 2-D (then nl(3) = 1).
 !> The spectral layout is described separately (nsl, soff, saxis): index d of a
 !> spectral array runs over the global wavenumber axis saxis(d) from offset soff(d).
-!> The serial backend and the 2-D MPI backend keep the real-space order
-!> (saxis = [1, 2, 3]); the 3-D MPI backend leaves the spectrum transposed
+!> The serial transport and the 2-D MPI transport keep the real-space order
+!> (saxis = [1, 2, 3]); the 3-D MPI transport leaves the spectrum transposed
 !> (c(nxh, n3, local n2), saxis = [1, 3, 2], y distributed), which saves one global
 !> transpose per transform (docs/physics.md#parallel-scaling-of-the-slab-decomposition).
 !> Every Fourier-space loop of the solver is pointwise in the mode and reads its
-!> wavenumbers from this map, so it never sees the order. A serial backend
+!> wavenumbers from this map, so it never sees the order. A serial transport
 !> (fold_fft_serial, in the core library that the Python extensions link) owns
-!> the whole grid; an FFTW-MPI backend (fold_fft_mpi, executable only) owns one
+!> the whole grid; an FFTW-MPI transport (fold_fft_mpi, executable only) owns one
 !> slab and sums over ranks. Serial and parallel runs share every line of numerics.
-module fold_fft_backend
+module fold_fft_transport
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
    implicit none
@@ -33,7 +35,7 @@ module fold_fft_backend
       type(c_ptr) :: mem = c_null_ptr
       !> Real view (nxp, nl(2), nl(3)); only r(1:nx, :, :) is data, the rest padding
       real(dp), pointer, contiguous :: r(:, :, :) => null()
-      !> Complex view (nsl(1), nsl(2), nsl(3)) of the backend (spectral layout)
+      !> Complex view (nsl(1), nsl(2), nsl(3)) of the transport (spectral layout)
       complex(dp), pointer, contiguous :: c(:, :, :) => null()
       !> Single-precision real view, same shape as r
       real(c_float), pointer, contiguous :: rs(:, :, :) => null()
@@ -42,7 +44,7 @@ module fold_fft_backend
    end type fft_field_t
 
    !> Abstract FFT engine of a fixed grid (global sizes n, local slab nl/off).
-   type, abstract, public :: fft_backend_t
+   type, abstract, public :: fft_transport_t
       !> Spatial dimension (2 or 3)
       integer(ip) :: dim = 3
       !> Global grid sizes (n(3) = 1 in 2-D)
@@ -63,6 +65,10 @@ module fold_fft_backend
       integer(i8) :: alloc_complex = 1
       !> Rank of this process and number of ranks
       integer :: rank = 0, nranks = 1
+      !> In-place r2c/c2r plans of the grid (serial or FFTW-MPI)
+      type(c_ptr) :: fwd = c_null_ptr, bwd = c_null_ptr
+      !> Single-precision (fftwf) plans, made by plan_single only
+      type(c_ptr) :: fwd_sp = c_null_ptr, bwd_sp = c_null_ptr
    contains
       !> In-place forward transform of a field (real view -> complex view), unnormalised
       procedure(transform_iface), deferred :: r2c
@@ -84,47 +90,47 @@ module fold_fft_backend
       !> Release the FFTW plans
       procedure(destroy_iface), deferred :: destroy
       !> Allocate an aligned field of this grid
-      procedure :: alloc_field => backend_alloc_field
+      procedure :: alloc_field => transport_alloc_field
       !> f <- r2c(c eta c2r(f)): back to real space, pointwise product, forward again
       !> (the viscosity step of the Stokes operator). A serial override that split the
       !> 3-D transforms (slow axes over the field, then x rows and the product plane
       !> by plane in cache) was measured 5-10 % slower than FFTW's own 3-D plans at
-      !> 64^3 and 128^3, so every backend uses this reference.
-      procedure :: c2r_scale_r2c => backend_c2r_scale_r2c
-   end type fft_backend_t
+      !> 64^3 and 128^3, so every transport uses this reference.
+      procedure :: c2r_scale_r2c => transport_c2r_scale_r2c
+   end type fft_transport_t
 
    abstract interface
       subroutine transform_iface(self, f)
-         import :: fft_backend_t, fft_field_t
-         class(fft_backend_t), intent(inout) :: self
+         import :: fft_transport_t, fft_field_t
+         class(fft_transport_t), intent(inout) :: self
          type(fft_field_t), intent(inout) :: f
       end subroutine transform_iface
       subroutine plan_single_iface(self, effort, stat, errmsg)
-         import :: fft_backend_t, msg_len
-         class(fft_backend_t), intent(inout) :: self
+         import :: fft_transport_t, msg_len
+         class(fft_transport_t), intent(inout) :: self
          integer, intent(in) :: effort
          integer, intent(out) :: stat
          character(len=msg_len), intent(out) :: errmsg
       end subroutine plan_single_iface
       subroutine reduce_iface(self, x)
-         import :: fft_backend_t, dp
-         class(fft_backend_t), intent(in) :: self
+         import :: fft_transport_t, dp
+         class(fft_transport_t), intent(in) :: self
          real(dp), intent(inout) :: x(:)
       end subroutine reduce_iface
       subroutine halo_iface(self, n, first, last, lo, hi)
-         import :: fft_backend_t, dp, i8
-         class(fft_backend_t), intent(in) :: self
+         import :: fft_transport_t, dp, i8
+         class(fft_transport_t), intent(in) :: self
          integer(i8), intent(in) :: n
          real(dp), intent(in) :: first(n), last(n)
          real(dp), intent(out) :: lo(n), hi(n)
       end subroutine halo_iface
       subroutine destroy_iface(self)
-         import :: fft_backend_t
-         class(fft_backend_t), intent(inout) :: self
+         import :: fft_transport_t
+         class(fft_transport_t), intent(inout) :: self
       end subroutine destroy_iface
    end interface
 
-   public :: field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
+   public :: plans_free, field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
 
    !> FFTW planning effort: FFTW_ESTIMATE (instant) or FFTW_MEASURE (seconds, faster transforms)
    integer, parameter :: FOLD_PLAN_ESTIMATE = 0, FOLD_PLAN_MEASURE = 1
@@ -133,8 +139,8 @@ contains
 
    !> Allocate an FFTW-aligned field (every field of a grid has the same
    !> alignment, which FFTW's new-array execute functions require).
-   subroutine backend_alloc_field(self, f)
-      class(fft_backend_t), intent(in) :: self
+   subroutine transport_alloc_field(self, f)
+      class(fft_transport_t), intent(in) :: self
       type(fft_field_t), intent(inout) :: f
       call field_free(f)
       f%mem = fftw_alloc_complex(int(max(self%alloc_complex, 1_i8), c_size_t))
@@ -143,11 +149,11 @@ contains
       call c_f_pointer(f%mem, f%rs, [self%nxp, self%nl(2), self%nl(3)])
       call c_f_pointer(f%mem, f%cs, self%nsl)
       f%r = 0.0_dp
-   end subroutine backend_alloc_field
+   end subroutine transport_alloc_field
 
    !> Unfused reference: c2r, w = c eta w on the nx data columns, r2c.
-   subroutine backend_c2r_scale_r2c(self, f, c, eta)
-      class(fft_backend_t), intent(inout) :: self
+   subroutine transport_c2r_scale_r2c(self, f, c, eta)
+      class(fft_transport_t), intent(inout) :: self
       type(fft_field_t), intent(inout) :: f
       !> Constant factor [-] and field (padded real layout) of the product
       real(dp), intent(in) :: c
@@ -155,7 +161,7 @@ contains
       call self%c2r(f)
       call scale_rows(self%n(1), self%nxp, self%nl(2)*self%nl(3), c, eta%r, f%r)
       call self%r2c(f)
-   end subroutine backend_c2r_scale_r2c
+   end subroutine transport_c2r_scale_r2c
 
    !> w(1:nx, :) = c eta(1:nx, :) w(1:nx, :) on padded real rows (nxp, nrows).
    subroutine scale_rows(nx, nxp, nrows, c, eta, w)
@@ -170,6 +176,19 @@ contains
       end do
    end subroutine scale_rows
 
+   !> Destroy the plans of a transport (FFTW-MPI plans too: fftw_destroy_plan frees both).
+   subroutine plans_free(self)
+      class(fft_transport_t), intent(inout) :: self
+      if (c_associated(self%fwd)) call fftw_destroy_plan(self%fwd)
+      if (c_associated(self%bwd)) call fftw_destroy_plan(self%bwd)
+      if (c_associated(self%fwd_sp)) call fftwf_destroy_plan(self%fwd_sp)
+      if (c_associated(self%bwd_sp)) call fftwf_destroy_plan(self%bwd_sp)
+      self%fwd = c_null_ptr
+      self%bwd = c_null_ptr
+      self%fwd_sp = c_null_ptr
+      self%bwd_sp = c_null_ptr
+   end subroutine plans_free
+
    !> Free a field (no-op when not allocated).
    subroutine field_free(f)
       type(fft_field_t), intent(inout) :: f
@@ -183,7 +202,7 @@ contains
 
    !> Spectral layout in the real-space order: c(nxh, nl(2), nl(3)) (serial, 2-D MPI).
    subroutine spectral_natural(self)
-      class(fft_backend_t), intent(inout) :: self
+      class(fft_transport_t), intent(inout) :: self
       self%nsl = [self%nxh, self%nl(2), self%nl(3)]
       self%soff = [0_ip, self%off(2), self%off(3)]
       self%saxis = [1_ip, 2_ip, 3_ip]
@@ -200,4 +219,4 @@ contains
       end if
    end function plan_flag
 
-end module fold_fft_backend
+end module fold_fft_transport
