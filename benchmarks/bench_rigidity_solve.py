@@ -21,6 +21,8 @@ Error: sqrt(sum |V - V_ref|^2 + (L/2)^2 |w - w_ref|^2) / sqrt(sum |V_ref|^2 + (L
 over the fibres (vel err) and the same for the rotation rates alone (rot err); eta err:
 the relative error of the particles' part of the effective viscosity.
 Command:  nice -n 5 python benchmarks/bench_rigidity_solve.py [--quick | --big] [--seed 1] [--only NAME ...]
+          nice -n 5 python benchmarks/bench_rigidity_solve.py --case CELL CPD GAP COUNT [--case ...]
+          (one scene of the full list, e.g. --case 2.4 3 0.2 14; COUNT 0 = n L^3 = 4)
 Cost: --quick (the 55-fibre scene at 3 voxels per diameter only) ~3 CPU-min; full ~30 CPU-min;
 --big roughly 6x the 72^3 scene per iteration.
 """
@@ -129,6 +131,9 @@ def main() -> None:
     ap.add_argument("--big", action="store_true", help="the 128^3 scene of 305 fibres only (one solve per setting)")
     ap.add_argument("--only", nargs="*", default=None, choices=list(SETTINGS), metavar="NAME",
                     help="settings to run (default all)")
+    ap.add_argument("--case", type=float, nargs=4, action="append", metavar=("CELL", "CPD", "GAP", "COUNT"),
+                    help="only this scene (cell side in fibre lengths, voxels per diameter, gap in R, fibres; "
+                         "0 fibres = n L^3 = 4); repeatable")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
@@ -140,6 +145,8 @@ def main() -> None:
     cases = [(2.4, 3, 0.2, None)] if args.quick else [
         (2.4, 3, 0.2, None), (1.5, 3, 0.2, None), (3.2, 3, 0.2, None), (2.4, 3, 0.2, 14), (2.4, 3, 0.2, 28),
         (2.4, 2, 0.2, None), (2.4, 4, 0.2, None), (2.4, 3, 0.05, None), (2.4, 3, 0.5, None)]
+    if args.case:
+        cases = [(cell, int(cpd), gap, int(count) or None) for cell, cpd, gap, count in args.case]
     for cell, cpd, gap, count in cases:
         scene(cell, cpd, gap, args.seed, count=count, only=args.only)
     print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
