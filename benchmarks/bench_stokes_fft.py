@@ -244,11 +244,8 @@ def fft_cpu(exe: Path, n: int, repeats: int) -> float:
 
 #: --rigidity: name -> StokesSettings keywords
 RIGIDITY_SETTINGS = {
-    "penalty 1e3, tol 1e-6": dict(kappa=1e3, tol=1e-6),
-    "penalty 1e3, tol 1e-3": dict(kappa=1e3, tol=1e-3),
-    "penalty 1e4, tol 1e-6": dict(kappa=1e4, tol=1e-6),
-    "exact, tol 1e-6": dict(rigidity="exact", tol=1e-6),
-    "exact, tol 1e-3": dict(rigidity="exact", tol=1e-3),
+    **{f"penalty {k:.0e}, tol {t:.0e}": dict(kappa=k, tol=t) for k, t in ((1e3, 1e-6), (1e3, 1e-3), (1e4, 1e-6))},
+    **{f"exact, tol {t:.0e}": dict(rigidity="exact", tol=t) for t in (1e-6, 1e-3)},
 }
 
 
@@ -259,7 +256,7 @@ def rigidity_table(exe: Path, grids: list[int], repeats: int) -> None:
     from pyfold.native.stokes import Particles, StokesSettings, solve_particles
 
     P = Particles(x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.125, length=0.25, shape="sphere")
-    print(f"{'grid':>6} {'setting':<22} {'iter':>6} {'CPU-s':>8} {'FFT-eq':>8} {'FFT-eq/iter':>11} {'eta_eff':>10}")
+    print(f"{'grid':>6} {'setting':<24} {'iter':>6} {'CPU-s':>8} {'FFT-eq':>8} {'FFT-eq/iter':>11} {'eta_eff':>10}")
     for n in grids:
         t_fft = fft_cpu(exe, n, repeats)
         rows = []
@@ -271,7 +268,7 @@ def rigidity_table(exe: Path, grids: list[int], repeats: int) -> None:
         t_fft2 = fft_cpu(exe, n, repeats)
         unit = 0.5 * (t_fft + t_fft2)
         for name, its, t, eta in rows:
-            print(f"{n:>5}^3 {name:<22} {its:>6d} {t:>8.3f} {t / unit:>8.0f} {t / unit / max(its, 1):>11.1f} "
+            print(f"{n:>5}^3 {name:<24} {its:>6d} {t:>8.3f} {t / unit:>8.0f} {t / unit / max(its, 1):>11.1f} "
                   f"{eta:>10.6f}", flush=True)
         print(f"        one hot FFT {unit:.3e} CPU-s (mean of {t_fft:.3e} before and {t_fft2:.3e} after; "
               f"load {load()})")
