@@ -6,7 +6,7 @@ from typing import Any
 import equinox as eqx
 
 from pyfold._jax import jax
-from pyfold.models._base import OrientationModel, check_range, closure_field, parameter
+from pyfold.models._base import OrientationModel, closure_field, parameter
 from pyfold.models._terms import (
     flow_parts,
     isotropic_diffusion,
@@ -36,13 +36,10 @@ class FolgarTucker(OrientationModel):
         3 or 2.
     """
 
-    ci: jax.Array = parameter(0.01)
+    ci: jax.Array = parameter(0.01, low=0.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
-
-    def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
 
     def _rate(self, t, a2, L):
         D, W, gamma_dot = flow_parts(L)
@@ -78,15 +75,11 @@ class FTMS(OrientationModel):
         As in :class:`FolgarTucker`.
     """
 
-    ci: jax.Array = parameter(0.01)
-    u0: jax.Array = parameter(0.0)
+    ci: jax.Array = parameter(0.01, low=0.0)
+    u0: jax.Array = parameter(0.0, low=0.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
-
-    def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
-        check_range("u0", self.u0, 0.0)
 
     def _rate(self, t, a2, L):
         D, W, gamma_dot = flow_parts(L)
