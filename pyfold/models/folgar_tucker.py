@@ -16,6 +16,17 @@ from pyfold.models._terms import (
 )
 
 
+def _folgar_tucker_rate(model: OrientationModel, t, a2, L):
+    # Jeffery's rotation and stretching (a4:D from the model's closure) plus isotropic
+    # rotary diffusion with the model's ci, xi: the Folgar-Tucker rate.
+    D, W, gamma_dot = flow_parts(L)
+    return (
+        rotation_term(a2, W)
+        + stretching_term_contracted(a2, model.a4_contract(a2, D, t), D, model.xi)  # type: ignore[attr-defined]
+        + isotropic_diffusion(a2, model.ci, gamma_dot)  # type: ignore[attr-defined]
+    )
+
+
 class FolgarTucker(OrientationModel):
     """Folgar-Tucker model (Folgar & Tucker 1984, J. Reinf. Plast. Compos. 3:98).
 
@@ -42,12 +53,7 @@ class FolgarTucker(OrientationModel):
     dim: int = eqx.field(default=3, static=True)
 
     def _rate(self, t, a2, L):
-        D, W, gamma_dot = flow_parts(L)
-        return (
-            rotation_term(a2, W)
-            + stretching_term_contracted(a2, self.a4_contract(a2, D, t), D, self.xi)
-            + isotropic_diffusion(a2, self.ci, gamma_dot)
-        )
+        return _folgar_tucker_rate(self, t, a2, L)
 
 
 class FTMS(OrientationModel):
@@ -82,11 +88,6 @@ class FTMS(OrientationModel):
     dim: int = eqx.field(default=3, static=True)
 
     def _rate(self, t, a2, L):
-        D, W, gamma_dot = flow_parts(L)
+        _, _, gamma_dot = flow_parts(L)
         potential = 2.0 * self.u0 * gamma_dot * (mat(a2, a2) - self.a4_contract(a2, a2, t))
-        return (
-            rotation_term(a2, W)
-            + stretching_term_contracted(a2, self.a4_contract(a2, D, t), D, self.xi)
-            + isotropic_diffusion(a2, self.ci, gamma_dot)
-            + potential
-        )
+        return _folgar_tucker_rate(self, t, a2, L) + potential
