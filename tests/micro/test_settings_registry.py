@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import typing
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,44 @@ def test_optional_datasets_default_to_the_registry():
     for s in registry.SETTINGS:
         if s.optional:
             assert f"= FOLD_DEF_{s.fortran}" in text, s.path
+
+
+def _table_of(annotation) -> type[schema.BaseModel] | None:
+    """The schema model of a field that is a table or an array of tables, else None."""
+    if isinstance(annotation, type) and issubclass(annotation, schema.BaseModel):
+        return annotation
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    return next((m for m in map(_table_of, args) if m is not None), None)
+
+
+def _fields(model: type[schema.BaseModel], prefix: str = ""):
+    """(TOML path, field) of every key of ``model`` that is not a table, descending into tables."""
+    for name, info in model.model_fields.items():
+        table = _table_of(info.annotation)
+        path = prefix + name
+        if table is None:
+            yield path, info
+        else:
+            yield from _fields(table, f"{path}.")
+
+
+SCHEMA_FIELDS = dict(_fields(schema.Scene))
+
+
+def test_every_schema_key_is_a_registry_setting_and_every_setting_a_schema_key():
+    """A scene key cannot bypass the registry: the keys of the schema's models and the
+    registered settings are the same set."""
+    assert set(SCHEMA_FIELDS) == {s.path for s in registry.SETTINGS}
+
+
+@pytest.mark.parametrize("path", sorted(SCHEMA_FIELDS))
+def test_each_schema_field_has_the_registered_default(path):
+    """A field with a registered default has it; one without is required or None."""
+    info, default = SCHEMA_FIELDS[path], registry.setting(path).default
+    if default is None:
+        assert info.is_required() or info.default is None, path
+    else:
+        assert info.default == default and type(info.default) is type(default), path
 
 
 def test_backend_for_follows_the_capability_table():
