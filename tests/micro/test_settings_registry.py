@@ -144,6 +144,28 @@ def test_a_contact_setting_is_run_at_its_bound_and_refused_beyond(dataset, value
         assert f"/setup/resolved/{dataset}" in proc.stderr, proc.stderr
 
 
+_VISCOSITY = registry.setting("fluid.viscosity")
+
+
+@pytest.mark.parametrize("dataset, value, accepted", [
+    ("viscosity", _VISCOSITY.hi, True), ("viscosity", _VISCOSITY.lo, True),
+    ("viscosity", float(np.nextafter(_VISCOSITY.hi, np.inf)), False),
+    ("viscosity", float(np.nextafter(_VISCOSITY.lo, 0.0)), False),
+    ("dim", np.int32(registry.setting("cell.dim").hi + 1), False)])
+def test_a_cell_or_fluid_setting_is_run_within_the_registry_range_and_refused_beyond(dataset, value, accepted,
+                                                                                     tmp_path):
+    """fold_run reads the viscosity and the dimension within the range `pyfold validate`
+    accepts (exit 0 at a bound) and refuses a value beyond it, naming the dataset (exit 2)."""
+    require_fold_run()
+    path = tmp_path / "cell.h5"
+    write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.05, length=0.5, xi=xi_of(5.0),
+                   t_end=0.02, override={f"/setup/resolved/{dataset}": value})
+    proc = run_fold(path)
+    assert proc.returncode == (0 if accepted else 2), (proc.returncode, proc.stderr)
+    if not accepted:
+        assert f"/setup/resolved/{dataset}" in proc.stderr, proc.stderr
+
+
 def test_every_rigidity_word_has_a_formulation_entry_and_the_fortran_table_follows_it():
     """The rigidity formulations (registry.RIGIDITIES) cover the words of
     numerics.stokes.rigidity, and the generated Fortran names/kappa flags, indexed by
