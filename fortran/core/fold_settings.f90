@@ -34,6 +34,14 @@ module fold_settings
    !> Bounds of the viscosity contrast kappa (registry KAPPA_MIN, KAPPA_MAX)
    real(dp), parameter, public :: FOLD_KAPPA_MIN = 1.0_dp, FOLD_KAPPA_MAX = 1000000000000.0_dp
 
+   !> cell.dim -> /setup/resolved/dim
+   integer(i8), parameter, public :: FOLD_LO_DIM = 2_i8
+   integer(i8), parameter, public :: FOLD_HI_DIM = 3_i8
+   integer(ip), parameter, public :: FOLD_DEF_DIM = 3_ip
+   !> fluid.viscosity -> /setup/resolved/viscosity
+   real(dp), parameter, public :: FOLD_LO_VISCOSITY = 1.0e-30_dp
+   real(dp), parameter, public :: FOLD_HI_VISCOSITY = 1.0e30_dp
+   real(dp), parameter, public :: FOLD_DEF_VISCOSITY = 1.0_dp
    !> particles.shape -> /setup/resolved/family_shape
    integer(i8), parameter, public :: FOLD_LO_SHAPE = 1_i8
    integer(i8), parameter, public :: FOLD_HI_SHAPE = 3_i8
@@ -58,6 +66,12 @@ module fold_settings
    integer(i8), parameter, public :: FOLD_LO_LUBRICATION = 0_i8
    integer(i8), parameter, public :: FOLD_HI_LUBRICATION = 1_i8
    logical, parameter, public :: FOLD_DEF_LUBRICATION = .false.
+   !> numerics.dt -> /setup/resolved/dt
+   real(dp), parameter, public :: FOLD_LO_DT = nearest(0.0_dp, 1.0_dp)
+   real(dp), parameter, public :: FOLD_HI_DT = huge(1.0_dp)
+   !> numerics.t_end -> /setup/resolved/t_end
+   real(dp), parameter, public :: FOLD_LO_T_END = nearest(0.0_dp, 1.0_dp)
+   real(dp), parameter, public :: FOLD_HI_T_END = huge(1.0_dp)
    !> numerics.time_scheme -> /setup/resolved/time_scheme
    integer(i8), parameter, public :: FOLD_LO_TIME_SCHEME = 1_i8
    integer(i8), parameter, public :: FOLD_HI_TIME_SCHEME = 2_i8

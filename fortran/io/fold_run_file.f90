@@ -39,7 +39,8 @@ module fold_run_file
                             FOLD_LO_STOKES_FFT_PRECISION, FOLD_HI_STOKES_FFT_PRECISION, FOLD_DEF_STOKES_FFT_PRECISION, &
                             FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, FOLD_DEF_STOKES_RIGIDITY, &
                             FOLD_LO_STOKES_SOLVE_EVERY, FOLD_HI_STOKES_SOLVE_EVERY, FOLD_DEF_STOKES_SOLVE_EVERY, &
-                            FOLD_LO_SHAPE, FOLD_HI_SHAPE
+                            FOLD_LO_SHAPE, FOLD_HI_SHAPE, FOLD_LO_DIM, FOLD_HI_DIM, &
+                            FOLD_LO_VISCOSITY, FOLD_HI_VISCOSITY, FOLD_LO_DT, FOLD_HI_DT, FOLD_LO_T_END, FOLD_HI_T_END
    use fold_h5, only: hid_t, hsize_t, h5_open_file, h5_close_file, h5_exists, h5_shape, &
                       h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array
    implicit none
@@ -145,7 +146,7 @@ contains
       integer(hsize_t) :: shape(7)
       real(dp), parameter :: big = huge(1.0_dp)
 
-      call get_int(file, R//"dim", 2_i8, 3_i8, iv, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_int(file, R//"dim", FOLD_LO_DIM, FOLD_HI_DIM, iv, stat, errmsg); if (stat /= FOLD_OK) return
       s%dim = int(iv, ip)
       call h5_read_real_array(file, R//"cell_lengths", [3_hsize_t], buf, stat, errmsg); if (stat /= FOLD_OK) return
       s%cell_lengths = buf
@@ -165,9 +166,10 @@ contains
       ! h5py wrote G[i, j] = G_ij row-major; the column-major read gives G_ji.
       s%velocity_gradient = transpose(reshape(buf, [3, 3]))
       call get_real(file, R//"shear_rate", -big, big, s%shear_rate, stat, errmsg); if (stat /= FOLD_OK) return
-      call get_real(file, R//"viscosity", tiny(1.0_dp), big, s%viscosity, stat, errmsg); if (stat /= FOLD_OK) return
-      call get_real(file, R//"dt", tiny(1.0_dp), big, s%dt, stat, errmsg); if (stat /= FOLD_OK) return
-      call get_real(file, R//"t_end", tiny(1.0_dp), big, s%t_end, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_real(file, R//"viscosity", FOLD_LO_VISCOSITY, FOLD_HI_VISCOSITY, s%viscosity, stat, errmsg)
+      if (stat /= FOLD_OK) return
+      call get_real(file, R//"dt", FOLD_LO_DT, FOLD_HI_DT, s%dt, stat, errmsg); if (stat /= FOLD_OK) return
+      call get_real(file, R//"t_end", FOLD_LO_T_END, FOLD_HI_T_END, s%t_end, stat, errmsg); if (stat /= FOLD_OK) return
       if (s%t_end/s%dt > 1.0e12_dp) then
          call range_error(R//"t_end", "t_end/dt must be <= 1e12 steps", stat, errmsg)
          return

@@ -20,8 +20,8 @@ from pyfold.scene._problems import Problems
 from pyfold.scene.hydrodynamics_evidence import auto_evidence
 from pyfold.scene.kappa_range import check_kappa
 from pyfold.scene.vectors import unit_rows
-from pyfold.scene.schema import (EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY,
-                                 Scene)
+from pyfold.scene.registry import EQUIVALENT_ASPECT_RATIO_DEFAULT, MAX_LENGTH_RATIO, MAX_PARTICLES_PER_FAMILY
+from pyfold.scene.schema import Scene
 
 __all__ = ["Family", "ResolvedScene", "normalise", "stokes_grid", "backend_mismatch", "HYDRODYNAMICS_CODES",
            "COLLISION_CODES", "SPHERE_INTERACTION_FRACTION"]
@@ -155,15 +155,15 @@ class ResolvedScene:
         """``name -> (value, units, long_name)`` of the run file's ``/setup/resolved`` group."""
         fams = self.families
         return {
-            "dim": (np.int32(self.dim), "1", "spatial dimension"),
+            "dim": _dataset("dim", self.dim),
             "cell_lengths": (self.cell_lengths, "m", "cell side lengths (Lx, Ly, Lz); Lz = 0 in 2-D"),
             "walls": (np.int32(self.walls), "1", "1: no-slip walls at y = 0 and y = Ly (Couette), 0: periodic"),
             "wall_speed": (self.wall_speed, "m/s", "walls at y = 0 and y = Ly move at -U and +U along x"),
             "velocity_gradient": (self.velocity_gradient, "1/s", "imposed velocity gradient G_ij = du_i/dx_j"),
             "shear_rate": (self.shear_rate, "1/s", "scalar deformation rate sqrt(2 D:D)"),
-            "viscosity": (self.viscosity, "Pa s", "fluid viscosity"),
-            "dt": (self.dt, "s", "time step"),
-            "t_end": (self.t_end, "s", "end time"),
+            "viscosity": _dataset("viscosity", self.viscosity),
+            "dt": _dataset("dt", self.dt),
+            "t_end": _dataset("t_end", self.t_end),
             "n_steps": (np.int32(self.n_steps), "1", "number of time steps, t_end / dt"),
             "seed": _dataset("seed", self.seed),
             "hydrodynamics": _dataset("hydrodynamics", self.hydrodynamics),

@@ -1,9 +1,9 @@
 """The scene settings and the Stokes backends, each declared once, as data.
 
-Every setting that reaches ``fold_run`` (through ``/setup/resolved``) or chooses
-between coded alternatives is a :class:`Setting`: its TOML path, type, range or
-enumeration (words and their integer codes), default, units, the physics that uses
-it, a help text, and the ``/setup/resolved`` dataset and legend it is written as.
+Every key of a scene file (each field of the schema that is not a table) is a
+:class:`Setting`: its TOML path, type, range or enumeration (words and their integer
+codes), default, units, the physics that uses it, a help text, and the
+``/setup/resolved`` dataset and legend it is written as when ``fold_run`` reads it.
 Every Stokes backend is a :class:`Backend` with the capabilities the normaliser, the
 bindings and ``fold_run`` ask about instead of testing names.
 
@@ -29,7 +29,9 @@ from typing import Mapping
 
 __all__ = ["Setting", "Backend", "Rigidity", "SETTINGS", "BACKENDS", "RIGIDITIES", "AUTO_BACKEND", "setting", "codes", "resolved",
            "in_range", "range_text",
-           "backend_for", "backend_capable", "DEFAULT_ALPHA_OVER_RADIUS", "KAPPA_MIN", "KAPPA_MAX"]
+           "backend_for", "backend_capable", "DEFAULT_ALPHA_OVER_RADIUS", "KAPPA_MIN", "KAPPA_MAX",
+           "MAGNITUDE_LIMIT", "SMALLEST", "MAX_LENGTH_RATIO", "MAX_PARTICLES_PER_FAMILY",
+           "EQUIVALENT_ASPECT_RATIO_DEFAULT", "FILE_PATH_MAX"]
 
 #: Largest value of a 32-bit signed integer (counts and seeds fold_run holds in default integers).
 INT32_MAX = 2**31 - 1
@@ -46,14 +48,45 @@ KAPPA_MIN, KAPPA_MAX = 1.0, 1.0e12
 #: default 4 cells per diameter). pyfold.scene.sheared_fibres takes its default from it.
 DEFAULT_ALPHA_OVER_RADIUS = 0.1
 
+#: Every dimensional value (lengths [m], rates [1/s], viscosity [Pa s]) must lie within
+#: 30 decades of 1: any consistent unit system works (SI fibres are ~1e-5 m, lengths in
+#: fibre lengths are ~1), and then a volume (L^3, <= 1e90) or a product of a few such
+#: values stays finite and normal in double precision (limits 1e+-308).
+MAGNITUDE_LIMIT = 1e30
+#: its reciprocal, the smallest length or viscosity
+SMALLEST = 1e-30
+
+#: Largest ratio of the longest cell side to the smallest particle radius (and so of any
+#: two lengths of a scene: every particle must fit in half the cell). 1e6 radii per side
+#: is far beyond any simulation (the Stokes grid, the cell lists, the particle count all
+#: scale with it); it keeps cell / particle volume ratios <= 1e18 and grid sizes finite.
+MAX_LENGTH_RATIO = 1e6
+
+#: Largest number of particles of one family: ``count``, or the count a
+#: ``volume_fraction`` gives (one cap, applied to both).
+MAX_PARTICLES_PER_FAMILY = 10_000_000
+
+#: Default rule for the equivalent aspect ratio of a finite cylinder: Cox (1971,
+#: J. Fluid Mech. 45:625) slender-body result ``beta_e = 1.24 beta / sqrt(ln beta)``,
+#: the classic choice for long fibres (docs/physics.md#equivalent-aspect-ratio-of-a-finite-cylinder).
+EQUIVALENT_ASPECT_RATIO_DEFAULT = "cox"
+
+#: Longest name of a data file in a scene (``.csv`` or ``.npy``, relative to the scene file)
+FILE_PATH_MAX = 4096
+
 
 @dataclass(frozen=True)
 class Setting:
     """One scene setting.
 
-    ``kind`` is ``"choice"`` (a word of ``choices``), ``"integer"``, ``"real"`` or
-    ``"bool"``. A numeric range is ``[lo, hi]``, a bound excluded when ``lo_open`` /
-    ``hi_open``; ``None`` is unbounded. ``codes`` maps a word to the integer written to
+    ``kind`` is ``"choice"`` (a word of ``choices``), ``"integer"``, ``"real"``,
+    ``"bool"``, ``"vector"`` (``size`` reals), ``"matrix"`` (``rows`` vectors of ``size``
+    reals; with ``file`` also the name of a data file holding them) or ``"text"`` (``size``
+    characters matching ``pattern``). A numeric range, of a number or of each entry of a
+    vector or matrix, is ``[lo, hi]``, a bound excluded when ``lo_open`` / ``hi_open``;
+    ``None`` is unbounded; ``values``, when given, are the only integers allowed (``lo``
+    and ``hi`` their extremes). A bound is written as the pydantic message should name it
+    (``0``, not ``0.0``: "greater than 0"). ``codes`` maps a word to the integer written to
     ``/setup/resolved`` (a word without a code, like the backend's ``"auto"``, is
     resolved by the normaliser first). ``default`` ``None``: computed by the normaliser
     (``default_text`` says how) or required.
@@ -81,6 +114,17 @@ class Setting:
     #: prefix of the named Fortran code constants, and the constant per word when not <prefix><WORD>
     fortran_codes: str | None = None
     default_text: str = ""
+    #: the only integers allowed (kind "integer"), lo and hi their extremes
+    values: tuple[int, ...] = ()
+    #: (fewest, most) entries of a vector or of each row of a matrix, characters of a text;
+    #: None: no bound on that side
+    size: tuple[int | None, int | None] | None = None
+    #: (fewest, most) rows of a matrix
+    rows: tuple[int | None, int | None] | None = None
+    #: a matrix may instead be given as the name of a .csv / .npy file (relative to the scene file)
+    file: bool = False
+    #: regular expression a text matches
+    pattern: str | None = None
 
     @property
     def key(self) -> str:
@@ -108,11 +152,62 @@ _STOKES = "stokes"
 _CONTACTS = "contacts"
 
 SETTINGS: tuple[Setting, ...] = (
-    # ---- [particles]
+    # ---- top level
+    Setting("title", "text", "", size=(None, 200), help="short title of the scene"),
+    Setting("description", "text", "", size=(None, 4000), help="free description of the scene"),
+    # ---- [cell]
+    Setting("cell.dim", "integer", 3, lo=2, hi=3, values=(2, 3), resolved="dim", legend="spatial dimension",
+            fortran="DIM", help="spatial dimension, 2 or 3"),
+    Setting("cell.size", "vector", None, lo=SMALLEST, hi=MAGNITUDE_LIMIT, size=(2, 3), units="m",
+            help="side lengths (Lx, Ly[, Lz]), one per dimension"),
+    Setting("cell.boundary", "choice", "periodic", ("periodic", "couette"),
+            help='"periodic" on every side, or "couette": no-slip walls at y = 0 and y = Ly moving at -U and +U '
+                 '(U = rate Ly / 2), periodic in x (and z)'),
+    # ---- [flow]
+    Setting("flow.type", "choice", "simple_shear", ("simple_shear", "planar_elongation", "uniaxial_elongation", "general"),
+            help="the imposed mean flow u = G . x"),
+    Setting("flow.rate", "real", None, lo=-MAGNITUDE_LIMIT, hi=MAGNITUDE_LIMIT, units="1/s",
+            default_text='required unless type = "general"',
+            help="simple shear: G_xy = rate; planar elongation: G = diag(rate, -rate[, 0]); "
+                 "uniaxial elongation: G = diag(rate, -rate/2, -rate/2)"),
+    Setting("flow.gradient", "matrix", None, lo=-MAGNITUDE_LIMIT, hi=MAGNITUDE_LIMIT, size=(2, 3), rows=(2, 3),
+            units="1/s", default_text='required with type = "general"',
+            help='the full velocity gradient G_ij = du_i/dx_j (dim x dim, traceless), type = "general" only'),
+    # ---- [fluid]
+    Setting("fluid.viscosity", "real", 1.0, lo=SMALLEST, hi=MAGNITUDE_LIMIT, units="Pa s", resolved="viscosity",
+            legend="fluid viscosity", fortran="VISCOSITY", help="dynamic viscosity of the suspending Newtonian fluid"),
+    # ---- [[particles]]
+    Setting("particles.name", "text", None, size=(1, 64), pattern=r"^[A-Za-z0-9_.+-]+$",
+            default_text='`"family<index>"`', help="label used in outputs"),
     Setting("particles.shape", "choice", None, ("fibre", "sphere", "spheroid"),
             _codes(fibre=1, sphere=2, spheroid=3), resolved="family_shape", legend="1 fibre, 2 sphere, 3 spheroid",
             fortran="SHAPE",
             help="cylinder (R, L); sphere (2-D disk); prolate spheroid, semi-axes L/2 and R (2-D ellipse)"),
+    Setting("particles.radius", "real", None, lo=SMALLEST, hi=MAGNITUDE_LIMIT, units="m",
+            help="fibre cross-section radius, sphere radius, spheroid minor semi-axis"),
+    Setting("particles.length", "real", None, lo=SMALLEST, hi=MAGNITUDE_LIMIT, units="m",
+            default_text="from aspect_ratio", help="fibre (cylinder) length or spheroid major axis; not for spheres"),
+    Setting("particles.aspect_ratio", "real", None, lo=0, hi=MAX_LENGTH_RATIO, lo_open=True,
+            default_text="from length", help="length / (2 radius), an alternative to length; not for spheres"),
+    Setting("particles.count", "integer", None, lo=1, hi=MAX_PARTICLES_PER_FAMILY,
+            default_text="from volume_fraction", help="number of particles (give exactly one of count, volume_fraction)"),
+    Setting("particles.volume_fraction", "real", None, lo=0, hi=1, lo_open=True, hi_open=True,
+            default_text="from count", help="fraction of the cell volume (area in 2-D) the family fills"),
+    Setting("particles.orientation", "choice", "isotropic", ("isotropic", "aligned", "planar_random", "given"),
+            help="initial orientations of the family"),
+    Setting("particles.direction", "vector", None, size=(2, 3), default_text="x, the flow direction",
+            help='axis of every particle for orientation = "aligned" (normalised)'),
+    Setting("particles.orientations", "matrix", None, size=(2, 3), file=True,
+            default_text='required with orientation = "given"',
+            help='one axis per particle (count x dim) for orientation = "given" (each normalised), inline or a '
+                 ".csv / .npy file (one row per particle)"),
+    Setting("particles.positions", "matrix", None, size=(2, 3), file=True, units="m", default_text="random placement",
+            help="given centres, one per particle (n x dim), inline or a .csv / .npy file (one row per particle; "
+                 "a CSV may start with a header line): the count is the number of rows"),
+    Setting("particles.equivalent_aspect_ratio", "choice", None, ("cox", "zhang", "harris_pittman"),
+            default_text=f'`"{EQUIVALENT_ASPECT_RATIO_DEFAULT}"` (finite cylinders)',
+            help="finite cylinders only: rule giving the equivalent spheroid aspect ratio "
+                 "(Cox 1971, Zhang et al. 2011, Harris & Pittman 1975)"),
     # ---- [model]
     Setting("model.hydrodynamics", "choice", "auto", ("auto", "jeffery", "stokes"), _codes(jeffery=0, stokes=1),
             resolved="hydrodynamics", legend="0 jeffery, 1 stokes", fortran="HYDRODYNAMICS",
@@ -138,6 +233,10 @@ SETTINGS: tuple[Setting, ...] = (
             legend="sphere-sphere lubrication on (1) or off (0)", fortran="LUBRICATION",
             help="sphere-sphere lubrication force; spheres only"),
     # ---- [numerics]
+    Setting("numerics.dt", "real", None, lo=0, lo_open=True, units="s", resolved="dt", legend="time step",
+            fortran="DT", help="time step"),
+    Setting("numerics.t_end", "real", None, lo=0, lo_open=True, units="s", resolved="t_end", legend="end time",
+            fortran="T_END", help="end time; a multiple of dt"),
     Setting("numerics.seed", "integer", 0, lo=0, hi=INT32_MAX, resolved="seed", legend="random seed",
             help="seed of every random draw (placement, orientations)"),
     Setting("numerics.time_scheme", "choice", "ab2", ("ab2", "euler"), _codes(euler=1, ab2=2), physics=_STOKES,
@@ -205,6 +304,16 @@ SETTINGS: tuple[Setting, ...] = (
             resolved="stokes_solve_every", optional=True,
             legend="a Stokes solve every k-th step, velocities extrapolated linearly in between",
             fortran="STOKES_SOLVE_EVERY", help="a Stokes solve every k-th step only"),
+    # ---- [output]
+    Setting("output.interval", "real", None, lo=0, lo_open=True, units="s",
+            default_text="t_end / 100, rounded down to a multiple of dt",
+            help="interval between records of the statistics (a2, a4, contact and drift counters)"),
+    Setting("output.snapshot_interval", "real", None, lo=0, units="s",
+            default_text="t_end / 10, rounded down to a multiple of dt",
+            help="interval between particle snapshots (positions, axes); 0 = none"),
+    Setting("output.checkpoint_interval", "real", None, lo=0, units="s",
+            default_text="t_end / 20, rounded down to a multiple of dt",
+            help="interval between restart checkpoints; 0 = none"),
 )
 
 _BY_PATH = {s.path: s for s in SETTINGS}

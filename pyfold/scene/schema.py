@@ -10,6 +10,10 @@ integer (every integer key, ``cell.dim`` included); an integer is accepted where
 real is expected. Units: SI or any consistent set (Stokes flow is linear), see
 ``docs/scenes.md``; every dimensional value stays within :data:`MAGNITUDE_LIMIT`
 of 1 so that the arithmetic on it stays finite.
+
+Every field that is not a table is a setting of the registry
+(:mod:`pyfold.scene.registry`): its type, range, words and default are built from
+there by :func:`_registered` and :func:`_default`.
 """
 from __future__ import annotations
 
@@ -36,29 +40,11 @@ __all__ = [
     "MAX_PARTICLES_PER_FAMILY",
 ]
 
-#: Default rule for the equivalent aspect ratio of a finite cylinder: Cox (1971,
-#: J. Fluid Mech. 45:625) slender-body result ``beta_e = 1.24 beta / sqrt(ln beta)``,
-#: the classic choice for long fibres (docs/physics.md#equivalent-aspect-ratio-of-a-finite-cylinder).
-EQUIVALENT_ASPECT_RATIO_DEFAULT = "cox"
-
-
-#: Every dimensional value (lengths [m], rates [1/s], viscosity [Pa s]) must lie within
-#: 30 decades of 1: any consistent unit system works (SI fibres are ~1e-5 m, lengths in
-#: fibre lengths are ~1), and then a volume (L^3, <= 1e90) or a product of a few such
-#: values stays finite and normal in double precision (limits 1e+-308).
-MAGNITUDE_LIMIT = 1e30
-#: its reciprocal, the smallest length or viscosity
-_SMALLEST = 1e-30
-
-#: Largest ratio of the longest cell side to the smallest particle radius (and so of any
-#: two lengths of a scene: every particle must fit in half the cell). 1e6 radii per side
-#: is far beyond any simulation (the Stokes grid, the cell lists, the particle count all
-#: scale with it); it keeps cell / particle volume ratios <= 1e18 and grid sizes finite.
-MAX_LENGTH_RATIO = 1e6
-
-#: Largest number of particles of one family: ``count``, or the count a
-#: ``volume_fraction`` gives (one cap, applied to both).
-MAX_PARTICLES_PER_FAMILY = 10_000_000
+#: Bounds shared with pyfold.scene.normalise; declared with the settings (pyfold/scene/registry.py).
+EQUIVALENT_ASPECT_RATIO_DEFAULT = registry.EQUIVALENT_ASPECT_RATIO_DEFAULT
+MAGNITUDE_LIMIT = registry.MAGNITUDE_LIMIT
+MAX_LENGTH_RATIO = registry.MAX_LENGTH_RATIO
+MAX_PARTICLES_PER_FAMILY = registry.MAX_PARTICLES_PER_FAMILY
 
 
 def _finite(value: float) -> float:
@@ -75,40 +61,55 @@ def _one_of(*allowed: int):
     return check
 
 
-def _registered(path: str):
-    """The field type of the registered setting at TOML ``path`` (pyfold/scene/registry.py):
-    its words, or its type within its range (strict, finite)."""
-    s = registry.setting(path)
-    if s.kind == "choice":
-        return Literal[s.choices]
-    if s.kind == "bool":
-        return bool
+def _bounded(s: registry.Setting, kind: str):
+    """A number within the setting's range (strict; a real finite)."""
     bounds = {}
     if s.lo is not None:
         bounds["gt" if s.lo_open else "ge"] = s.lo
     if s.hi is not None:
         bounds["lt" if s.hi_open else "le"] = s.hi
-    if s.kind == "integer":
+    if kind == "integer":
         return Annotated[int, Field(**bounds)]
-    return Annotated[float, Field(**bounds), AfterValidator(_finite)]
+    if bounds:
+        return Annotated[float, Field(**bounds), AfterValidator(_finite)]
+    return Annotated[float, AfterValidator(_finite)]
+
+
+def _sized(size: tuple[int | None, int | None] | None, **extra) -> dict:
+    """Field arguments of a length bound (fewest, most) and any others."""
+    lo, hi = size or (None, None)
+    return {**({} if lo is None else {"min_length": lo}), **({} if hi is None else {"max_length": hi}), **extra}
+
+
+#: a data file named in a scene (``.csv`` or ``.npy``), relative to the scene file
+FilePath = Annotated[str, Field(min_length=1, max_length=registry.FILE_PATH_MAX)]
+
+
+def _registered(path: str):
+    """The field type of the registered setting at TOML ``path`` (pyfold/scene/registry.py):
+    its words, its allowed integers, its type within its range (strict, finite), its
+    vector or matrix of such reals (or the data file holding it), or its text."""
+    s = registry.setting(path)
+    if s.kind == "choice":
+        return Literal[s.choices]
+    if s.kind == "bool":
+        return bool
+    if s.kind == "integer" and s.values:
+        return Annotated[int, AfterValidator(_one_of(*s.values))]
+    if s.kind in ("integer", "real"):
+        return _bounded(s, s.kind)
+    if s.kind == "text":
+        return Annotated[str, Field(**_sized(s.size, **({"pattern": s.pattern} if s.pattern else {})))]
+    vector = Annotated[list[_bounded(s, "real")], Field(**_sized(s.size))]
+    if s.kind == "vector":
+        return vector
+    matrix = Annotated[list[vector], Field(**_sized(s.rows))] if s.rows else list[vector]
+    return matrix | FilePath if s.file else matrix
 
 
 def _default(path: str):
     """The registered default of the setting at ``path``."""
     return registry.default(path)
-
-
-Real = Annotated[float, AfterValidator(_finite)]
-PositiveReal = Annotated[float, Field(gt=0), AfterValidator(_finite)]
-NonNegativeReal = Annotated[float, Field(ge=0), AfterValidator(_finite)]
-#: a length [m]: 1e-30 <= value <= MAGNITUDE_LIMIT
-Length = Annotated[float, Field(ge=_SMALLEST, le=MAGNITUDE_LIMIT), AfterValidator(_finite)]
-#: a rate or velocity gradient entry [1/s]: |value| <= MAGNITUDE_LIMIT
-Rate = Annotated[float, Field(ge=-MAGNITUDE_LIMIT, le=MAGNITUDE_LIMIT), AfterValidator(_finite)]
-Vector = Annotated[list[Real], Field(min_length=2, max_length=3)]
-#: a data file named in a scene (``.csv`` or ``.npy``), relative to the scene file
-FilePath = Annotated[str, Field(min_length=1, max_length=4096)]
-RateVector = Annotated[list[Rate], Field(min_length=2, max_length=3)]
 
 
 class _Table(BaseModel):
@@ -121,61 +122,61 @@ class Cell(_Table):
     """The computational cell."""
 
     #: 2 or 3 (a strict integer: 3.0 is rejected like every non-integer for an integer key)
-    dim: Annotated[int, AfterValidator(_one_of(2, 3))] = 3
+    dim: _registered("cell.dim") = _default("cell.dim")
     #: Side lengths (Lx, Ly[, Lz]), one per dimension [m]
-    size: Annotated[list[Length], Field(min_length=2, max_length=3)]
+    size: _registered("cell.size")
     #: "periodic" on every side, or "couette": no-slip walls at y = 0 and y = Ly
     #: moving at -U and +U (U = rate * Ly / 2), periodic in x (and z)
-    boundary: Literal["periodic", "couette"] = "periodic"
+    boundary: _registered("cell.boundary") = _default("cell.boundary")
 
 
 class Flow(_Table):
     """The imposed mean flow ``u = G . x``."""
 
-    type: Literal["simple_shear", "planar_elongation", "uniaxial_elongation", "general"] = "simple_shear"
+    type: _registered("flow.type") = _default("flow.type")
     #: simple shear: G_xy = rate; planar elongation: G = diag(rate, -rate[, 0]);
     #: uniaxial elongation: G = diag(rate, -rate/2, -rate/2) [1/s]
-    rate: Rate | None = None
+    rate: _registered("flow.rate") | None = None
     #: the full velocity gradient G_ij = du_i/dx_j (dim x dim, traceless), type = "general" only [1/s]
-    gradient: Annotated[list[RateVector], Field(min_length=2, max_length=3)] | None = None
+    gradient: _registered("flow.gradient") | None = None
 
 
 class Fluid(_Table):
     """The suspending Newtonian fluid."""
 
     #: dynamic viscosity [Pa s]
-    viscosity: Annotated[float, Field(ge=_SMALLEST, le=MAGNITUDE_LIMIT), AfterValidator(_finite)] = 1.0
+    viscosity: _registered("fluid.viscosity") = _default("fluid.viscosity")
 
 
 class ParticleFamily(_Table):
     """One family of identical particles."""
 
     #: label used in outputs (default "family<index>")
-    name: Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.+-]+$")] | None = None
+    name: _registered("particles.name") | None = None
     shape: _registered("particles.shape")
     #: fibre cross-section radius, sphere radius, spheroid minor semi-axis [m]
-    radius: Length
+    radius: _registered("particles.radius")
     #: fibre (cylinder) length or spheroid major axis; not for spheres [m]
-    length: Length | None = None
+    length: _registered("particles.length") | None = None
     #: length / (2 radius), an alternative to `length`; not for spheres [-]
-    aspect_ratio: Annotated[float, Field(gt=0, le=MAX_LENGTH_RATIO), AfterValidator(_finite)] | None = None
+    aspect_ratio: _registered("particles.aspect_ratio") | None = None
     #: number of particles (give exactly one of count, volume_fraction)
-    count: Annotated[int, Field(ge=1, le=MAX_PARTICLES_PER_FAMILY)] | None = None
+    count: _registered("particles.count") | None = None
     #: fraction of the cell volume (area in 2-D) the family fills [-]
-    volume_fraction: Annotated[float, Field(gt=0, lt=1), AfterValidator(_finite)] | None = None
-    orientation: Literal["isotropic", "aligned", "planar_random", "given"] = "isotropic"
+    volume_fraction: _registered("particles.volume_fraction") | None = None
+    orientation: _registered("particles.orientation") = _default("particles.orientation")
     #: axis of every particle for orientation = "aligned" (normalised; default the flow direction x)
-    direction: Vector | None = None
+    direction: _registered("particles.direction") | None = None
     #: one axis per particle (count x dim) for orientation = "given" (each normalised), inline
     #: or a .csv / .npy file (path relative to the scene file, one row per particle)
-    orientations: list[Vector] | FilePath | None = None
+    orientations: _registered("particles.orientations") | None = None
     #: given centres, one per particle (n x dim) [m], inline or a .csv / .npy file (path
     #: relative to the scene file, one row per particle; a CSV may start with a header line):
     #: no random placement, the count is the number of rows
-    positions: list[Vector] | FilePath | None = None
+    positions: _registered("particles.positions") | None = None
     #: finite cylinders only: rule giving the equivalent spheroid aspect ratio
     #: (Cox 1971, Zhang et al. 2011, Harris & Pittman 1975)
-    equivalent_aspect_ratio: Literal["cox", "zhang", "harris_pittman"] | None = None
+    equivalent_aspect_ratio: _registered("particles.equivalent_aspect_ratio") | None = None
 
 
 class Model(_Table):
@@ -263,9 +264,9 @@ class Numerics(_Table):
     """Time stepping and solver settings."""
 
     #: time step [s]
-    dt: PositiveReal
+    dt: _registered("numerics.dt")
     #: end time; a multiple of dt [s]
-    t_end: PositiveReal
+    t_end: _registered("numerics.t_end")
     #: seed of every random draw (placement, orientations)
     seed: _registered("numerics.seed") = _default("numerics.seed")
     #: time scheme of the Stokes rigid velocities: "ab2" (Adams-Bashforth 2, first step
@@ -280,20 +281,20 @@ class Output(_Table):
 
     #: interval between records of the statistics (a2, a4, contact and drift counters) [s]
     #: (default: t_end / 100 rounded down to a multiple of dt)
-    interval: PositiveReal | None = None
+    interval: _registered("output.interval") | None = None
     #: interval between particle snapshots (positions, axes); 0 = none
     #: (default: t_end / 10 rounded down to a multiple of dt) [s]
-    snapshot_interval: NonNegativeReal | None = None
+    snapshot_interval: _registered("output.snapshot_interval") | None = None
     #: interval between restart checkpoints; 0 = none
     #: (default: t_end / 20 rounded down to a multiple of dt) [s]
-    checkpoint_interval: NonNegativeReal | None = None
+    checkpoint_interval: _registered("output.checkpoint_interval") | None = None
 
 
 class Scene(_Table):
     """A complete scene: what ``pyfold run`` simulates."""
 
-    title: Annotated[str, Field(max_length=200)] = ""
-    description: Annotated[str, Field(max_length=4000)] = ""
+    title: _registered("title") = _default("title")
+    description: _registered("description") = _default("description")
     cell: Cell
     flow: Flow
     fluid: Fluid = Fluid()

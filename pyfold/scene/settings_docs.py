@@ -11,7 +11,7 @@ from types import ModuleType
 def _number(x: float | int) -> str:
     if isinstance(x, int) and abs(x) >= 10_000:
         return f"{x:.0e}".replace("e+0", "e").replace("e+", "e") if x % 10 ** (len(str(x)) - 1) == 0 else str(x)
-    return f"{x:g}".replace("e+", "e").replace("e-0", "e-")
+    return f"{x:g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
 
 
 def _range(s) -> str:
@@ -21,9 +21,27 @@ def _range(s) -> str:
         return "bool (0, 1)"
     if s.path == "model.alpha":  # the upper bound depends on the particles (pyfold.scene.normalise)
         return "real in [0, smallest particle radius]"
+    if s.kind == "integer" and s.values:
+        return " or ".join(map(str, s.values))
+    if s.kind == "text":
+        lo, hi = s.size or (None, None)
+        chars = f"{lo or 0} to {hi} characters" if hi is not None else f"at least {lo or 0} characters"
+        return f"text, {chars}" + (f" matching `{s.pattern}`" if s.pattern else "")
     lo = "−∞" if s.lo is None else _number(s.lo)
     hi = "∞" if s.hi is None else _number(s.hi)
-    return f"{s.kind} in {'(' if s.lo_open or s.lo is None else '['}{lo}, {hi}{')' if s.hi_open or s.hi is None else ']'}"
+    interval = f"{'(' if s.lo_open or s.lo is None else '['}{lo}, {hi}{')' if s.hi_open or s.hi is None else ']'}"
+    if s.kind == "vector":
+        return f"{_count(s.size)} reals in {interval}"
+    if s.kind == "matrix":
+        rows = f"{_count(s.rows)} rows" if s.rows else "rows"
+        return f"{rows} of {_count(s.size)} reals in {interval}" + (", or a .csv / .npy file" if s.file else "")
+    return f"{s.kind} in {interval}"
+
+
+def _count(size: tuple[int | None, int | None]) -> str:
+    """``2-3``: the fewest and most entries."""
+    lo, hi = size
+    return str(lo) if lo == hi else f"{lo}-{hi}"
 
 
 def _default(s) -> str:

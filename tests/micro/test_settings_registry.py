@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import typing
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,44 @@ def test_optional_datasets_default_to_the_registry():
     for s in registry.SETTINGS:
         if s.optional:
             assert f"= FOLD_DEF_{s.fortran}" in text, s.path
+
+
+def _table_of(annotation) -> type[schema.BaseModel] | None:
+    """The schema model of a field that is a table or an array of tables, else None."""
+    if isinstance(annotation, type) and issubclass(annotation, schema.BaseModel):
+        return annotation
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    return next((m for m in map(_table_of, args) if m is not None), None)
+
+
+def _fields(model: type[schema.BaseModel], prefix: str = ""):
+    """(TOML path, field) of every key of ``model`` that is not a table, descending into tables."""
+    for name, info in model.model_fields.items():
+        table = _table_of(info.annotation)
+        path = prefix + name
+        if table is None:
+            yield path, info
+        else:
+            yield from _fields(table, f"{path}.")
+
+
+SCHEMA_FIELDS = dict(_fields(schema.Scene))
+
+
+def test_every_schema_key_is_a_registry_setting_and_every_setting_a_schema_key():
+    """A scene key cannot bypass the registry: the keys of the schema's models and the
+    registered settings are the same set."""
+    assert set(SCHEMA_FIELDS) == {s.path for s in registry.SETTINGS}
+
+
+@pytest.mark.parametrize("path", sorted(SCHEMA_FIELDS))
+def test_each_schema_field_has_the_registered_default(path):
+    """A field with a registered default has it; one without is required or None."""
+    info, default = SCHEMA_FIELDS[path], registry.setting(path).default
+    if default is None:
+        assert info.is_required() or info.default is None, path
+    else:
+        assert info.default == default and type(info.default) is type(default), path
 
 
 def test_backend_for_follows_the_capability_table():
@@ -99,6 +138,28 @@ def test_a_contact_setting_is_run_at_its_bound_and_refused_beyond(dataset, value
     path = tmp_path / "contact.h5"
     write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.05, length=0.5, xi=xi_of(5.0),
                    t_end=0.02, collisions=2, **{dataset: value})
+    proc = run_fold(path)
+    assert proc.returncode == (0 if accepted else 2), (proc.returncode, proc.stderr)
+    if not accepted:
+        assert f"/setup/resolved/{dataset}" in proc.stderr, proc.stderr
+
+
+_VISCOSITY = registry.setting("fluid.viscosity")
+
+
+@pytest.mark.parametrize("dataset, value, accepted", [
+    ("viscosity", _VISCOSITY.hi, True), ("viscosity", _VISCOSITY.lo, True),
+    ("viscosity", float(np.nextafter(_VISCOSITY.hi, np.inf)), False),
+    ("viscosity", float(np.nextafter(_VISCOSITY.lo, 0.0)), False),
+    ("dim", np.int32(registry.setting("cell.dim").hi + 1), False)])
+def test_a_cell_or_fluid_setting_is_run_within_the_registry_range_and_refused_beyond(dataset, value, accepted,
+                                                                                     tmp_path):
+    """fold_run reads the viscosity and the dimension within the range `pyfold validate`
+    accepts (exit 0 at a bound) and refuses a value beyond it, naming the dataset (exit 2)."""
+    require_fold_run()
+    path = tmp_path / "cell.h5"
+    write_run_file(path, x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.05, length=0.5, xi=xi_of(5.0),
+                   t_end=0.02, override={f"/setup/resolved/{dataset}": value})
     proc = run_fold(path)
     assert proc.returncode == (0 if accepted else 2), (proc.returncode, proc.stderr)
     if not accepted:
