@@ -9,15 +9,22 @@ Scenes: N fibres of aspect ratio 10 placed at random (random sequential addition
 closest axis distance >= (2 + gap) R), number density n L^3 = 4 (the dense-fibre scene
 of bench_stokes_step.py: 55 fibres in a 2.4^3 cell), cells of 1.5, 2.4 and 3.2 fibre
 lengths (14, 55 and 131 fibres), 3 voxels per diameter; the 55-fibre scene also at 2
-and 4 voxels per diameter and with gaps 0.05 and 0.5 R. One static solve in simple shear
-(gamma_dot = 1) per setting, cold start. Reference: the exact solve at tolerance 1e-10
-(the kappa -> infinity limit of the penalised solve on the same voxels: the penalty is
-its Tikhonov regularisation, tests/micro/test_stokes_exact.py).
+and 4 voxels per diameter and with gaps 0.05 and 0.5 R; 14 and 28 fibres in the same
+2.4^3 cell and 72^3 grid (the number of particles at a fixed grid). One static solve in
+simple shear (gamma_dot = 1) per setting, cold start. Reference: the exact solve at
+tolerance 1e-10 (the kappa -> infinity limit of the penalised solve on the same voxels:
+the penalty is its Tikhonov regularisation, tests/micro/test_stokes_exact.py).
+``--big``: the 128^3 sibling of bench_stokes_step.py --big (305 fibres, cell 4.25^3, 3
+voxels per diameter), one cold solve per setting, errors against the exact solve at
+1e-6 instead (its own error, ~2e-7 at 72^3, is far below the settings' it measures).
 Error: sqrt(sum |V - V_ref|^2 + (L/2)^2 |w - w_ref|^2) / sqrt(sum |V_ref|^2 + (L/2)^2 |w_ref|^2)
 over the fibres (vel err) and the same for the rotation rates alone (rot err); eta err:
 the relative error of the particles' part of the effective viscosity.
-Command:  nice -n 5 python benchmarks/bench_rigidity_solve.py [--quick] [--seed 1]
-Cost: --quick (the 55-fibre scene at 3 voxels per diameter only) ~3 CPU-min; full ~25 CPU-min.
+Command:  nice -n 5 python benchmarks/bench_rigidity_solve.py [--quick | --big] [--seed 1] [--only NAME ...]
+          nice -n 5 python benchmarks/bench_rigidity_solve.py --case CELL CPD GAP COUNT [--case ...]
+          (one scene of the full list, e.g. --case 2.4 3 0.2 14; COUNT 0 = n L^3 = 4)
+Cost: --quick (the 55-fibre scene at 3 voxels per diameter only) ~3 CPU-min; full ~30 CPU-min;
+--big roughly 6x the 72^3 scene per iteration.
 """
 from __future__ import annotations
 
@@ -98,15 +105,20 @@ def errors(sol, ref):
     return vel, rot, eta
 
 
-def scene(cell, cpd, gap, seed):
-    count = int(round(NL3 * cell**3))
+def scene(cell, cpd, gap, seed, count=None, ref_tol=1e-10, only=None):
+    """The table of one scene: count fibres (default n L^3 = 4) in a cube of side cell,
+    cpd voxels per diameter, axes >= (2 + gap) R apart; the settings named in only (all)."""
+    count = count or int(round(NL3 * cell**3))
     n = int(round(cell * BETA * cpd))
     x, p = place(cell, count, gap, seed)
-    ref, tref = solve(x, p, cell, n, rigidity="exact", tol=1e-10)
+    ref, tref = solve(x, p, cell, n, rigidity="exact", tol=ref_tol)
     print(f"\n{count} fibres, cell {cell} L, grid {n}^3 ({cpd} voxels per diameter), gap >= {gap} R; "
-          f"reference: exact 1e-10, {ref.iterations} iterations, {tref:.1f} CPU-s", flush=True)
+          f"reference: exact {ref_tol:g}, {ref.iterations} iterations, {tref:.1f} CPU-s "
+          f"(load {os.getloadavg()[0]:.2f})", flush=True)
     print(f"  {'setting':<24} {'iter':>6} {'CPU-s':>7} {'CPU-s/iter':>10} {'vel err':>9} {'rot err':>9} {'eta err':>9}")
     for name, kw in SETTINGS.items():
+        if only is not None and name not in only:
+            continue
         sol, t = solve(x, p, cell, n, **kw)
         vel, rot, eta = errors(sol, ref)
         print(f"  {name:<24} {sol.iterations:>6d} {t:>7.2f} {t / max(sol.iterations, 1):>10.4f} {vel:>9.2e} "
@@ -116,13 +128,27 @@ def scene(cell, cpd, gap, seed):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="the 55-fibre scene at 3 voxels per diameter only")
+    ap.add_argument("--big", action="store_true", help="the 128^3 scene of 305 fibres only (one solve per setting)")
+    ap.add_argument("--only", nargs="*", default=None, choices=list(SETTINGS), metavar="NAME",
+                    help="settings to run (default all)")
+    ap.add_argument("--case", type=float, nargs=4, action="append", metavar=("CELL", "CPD", "GAP", "COUNT"),
+                    help="only this scene (cell side in fibre lengths, voxels per diameter, gap in R, fibres; "
+                         "0 fibres = n L^3 = 4); repeatable")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
-    cases = [(2.4, 3, 0.2)] if args.quick else [(2.4, 3, 0.2), (1.5, 3, 0.2), (3.2, 3, 0.2), (2.4, 2, 0.2),
-                                                  (2.4, 4, 0.2), (2.4, 3, 0.05), (2.4, 3, 0.5)]
-    for cell, cpd, gap in cases:
-        scene(cell, cpd, gap, args.seed)
+    if args.big:
+        scene(4.25, 3, 0.2, args.seed, count=305, ref_tol=1e-6, only=args.only)
+        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+        return
+    # (cell, voxels per diameter, gap, count): count None = n L^3 = 4
+    cases = [(2.4, 3, 0.2, None)] if args.quick else [
+        (2.4, 3, 0.2, None), (1.5, 3, 0.2, None), (3.2, 3, 0.2, None), (2.4, 3, 0.2, 14), (2.4, 3, 0.2, 28),
+        (2.4, 2, 0.2, None), (2.4, 4, 0.2, None), (2.4, 3, 0.05, None), (2.4, 3, 0.5, None)]
+    if args.case:
+        cases = [(cell, int(cpd), gap, int(count) or None) for cell, cpd, gap, count in args.case]
+    for cell, cpd, gap, count in cases:
+        scene(cell, cpd, gap, args.seed, count=count, only=args.only)
     print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 

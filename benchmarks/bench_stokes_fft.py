@@ -11,6 +11,7 @@ Command:  python benchmarks/bench_stokes_fft.py [--build build/editable] [--repe
           python benchmarks/bench_stokes_fft.py --project T_C ALPHA BETA [--grids 128]
           python benchmarks/bench_stokes_fft.py --precision [--grids 72 128] [--rounds 3]
           python benchmarks/bench_stokes_fft.py --forms [--grids 72] [--rounds 3]
+          python benchmarks/bench_stokes_fft.py --rigidity [--grids 32 64]
 Cost: ~3 min (--quick: ~1 min; --mpi: 2-5 min per round of 64^3 and 128^3, 4.5 min at load 10). Runs fortran/stokes/tests/bench_stokes_fft (FFTW_MEASURE
 plans, a sphere of radius n/8 on a sheared lattice, simple shear) and prints medians
 over repeats, with the load average before and after: the machine is shared, so read
@@ -33,6 +34,15 @@ the cell) and a large one (27 %): rounds of the four back to back, medians of th
 iteration in units of one hot double FFT (CPU time). The stencil pass grows with the
 covered fraction, the spectral form does not: the crossover sets
 STENCIL_FRACTION_MAX in fortran/stokes/fold_stokes_fft.f90.
+
+``--rigidity`` answers only: what does one solve cost with exact rigidity
+(numerics.stokes.rigidity = "exact", fold_stokes_rigid) beside the penalised one, serial:
+per grid, the sphere of radius n/8 (centred, simple shear, cold start, through
+``pyfold.native.stokes.solve_particles``) solved by the penalty (kappa 1e3 and 1e4) and by
+the exact solve, at tolerances 1e-6 and 1e-3: CG iterations, CPU seconds, and the solve
+in units of one hot double FFT of the same grid (CPU time, ``bench_stokes_fft N 1e3 R fft``,
+mean of before and after), per solve and per iteration (voxelisation, plans and rigid fit
+included, so the per-iteration figure is an upper bound of the iteration's cost).
 
 ``--mpi`` answers only the parallel question (docs/physics.md, "Parallel scaling of
 the slab decomposition"): per round and grid, back to back, np = 1 (serial FFTW),
@@ -226,6 +236,44 @@ def forms_rounds(exe: Path, grids: list[int], rounds: int, repeats: int) -> None
               f"{statistics.median(v):6.2f} [{min(v):.2f}, {max(v):.2f}]  ({len(v)} rounds)")
 
 
+def fft_cpu(exe: Path, n: int, repeats: int) -> float:
+    """Median CPU seconds of one hot double FFT of n^3 (first repeat dropped)."""
+    out = _run(exe, [str(n), "1e3", str(repeats + 1), "fft"], 1)
+    return statistics.median(float(v) for v in re.findall(r"t_fft_cpu=\s*(\S+)", out)[1:])
+
+
+#: --rigidity: name -> StokesSettings keywords
+RIGIDITY_SETTINGS = {
+    **{f"penalty {k:.0e}, tol {t:.0e}": dict(kappa=k, tol=t) for k, t in ((1e3, 1e-6), (1e3, 1e-3), (1e4, 1e-6))},
+    **{f"exact, tol {t:.0e}": dict(rigidity="exact", tol=t) for t in (1e-6, 1e-3)},
+}
+
+
+def rigidity_table(exe: Path, grids: list[int], repeats: int) -> None:
+    """One cold solve per setting of the centred sphere of radius n/8, serial."""
+    import time
+
+    from pyfold.native.stokes import Particles, StokesSettings, solve_particles
+
+    P = Particles(x=[[0.5, 0.5, 0.5]], p=[[1.0, 0.0, 0.0]], radius=0.125, length=0.25, shape="sphere")
+    print(f"{'grid':>6} {'setting':<24} {'iter':>6} {'CPU-s':>8} {'FFT-eq':>8} {'FFT-eq/iter':>11} {'eta_eff':>10}")
+    for n in grids:
+        t_fft = fft_cpu(exe, n, repeats)
+        rows = []
+        for name, kw in RIGIDITY_SETTINGS.items():
+            t0 = time.process_time()
+            sol = solve_particles(P, [1, 1, 1], (n, n, n),
+                                  settings=StokesSettings(measure_plans=False, max_iter=20000, **kw))
+            rows.append((name, sol.iterations, time.process_time() - t0, sol.eta_eff))
+        t_fft2 = fft_cpu(exe, n, repeats)
+        unit = 0.5 * (t_fft + t_fft2)
+        for name, its, t, eta in rows:
+            print(f"{n:>5}^3 {name:<24} {its:>6d} {t:>8.3f} {t / unit:>8.0f} {t / unit / max(its, 1):>11.1f} "
+                  f"{eta:>10.6f}", flush=True)
+        print(f"        one hot FFT {unit:.3e} CPU-s (mean of {t_fft:.3e} before and {t_fft2:.3e} after; "
+              f"load {load()})")
+
+
 def iterations(exe: Path, n: int, kappa: float, shape: str = "sphere") -> int:
     out = _run(exe, [str(n), str(kappa), "1", "iters", shape], 1)
     m = re.search(r"iterations=\s*(\d+)", out)
@@ -242,7 +290,10 @@ def main() -> None:
                     help="only the serial iteration with single- against double-precision transforms")
     ap.add_argument("--forms", action="store_true",
                     help="only the serial iteration in the stencil against the spectral form, small and large sphere")
-    ap.add_argument("--grids", type=int, nargs="+", default=[64, 128], help="grids of --mpi, --precision and --forms")
+    ap.add_argument("--rigidity", action="store_true",
+                    help="only one solve with exact rigidity beside the penalised ones, serial, per grid")
+    ap.add_argument("--grids", type=int, nargs="+", default=[64, 128],
+                    help="grids of --mpi, --precision, --forms and --rigidity")
     ap.add_argument("--rounds", type=int, default=5, help="rounds of --mpi and --precision")
     ap.add_argument("--project", type=float, nargs=3, metavar=("T_C", "ALPHA", "BETA"),
                     help="only print the projected scaling at max(--grids) for a serial iteration T_C [s], "
@@ -266,6 +317,10 @@ def main() -> None:
         return
     if args.forms:
         forms_rounds(exe, args.grids, args.rounds, args.repeats)
+        print(f"\nload average after: {load()}")
+        return
+    if args.rigidity:
+        rigidity_table(exe, args.grids, args.repeats)
         print(f"\nload average after: {load()}")
         return
     if args.mpi:

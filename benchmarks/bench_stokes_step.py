@@ -9,7 +9,7 @@ fibre lengths, 3 voxels per diameter (grid 72^3), kappa 1e3, AB2, dt = 0.01 (str
 305 fibres, same number density and resolution); ``--quick``: 2 voxels per diameter
 (grid 48^3), 30 steps.
 Command:  nice -n 5 python benchmarks/bench_stokes_step.py [--quick | --big] [--steps N]
-          [--only NAME ...] [--build build-wt] [--keep DIR [--reuse]]
+          [--only NAME ...] [--np 2] [--build build-wt] [--keep DIR [--reuse]]
 Cost (CPU time; wall time depends on the load): --quick ~4 CPU-min for the reference, the baseline
 and 7 settings, default (72^3, 100 steps) ~15 CPU-min for the reference and the baseline, --big hours.
 
@@ -21,7 +21,10 @@ the first solve excluded). The unit of cost is one hot real 3-D FFT of the same 
 (r2c + c2r of one field / 2, FFTW_MEASURE plans, ``bench_stokes_fft N 1e3 R fft``),
 measured in this run before and after the settings; the FFT-equivalents per step are
 CPU seconds per step / CPU seconds per FFT (CPU time: the machine is shared, wall times
-carry the other engineers' load; the wall-based ratio is printed too).
+carry the other engineers' load; the wall-based ratio is printed too). With ``--np 2``
+every setting runs on two ranks (slabs): CPU seconds are fold_run's rank 0, so the
+FFT-equivalents per step are those of one rank (compare iterations per step with the
+serial table; the serial FFT is the unit).
 
 Accuracy, against the reference setting (tolerance 1e-10, a solve every step):
 * ``vel err``: RMS relative error of the particles' rigid rates over the steps,
@@ -93,8 +96,10 @@ def scene_text(size: float, count: int, cells_per_diameter: int, steps: int, sto
                                    "max_grid_points": 4000000, "max_iterations": 20000, **stokes})
 
 
-def run_setting(workdir: Path, name: str, text: str, fold_run: Path, reuse: bool = False) -> dict:
-    """One pyfold run (or, with reuse, the kept run of the same scene text and its log)."""
+def run_setting(workdir: Path, name: str, text: str, fold_run: Path, reuse: bool = False, ranks: int = 1) -> dict:
+    """One pyfold run on ``ranks`` ranks (or, with reuse, the kept run of the same scene text,
+    rank count and its log)."""
+    name = name if ranks == 1 else f"{name}_np{ranks}"
     scene = workdir / f"{name}.toml"
     out = workdir / f"{name}.h5"
     log = workdir / f"{name}.log"
@@ -102,7 +107,7 @@ def run_setting(workdir: Path, name: str, text: str, fold_run: Path, reuse: bool
         scene.write_text(text)
         env = dict(os.environ, PYFOLD_FOLD_RUN=str(fold_run))
         pyfold = Path(sys.executable).parent / "pyfold"
-        cmd = [str(pyfold), "run", str(scene), "-o", str(out), "--force"]
+        cmd = [str(pyfold), "run", str(scene), "-o", str(out), "--force", "--np", str(ranks)]
         proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
         log.write_text(proc.stdout + "\n" + proc.stderr)
         if proc.returncode != 0:
@@ -157,6 +162,7 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", default=None, help="settings to run besides the reference and baseline")
     ap.add_argument("--reference", default="reference", choices=list(SETTINGS),
                     help="the setting the accuracy is measured against (exact_ref: the kappa -> infinity limit)")
+    ap.add_argument("--np", type=int, default=1, help="MPI ranks of every run (pyfold run --np)")
     ap.add_argument("--keep", default=None, help="folder to keep the run files in")
     ap.add_argument("--reuse", action="store_true",
                     help="reuse the runs kept in --keep whose scene is unchanged (e.g. the reference)")
@@ -187,7 +193,7 @@ def main() -> None:
     runs = {}
     for name in names:
         text = scene_text(size, count, cpd, steps, SETTINGS[name][0], args.seed)
-        runs[name] = run_setting(tmp, name, text, fr, args.reuse)
+        runs[name] = run_setting(tmp, name, text, fr, args.reuse, args.np)
         r = runs[name]
         print(f"  ran {name}: grid {r['grid']}, {r['steps']} steps, {r['cg']:.1f} CG iterations/step, "
               f"{r['cpu']:.3f} CPU-s/step (load {os.getloadavg()[0]:.2f})", flush=True)
@@ -200,7 +206,7 @@ def main() -> None:
     ref, base = runs[args.reference], runs["baseline"]
     print(f"accuracy against: {args.reference} ({SETTINGS[args.reference][1]})")
     print(f"\n{count} fibres (aspect ratio 10), cell {size}^3 L, grid {'x'.join(map(str, ref['grid']))}, "
-          f"kappa 1e3, AB2, dt 0.01, {steps} steps; one hot FFT = {fc0:.3e} CPU-s ({fw0:.3e} s wall; "
+          f"kappa 1e3, AB2, dt 0.01, {steps} steps, np = {args.np}; one hot FFT = {fc0:.3e} CPU-s ({fw0:.3e} s wall; "
           f"before/after the runs {fft_before[1]:.3e}/{fft_after[1]:.3e} CPU-s)")
     head = (f"{'setting':<16} {'iter/step':>9} {'max':>5} {'CPU-s/step':>10} {'FFT-eq/step':>11} {'(wall)':>7} "
             f"{'x base':>6} {'FFT-eq/iter':>11} {'vel err':>9} {'rot err':>9} {'a2 err':>9} {'masked':>6}")

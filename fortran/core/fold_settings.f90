@@ -71,4 +71,9 @@ module fold_settings
    !> rigidity formulations (FOLD_RIGIDITY_* code, backend)
    logical, parameter, public :: FOLD_BACKEND_RIGIDITY(0:1, 2) = reshape([.true., .true., .true., .false.], [2, 2])
 
+   !> Rigidity formulations (index: the FOLD_RIGIDITY_* code): their names, whether the
+   !> solid is a viscosity kappa eta_f (kappa and its bound apply)
+   character(len=7), parameter, public :: FOLD_RIGIDITY_NAME(0:1) = [character(len=7) :: "penalty", "exact"]
+   logical, parameter, public :: FOLD_RIGIDITY_USES_KAPPA(0:1) = [.true., .false.]
+
 end module fold_settings

@@ -24,8 +24,8 @@ module fold_hydro_stokes
    use fold_run_file, only: run_setup_t
    use fold_output, only: run_record_t
    use fold_time_scheme, only: FOLD_AB2
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_backend_name, FOLD_RIGIDITY_PENALTY, &
-                                 FOLD_RIGIDITY_EXACT
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_backend_name
+   use fold_settings, only: FOLD_RIGIDITY_NAME, FOLD_RIGIDITY_USES_KAPPA
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
                                stokes_rigid_velocities, stokes_context_lubrication
@@ -78,7 +78,7 @@ contains
       ! (fold_stokes_trust); FOLD_RUN_UNCHECKED_KAPPA set in the environment waives it, for
       ! the test of the run-time stress check only (tests/micro/test_stokes_trust.py)
       call get_environment_variable("FOLD_RUN_UNCHECKED_KAPPA", status=envstat)
-      if (envstat /= 0 .and. self%set%rigidity == FOLD_RIGIDITY_PENALTY) then
+      if (envstat /= 0 .and. FOLD_RIGIDITY_USES_KAPPA(self%set%rigidity)) then
          call stokes_kappa_check(self%set, self%grid_points, stat, errmsg)
          if (stat /= FOLD_OK) then
             errmsg = "/setup/resolved/stokes_kappa: "//trim(errmsg)
@@ -110,9 +110,9 @@ contains
          write (grid, '(i0,"x",i0,"x",i0)') setup%stokes_grid(1:3)
       end if
       grid = trim(grid)//" ("//stokes_backend_name(setup%stokes%backend)//")"
-      if (setup%stokes%rigidity == FOLD_RIGIDITY_EXACT) then
-         write (output_unit, '(a,a,a,i0,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(grid), " on ", nranks, &
-            " rank(s), exact rigidity, tol ", setup%stokes%tol, ", ", &
+      if (.not. FOLD_RIGIDITY_USES_KAPPA(setup%stokes%rigidity)) then
+         write (output_unit, '(a,a,a,i0,a,a,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(grid), " on ", nranks, &
+            " rank(s), ", trim(FOLD_RIGIDITY_NAME(setup%stokes%rigidity)), " rigidity, tol ", setup%stokes%tol, ", ", &
             trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
       else
          write (output_unit, '(a,a,a,i0,a,es9.2,a,es9.2,a,a)') "fold_run: Stokes grid ", trim(grid), " on ", &

@@ -14,7 +14,8 @@ module fold_penalty
    use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED, FOLD_NUMERICAL
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, FOLD_RIGIDITY_EXACT
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC
+   use fold_settings, only: FOLD_RIGIDITY_NAME, FOLD_RIGIDITY_USES_KAPPA
    implicit none
    private
 
@@ -91,10 +92,11 @@ contains
       if (ieee_is_nan(residual)) then
          stat = FOLD_NUMERICAL
          errmsg = who//": residual is NaN"
-      else if (set%rigidity == FOLD_RIGIDITY_EXACT) then
+      else if (.not. FOLD_RIGIDITY_USES_KAPPA(set%rigidity)) then
          stat = FOLD_NOT_CONVERGED
          write (errmsg, '(a,a,i0,a,a,a,es10.3,a,es10.3,a)') who, ": not converged after ", iterations, " ", method, &
-            " iterations: rigidity error ", residual, " > tol ", set%tol, " (rigidity exact)"
+            " iterations: rigidity error ", residual, " > tol ", set%tol, " (rigidity "// &
+            trim(FOLD_RIGIDITY_NAME(set%rigidity))//")"
       else
          stat = FOLD_NOT_CONVERGED
          write (errmsg, '(a,a,i0,a,a,a,es10.3,a,es10.3,a,es10.3,a)') who, ": not converged after ", iterations, " ", &

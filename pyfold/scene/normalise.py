@@ -817,11 +817,14 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
         problems.add("numerics.stokes.rigidity",
                      f"rigidity = {st.rigidity!r} needs the {able} backend (a periodic cell); the {backend} backend "
                      f"is penalised only; allowed: {allowed} with this cell, got {st.rigidity!r}")
-    if st.rigidity == "exact" and st.fft_precision != "double":
+    rigidity = registry.RIGIDITIES[st.rigidity]
+    if st.fft_precision not in rigidity.fft_precisions:
+        others = " or ".join(repr(r.name) for r in registry.RIGIDITIES.values() if st.fft_precision in r.fft_precisions)
         problems.add("numerics.stokes.fft_precision",
-                     "rigidity = 'exact' transforms in double precision only; allowed: fft_precision = 'double' "
-                     f"(or rigidity = 'penalty'), got {st.fft_precision!r}")
-    if grid is not None and grid_points <= st.max_grid_points and st.rigidity == "penalty":
+                     f"rigidity = {st.rigidity!r} transforms in {' or '.join(rigidity.fft_precisions)} precision only; "
+                     f"allowed: fft_precision = {' or '.join(map(repr, rigidity.fft_precisions))} (or rigidity = "
+                     f"{others}), got {st.fft_precision!r}")
+    if grid is not None and grid_points <= st.max_grid_points and rigidity.uses_kappa:
         check_kappa(st, grid[:dim], grid_points, problems)
     voxel_text = ""
     if grid is not None and grid_points <= st.max_grid_points and good and G is not None and shear_flow:

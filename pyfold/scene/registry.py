@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Mapping
 
-__all__ = ["Setting", "Backend", "SETTINGS", "BACKENDS", "AUTO_BACKEND", "setting", "codes", "resolved",
+__all__ = ["Setting", "Backend", "Rigidity", "SETTINGS", "BACKENDS", "RIGIDITIES", "AUTO_BACKEND", "setting", "codes", "resolved",
            "in_range", "range_text",
            "backend_for", "backend_capable", "DEFAULT_ALPHA_OVER_RADIUS", "KAPPA_MIN", "KAPPA_MAX"]
 
@@ -295,6 +295,37 @@ BACKENDS: Mapping[str, Backend] = MappingProxyType({
     "hypre": Backend("hypre", walls=True, lees_edwards=False, deforming_lattice=False, fft_precisions=(),
                      mpi=True, rigidities=("penalty",), fft_transport=False, serial=False,
                      summary="staggered grid with no-slip walls"),
+})
+
+
+@dataclass(frozen=True)
+class Rigidity:
+    """A rigidity formulation of the Stokes solve (a ``numerics.stokes.rigidity`` word):
+    what the rest of the code asks of it instead of testing its name."""
+
+    name: str
+    #: the solid is a viscosity kappa eta_f (numerics.stokes.kappa applies, and its
+    #: grid-dependent bound, pyfold/scene/kappa_range.py and fold_stokes_trust)
+    uses_kappa: bool
+    #: FFT precisions it can run with
+    fft_precisions: tuple[str, ...]
+    #: what it is, for messages
+    summary: str
+
+    @property
+    def code(self) -> int:
+        """Its /setup/resolved/stokes_rigidity code."""
+        return setting("numerics.stokes.rigidity").codes[self.name]
+
+
+#: Rigidity formulations: a new one is an entry here (with its word and code in the
+#: numerics.stokes.rigidity setting), its module in fortran/stokes and its construction
+#: call in fortran/stokes/fold_stokes_build.f90.
+RIGIDITIES: Mapping[str, Rigidity] = MappingProxyType({
+    "penalty": Rigidity("penalty", uses_kappa=True, fft_precisions=("double", "single"),
+                        summary="the seed's penalty: viscosity kappa eta_f in the solid"),
+    "exact": Rigidity("exact", uses_kappa=False, fft_precisions=("double",),
+                      summary="eps(u) = 0 on the solid voxels by a multiplier"),
 })
 
 

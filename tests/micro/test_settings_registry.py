@@ -103,3 +103,17 @@ def test_a_contact_setting_is_run_at_its_bound_and_refused_beyond(dataset, value
     assert proc.returncode == (0 if accepted else 2), (proc.returncode, proc.stderr)
     if not accepted:
         assert f"/setup/resolved/{dataset}" in proc.stderr, proc.stderr
+
+
+def test_every_rigidity_word_has_a_formulation_entry_and_the_fortran_table_follows_it():
+    """The rigidity formulations (registry.RIGIDITIES) cover the words of
+    numerics.stokes.rigidity, and the generated Fortran names/kappa flags, indexed by
+    code, are theirs: fold_run asks them instead of testing a formulation's name."""
+    words = set(registry.setting("numerics.stokes.rigidity").choices)
+    assert set(registry.RIGIDITIES) == words
+    text = (REPO / "fortran" / "core" / "fold_settings.f90").read_text(encoding="utf-8")
+    ordered = sorted(registry.RIGIDITIES.values(), key=lambda r: r.code)
+    names = ", ".join(f'"{r.name}"' for r in ordered)
+    flags = ", ".join(".true." if r.uses_kappa else ".false." for r in ordered)
+    assert f":: {names}]" in text
+    assert f"FOLD_RIGIDITY_USES_KAPPA({ordered[0].code}:{ordered[-1].code}) = [{flags}]" in text
