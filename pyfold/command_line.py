@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import shlex
+import subprocess
 import sys
 from collections.abc import Iterable
 from pathlib import Path
@@ -97,3 +98,14 @@ def write_job_file(path: Path, lines: Iterable[str]) -> Path:
     """Write ``lines`` (from :func:`job_line`), one per line, to ``path``; returns ``path``."""
     path.write_text("".join(line + "\n" for line in lines), encoding="utf-8")
     return path
+
+
+def git_revision(folder: os.PathLike | str) -> str:
+    """The short hash of the git commit checked out at ``folder``, or ``"unknown"``
+    outside a git checkout or without git: recorded beside the command line that made a
+    study's output file."""
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              cwd=Path(folder), check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"

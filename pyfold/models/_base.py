@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import abc
+import dataclasses
 
 from typing import Any, ClassVar
 
@@ -19,10 +20,15 @@ def _as_float(x) -> jax.Array:
     return jnp.asarray(x, dtype=jnp.float64)
 
 
-def parameter(default: float):
+def parameter(default: float, low: float | None = None, high: float | None = None):
     """A float model parameter: stored as a float64 JAX array so that it is a dynamic
-    leaf (differentiable, vmappable over a leading axis, no recompilation per value)."""
-    return eqx.field(default=default, converter=_as_float)
+    leaf (differentiable, vmappable over a leading axis, no recompilation per value).
+
+    ``low`` / ``high`` bound its allowed range: :meth:`OrientationModel.__check_init__`
+    checks every bounded parameter with :func:`check_range`.
+    """
+    metadata = {} if low is None and high is None else {"range": (low, high)}
+    return eqx.field(default=default, converter=_as_float, metadata=metadata)
 
 
 def closure_field(default: Any = DEFAULT_CLOSURE):
@@ -99,7 +105,17 @@ class OrientationModel(eqx.Module):
         r = self._rate(t, a2, L)
         return 0.5 * (r + jnp.swapaxes(r, -1, -2))
 
+    def _check_parameter_ranges(self) -> None:
+        # Subclass first, each class's own fields in declaration order: the order in
+        # which equinox runs the classes' ``__check_init__`` methods.
+        bounds = {f.name: f.metadata["range"] for f in dataclasses.fields(self) if "range" in f.metadata}
+        for cls in type(self).__mro__:
+            for name in vars(cls).get("__annotations__", {}):
+                if name in bounds:
+                    check_range(name, getattr(self, name), *bounds.pop(name))
+
     def __check_init__(self):
+        self._check_parameter_ranges()
         d = self.dim  # type: ignore[attr-defined]
         if d not in (2, 3):
             raise InputError(f"dim must be 2 (planar) or 3 (spatial), got {d!r}")

@@ -15,7 +15,7 @@ import equinox as eqx
 
 from pyfold._jax import jax, jnp
 from pyfold.errors import InputError
-from pyfold.models._base import OrientationModel, check_range, closure_field, parameter
+from pyfold.models._base import OrientationModel, closure_field, parameter
 from pyfold.models._terms import (
     ard_diffusion,
     flow_parts,
@@ -108,13 +108,10 @@ class ARDRSC(_ARDBase):
     b3: jax.Array = parameter(0.04)
     b4: jax.Array = parameter(1.168e-5)
     b5: jax.Array = parameter(0.0)
-    kappa: jax.Array = parameter(1.0 / 30.0)
+    kappa: jax.Array = parameter(1.0 / 30.0, low=0.0, high=1.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
-
-    def __check_init__(self):
-        check_range("kappa", self.kappa, 0.0, 1.0)
 
     def diffusivity(self, a2, D, gamma_dot):
         inv = _safe_inverse(gamma_dot)
@@ -155,15 +152,11 @@ class IARD(_ARDBase):
     ``C_I = 0.0627, C_M = 0.9908``.
     """
 
-    ci: jax.Array = parameter(0.0627)
-    cm: jax.Array = parameter(0.9908)
+    ci: jax.Array = parameter(0.0627, low=0.0)
+    cm: jax.Array = parameter(0.9908, low=0.0, high=1.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
-
-    def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
-        check_range("cm", self.cm, 0.0, 1.0)
 
     def diffusivity(self, a2, D, gamma_dot):
         return _iard_diffusivity(self.ci, self.cm, D, gamma_dot)
@@ -194,18 +187,15 @@ class IARDRPR(_ARDBase):
 
     uses_eigenvectors: ClassVar[bool] = True
 
-    ci: jax.Array = parameter(0.0627)
-    cm: jax.Array = parameter(0.9908)
-    alpha: jax.Array = parameter(0.0)
+    ci: jax.Array = parameter(0.0627, low=0.0)
+    cm: jax.Array = parameter(0.9908, low=0.0, high=1.0)
+    alpha: jax.Array = parameter(0.0, low=0.0, high=1.0)
     beta: jax.Array = parameter(0.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
 
     def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
-        check_range("cm", self.cm, 0.0, 1.0)
-        check_range("alpha", self.alpha, 0.0, 1.0)
         _check_beta_dim(self.beta, self.dim)
 
     def diffusivity(self, a2, D, gamma_dot):
@@ -254,15 +244,11 @@ class PARD(_ARDBase):
 
     uses_eigenvectors: ClassVar[bool] = True
 
-    ci: jax.Array = parameter(0.0218)
-    omega: jax.Array = parameter(0.9673)
+    ci: jax.Array = parameter(0.0218, low=0.0)
+    omega: jax.Array = parameter(0.9673, low=0.0, high=1.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
-
-    def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
-        check_range("omega", self.omega, 0.0, 1.0)
 
     def diffusivity(self, a2, D, gamma_dot):
         return self.ci * principal_tensor(a2, _pard_coefficients(self.omega, a2.shape[-1]))
@@ -281,10 +267,7 @@ class PARDRPR(PARD):
     about by the solvers (``uses_eigenvectors = True``, inherited).
     """
 
-    alpha: jax.Array = parameter(0.0)
-
-    def __check_init__(self):
-        check_range("alpha", self.alpha, 0.0, 1.0)
+    alpha: jax.Array = parameter(0.0, low=0.0, high=1.0)
 
     def _rate(self, t, a2, L):
         principal, rotation = self._principal_and_rotation(t, a2, L)

@@ -6,7 +6,7 @@ from typing import Any
 import equinox as eqx
 
 from pyfold._jax import jax
-from pyfold.models._base import OrientationModel, check_range, closure_field, parameter
+from pyfold.models._base import OrientationModel, closure_field, parameter
 from pyfold.models._terms import (
     flow_parts,
     isotropic_diffusion,
@@ -14,6 +14,17 @@ from pyfold.models._terms import (
     rotation_term,
     stretching_term_contracted,
 )
+
+
+def _folgar_tucker_rate(model: OrientationModel, t, a2, L):
+    # Jeffery's rotation and stretching (a4:D from the model's closure) plus isotropic
+    # rotary diffusion with the model's ci, xi: the Folgar-Tucker rate.
+    D, W, gamma_dot = flow_parts(L)
+    return (
+        rotation_term(a2, W)
+        + stretching_term_contracted(a2, model.a4_contract(a2, D, t), D, model.xi)  # type: ignore[attr-defined]
+        + isotropic_diffusion(a2, model.ci, gamma_dot)  # type: ignore[attr-defined]
+    )
 
 
 class FolgarTucker(OrientationModel):
@@ -36,21 +47,13 @@ class FolgarTucker(OrientationModel):
         3 or 2.
     """
 
-    ci: jax.Array = parameter(0.01)
+    ci: jax.Array = parameter(0.01, low=0.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
 
-    def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
-
     def _rate(self, t, a2, L):
-        D, W, gamma_dot = flow_parts(L)
-        return (
-            rotation_term(a2, W)
-            + stretching_term_contracted(a2, self.a4_contract(a2, D, t), D, self.xi)
-            + isotropic_diffusion(a2, self.ci, gamma_dot)
-        )
+        return _folgar_tucker_rate(self, t, a2, L)
 
 
 class FTMS(OrientationModel):
@@ -78,22 +81,13 @@ class FTMS(OrientationModel):
         As in :class:`FolgarTucker`.
     """
 
-    ci: jax.Array = parameter(0.01)
-    u0: jax.Array = parameter(0.0)
+    ci: jax.Array = parameter(0.01, low=0.0)
+    u0: jax.Array = parameter(0.0, low=0.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
 
-    def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
-        check_range("u0", self.u0, 0.0)
-
     def _rate(self, t, a2, L):
-        D, W, gamma_dot = flow_parts(L)
+        _, _, gamma_dot = flow_parts(L)
         potential = 2.0 * self.u0 * gamma_dot * (mat(a2, a2) - self.a4_contract(a2, a2, t))
-        return (
-            rotation_term(a2, W)
-            + stretching_term_contracted(a2, self.a4_contract(a2, D, t), D, self.xi)
-            + isotropic_diffusion(a2, self.ci, gamma_dot)
-            + potential
-        )
+        return _folgar_tucker_rate(self, t, a2, L) + potential

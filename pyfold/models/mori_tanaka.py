@@ -6,7 +6,7 @@ from typing import Any
 import equinox as eqx
 
 from pyfold._jax import jax
-from pyfold.models._base import OrientationModel, check_range, closure_field, parameter
+from pyfold.models._base import OrientationModel, closure_field, parameter
 from pyfold.models._terms import flow_parts, mat, rotation_term, stretching_term
 
 
@@ -33,13 +33,10 @@ class MoriTanaka(OrientationModel):
         As in :class:`~pyfold.models.Jeffery`.
     """
 
-    cf: jax.Array = parameter(0.1)
+    cf: jax.Array = parameter(0.1, low=0.0, high=0.999)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
-
-    def __check_init__(self):
-        check_range("cf", self.cf, 0.0, 0.999)
 
     def _rate(self, t, a2, L):
         D, W, _ = flow_parts(L)

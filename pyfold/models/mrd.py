@@ -6,7 +6,7 @@ from typing import Any, ClassVar
 import equinox as eqx
 
 from pyfold._jax import jax, jnp
-from pyfold.models._base import check_range, closure_field, parameter
+from pyfold.models._base import closure_field, parameter
 from pyfold.models._terms import principal_tensor
 from pyfold.models.ard import _ARDBase
 
@@ -38,18 +38,13 @@ class MRD(_ARDBase):
 
     uses_eigenvectors: ClassVar[bool] = True
 
-    ci: jax.Array = parameter(0.01)
-    d1: jax.Array = parameter(1.0)
-    d2: jax.Array = parameter(0.8)
-    d3: jax.Array = parameter(0.15)
+    ci: jax.Array = parameter(0.01, low=0.0)
+    d1: jax.Array = parameter(1.0, low=0.0)
+    d2: jax.Array = parameter(0.8, low=0.0)
+    d3: jax.Array = parameter(0.15, low=0.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
-
-    def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
-        for name in ("d1", "d2", "d3"):
-            check_range(name, getattr(self, name), 0.0)
 
     def diffusivity(self, a2, D, gamma_dot):
         coeffs = [self.d1, self.d2, self.d3][: a2.shape[-1]]

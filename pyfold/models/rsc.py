@@ -6,7 +6,7 @@ from typing import Any, ClassVar
 import equinox as eqx
 
 from pyfold._jax import jax
-from pyfold.models._base import OrientationModel, check_range, closure_field, parameter
+from pyfold.models._base import OrientationModel, closure_field, parameter
 from pyfold.models._terms import (
     flow_parts,
     isotropic_diffusion,
@@ -82,15 +82,11 @@ class RSC(OrientationModel):
 
     uses_eigenvectors: ClassVar[bool] = True
 
-    ci: jax.Array = parameter(0.01)
-    kappa: jax.Array = parameter(0.1)
+    ci: jax.Array = parameter(0.01, low=0.0)
+    kappa: jax.Array = parameter(0.1, low=0.0, high=1.0)
     xi: jax.Array = parameter(1.0)
     closure: Any = closure_field()
     dim: int = eqx.field(default=3, static=True)
-
-    def __check_init__(self):
-        check_range("ci", self.ci, 0.0)
-        check_range("kappa", self.kappa, 0.0, 1.0)
 
     def _rate(self, t, a2, L):
         D, W, gamma_dot = flow_parts(L)

@@ -288,6 +288,16 @@ def _lengths(lengths, dim: int) -> np.ndarray:
     return np.concatenate([L, np.ones(3 - dim)])
 
 
+def _simple_shear_cell(dim: int, cell_lengths, grid, shear_rate: float) -> tuple[tuple[int, ...], np.ndarray, np.ndarray]:
+    """Voxel counts and cell lengths padded to 3-D, and the gradient ``G`` (3, 3) of
+    simple shear ``u = shear_rate y e_x``."""
+    n = _grid(grid, dim)
+    L = _lengths(cell_lengths, dim)
+    G = np.zeros((3, 3), order="F")
+    G[0, 1] = float(shear_rate)
+    return n, L, G
+
+
 def solve_chi(chi, lattice, G, settings: StokesSettings | None = None) -> FlowSolution:
     """Solve the flow for a given characteristic function ``chi`` (no particles).
 
@@ -332,11 +342,7 @@ def solve_particles(particles: Particles, cell_lengths, grid, shear_rate: float 
     the rigidity residual per particle and the bulk stress.
     """
     s = settings or StokesSettings()
-    dim = particles.dim
-    n = _grid(grid, dim)
-    L = _lengths(cell_lengths, dim)
-    G = np.zeros((3, 3), order="F")
-    G[0, 1] = float(shear_rate)
+    n, L, G = _simple_shear_cell(particles.dim, cell_lengths, grid, shear_rate)
     c = s.codes()
     ext = load("_fold_stokes")
     (chi, u, v, omega, rig, stress, sig_p, scal, it, hist, stat, msg) = ext.fold_stokes_solve_particles(
@@ -364,11 +370,7 @@ def march(particles: Particles, cell_lengths, grid, dt: float, nsteps: int, shea
         raise InputError(f"scheme: must be one of {sorted(SCHEMES)}, got {scheme!r}")
     if not dt > 0 or int(nsteps) < 1:
         raise InputError(f"dt, nsteps: need dt > 0 and nsteps >= 1, got {dt}, {nsteps}")
-    dim = particles.dim
-    n = _grid(grid, dim)
-    L = _lengths(cell_lengths, dim)
-    G = np.zeros((3, 3), order="F")
-    G[0, 1] = float(shear_rate)
+    n, L, G = _simple_shear_cell(particles.dim, cell_lengths, grid, shear_rate)
     c = s.codes()
     ext = load("_fold_stokes")
     xh, ph, rec, stat, msg = ext.fold_stokes_march(

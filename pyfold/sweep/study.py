@@ -28,6 +28,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sweep folder of the simulations (default: OUT/sweep)")
 
 
+def add_form_arguments(parser: argparse.ArgumentParser, large_help: str) -> None:
+    """``--large`` (help ``large_help``), ``--seeds`` and ``--t-end`` of a study script: the
+    choice of the study's form and the overrides of its seeds and strain."""
+    parser.add_argument("--large", action="store_true", help=large_help)
+    parser.add_argument("--seeds", type=int, nargs="+", help="override the form's seeds")
+    parser.add_argument("--t-end", type=float, help="override the form's strain")
+
+
 def load_form(folder: Path, study: str, large: bool, seeds: tuple[int, ...] | None = None,
               arguments: dict[str, Any] | None = None) -> SweepSpec:
     """The sweep file ``folder/<study>[_large].toml`` of a study's form, with ``seeds`` and builder

@@ -325,19 +325,17 @@ def summarise(values: dict, alphas, seeds, quantities) -> dict:
 
 
 def main() -> None:
+    from pyfold.sweep import study as sweep_study
+    from pyfold.sweep.study import wall_seconds
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--large", action="store_true", help="8 seeds, strain 110 (two Jeffery periods)")
-    parser.add_argument("--seeds", type=int, nargs="+", help="override the form's seeds")
-    parser.add_argument("--t-end", type=float, help="override the form's strain")
+    sweep_study.add_form_arguments(parser, "8 seeds, strain 110 (two Jeffery periods)")
     parser.add_argument("--rule-series", action=argparse.BooleanOptionalAction, default=True,
                         help="also run every alpha with the scene builder's dt = alpha/(rate L) (default on)")
     parser.add_argument("--stokes", action="store_true", help="add the small Stokes ensemble (effective viscosity)")
     parser.add_argument("--stokes-t-end", type=float, help="override the Stokes runs' strain")
     parser.add_argument("--analyse-only", action="store_true", help="use existing run files, simulate nothing")
     parser.add_argument("--out", type=Path, default=Path("out/alpha_influence"))
-    from pyfold.sweep import study as sweep_study
-    from pyfold.sweep.study import wall_seconds
-
     sweep_study.add_arguments(parser)
     args = parser.parse_args()
     if args.t_end is not None and not args.t_end > 0.0:

@@ -304,10 +304,10 @@ def rsc_fit(t, a2_mean, L, xi, closure: str = "ibof"):
 
 
 def main() -> None:
+    from pyfold.sweep import study as sweep_study
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--large", action="store_true", help="the large form (more points, seeds, strain)")
-    parser.add_argument("--seeds", type=int, nargs="+", help="override the form's seeds")
-    parser.add_argument("--t-end", type=float, help="override the form's strain")
+    sweep_study.add_form_arguments(parser, "the large form (more points, seeds, strain)")
     parser.add_argument("--np", type=int, default=1, help="MPI ranks per pyfold run")
     parser.add_argument("--trajectory-fit", action=argparse.BooleanOptionalAction, default=True,
                         help="(a) per seed on the form's fit_betas (default on)")
@@ -316,8 +316,6 @@ def main() -> None:
     parser.add_argument("--analyse-only", action="store_true", help="use existing run files, simulate nothing")
     parser.add_argument("--emit-scenes", type=Path, help="write scenes + jobs.txt for a cluster and stop")
     parser.add_argument("--out", type=Path, default=Path("out/interaction_coefficient"))
-    from pyfold.sweep import study as sweep_study
-
     sweep_study.add_arguments(parser)
     args = parser.parse_args()
     if args.emit_scenes:

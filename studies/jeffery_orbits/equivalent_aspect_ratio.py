@@ -86,7 +86,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -94,7 +93,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
-from pyfold.command_line import command_line
+from pyfold.command_line import command_line, git_revision
 from pyfold.kinematics import equivalent_aspect_ratio
 from pyfold.native.stokes import Particles, StokesSettings, solve_particles
 
@@ -264,14 +263,6 @@ def _args(argv=None):
     return a
 
 
-def _git_hash() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              cwd=Path(__file__).resolve().parent, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
 def discretisation(vpd, T):
     """(T_inf, error, order) from T at increasing vpd.
 
@@ -360,7 +351,8 @@ def run(a):
         coords["kappa"] = ("kappa", np.array(ks), {"units": "1", "long_name": "viscosity contrast"})
         data["kappa_period"] = _var(("shape", "kappa"), Tk, "s", "T of the rigidity study")
     return xr.Dataset(data, coords=coords, attrs=dict(
-        format="pyfold.study.equivalent_aspect_ratio", format_version="1.0", creator=f"pyfold {_git_hash()}",
+        format="pyfold.study.equivalent_aspect_ratio", format_version="1.0",
+        creator=f"pyfold {git_revision(Path(__file__).resolve().parent)}",
         created=datetime.datetime.now(datetime.timezone.utc).isoformat(), command=command_line(sys.argv),
         shear_rate=SHEAR_RATE, diameter=DIAMETER, eta_f=ETA_F, kappa_base=KAPPA, tol=TOL, nphi=a.nphi,
         cell_lengths=a.cell, image_beta=a.image_beta, image_vpd=a.image_vpd, fibre_ends=settings.fibre_ends,

@@ -86,14 +86,13 @@ import argparse
 import dataclasses
 import datetime
 import math
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from pyfold.command_line import command_line
+from pyfold.command_line import command_line, git_revision
 from pyfold.ensemble import ensemble_mean
 from pyfold.errors import InputError
 from pyfold.kinematics import equivalent_aspect_ratio
@@ -365,7 +364,8 @@ def run(form: Form, log=print):
                       "fibre among frozen neighbours: rotation rate"),
     )
     return xr.Dataset(data, coords=c, attrs=dict(
-        format="pyfold.study.rotation_neighbours", format_version="1.0", creator=f"pyfold {_git_hash()}",
+        format="pyfold.study.rotation_neighbours", format_version="1.0",
+        creator=f"pyfold {git_revision(Path(__file__).resolve().parent)}",
         created=datetime.datetime.now(datetime.timezone.utc).isoformat(), command=command_line(sys.argv),
         shear_rate=SHEAR_RATE, diameter=DIAMETER, eta_f=ETA_F, kappa=KAPPA, tol=TOL, beta=BETA,
         fibre_cell_d=fcell, sphere_cell_d=SPHERE_CELL, gap_d=GAP, fibre_clearance_d=FIBRE_CLEARANCE, nphi=form.nphi,
@@ -374,14 +374,6 @@ def run(form: Form, log=print):
 
 def _w(nphi: int):
     return jeffery_half_nodes(nphi, float(equivalent_aspect_ratio(BETA, "harris_pittman")))[1]
-
-
-def _git_hash() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              cwd=Path(__file__).resolve().parent, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 # Analysis

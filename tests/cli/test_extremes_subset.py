@@ -95,18 +95,22 @@ def test_gap_scan_matches_the_capsule_distance_of_crossed_and_parallel_fibres():
     assert abs(crossed - 0.2) < tol and abs(parallel - 0.15) < tol and abs(wrapped - 0.0) < tol
 
 
-def test_a_run_with_nan_or_an_overlap_under_status_ok_is_silent_garbage(runs, tmp_path):
-    case = CASES["dt_tip_10radius"]
+def _copy_of_accurate_run(runs, case, path: Path) -> Path:
+    """A copy at ``path`` of the run of ``case``, checked accurate, to damage."""
     good, run = runs(case.name)
     assert good.category == "accurate", good.diagnostic
-    nan_run = tmp_path / "nan.h5"
-    shutil.copy(run, nan_run)
+    shutil.copy(run, path)
+    return path
+
+
+def test_a_run_with_nan_or_an_overlap_under_status_ok_is_silent_garbage(runs, tmp_path):
+    case = CASES["dt_tip_10radius"]
+    nan_run = _copy_of_accurate_run(runs, case, tmp_path / "nan.h5")
     with h5py.File(nan_run, "r+") as f:
         f["a2"][-1, 0, 0] = np.nan
     broken, status = extremes.check_run(nan_run, case, extremes.Outcome("nan", "", ""))
     assert status == "ok" and any("NaN" in b for b in broken), broken
-    overlap = tmp_path / "overlap.h5"
-    shutil.copy(run, overlap)
+    overlap = _copy_of_accurate_run(runs, case, tmp_path / "overlap.h5")
     with h5py.File(overlap, "r+") as f:
         last = int(f.attrs["snapshots_complete"]) - 1
         x = f["x"][last]
@@ -118,10 +122,7 @@ def test_a_run_with_nan_or_an_overlap_under_status_ok_is_silent_garbage(runs, tm
 
 def test_an_orbit_off_the_exact_jeffery_solution_is_silent_garbage(runs, tmp_path):
     case = CASES["planar_single"]
-    good, run = runs(case.name)
-    assert good.category == "accurate", good.diagnostic
-    wrong = tmp_path / "wrong.h5"
-    shutil.copy(run, wrong)
+    wrong = _copy_of_accurate_run(runs, case, tmp_path / "wrong.h5")
     with h5py.File(wrong, "r+") as f:
         f["a2"][-1] = np.diag([0.0, 1.0, 0.0])  # a valid orientation tensor, off the orbit
     broken, _ = extremes.check_run(wrong, case, extremes.Outcome("wrong", "", ""))

@@ -7,10 +7,6 @@ estimators reproduce textbook least squares.
 """
 from __future__ import annotations
 
-import importlib
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy import stats
@@ -19,18 +15,15 @@ from pyfold.errors import InputError
 from pyfold.scene import parse_scene
 from pyfold.scene.sheared_fibres import sheared_fibres
 
-STUDY = Path(__file__).resolve().parents[2] / "studies" / "alpha_influence"
+from study_import import import_study  # helper module next to this file
+
 #: Round-off bound of a 2x2 normal-equation solve on O(1) data: a few hundred ulps.
 RTOL = 1e3 * np.finfo(float).eps
 
 
 @pytest.fixture(scope="module")
 def study():
-    sys.path.insert(0, str(STUDY))
-    try:
-        return importlib.import_module("alpha_influence")
-    finally:
-        sys.path.remove(str(STUDY))
+    return import_study("alpha_influence", "alpha_influence")
 
 
 def test_fixed_series_changes_only_alpha_and_rule_series_couples_dt(study):

@@ -5,27 +5,18 @@ overlaps without it); the Stokes form resolves to the hypre backend and, once th
 backend is built, runs with a wall shear stress above the fluid's."""
 from __future__ import annotations
 
-import importlib
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from pyfold.native import stokes as stokes_codes
 from pyfold.scene import parse_scene
 
-ROOT = Path(__file__).resolve().parents[2]
-STUDY = ROOT / "studies" / "seed_examples"
+from study_import import import_study  # helper module next to this file
 
 
 @pytest.fixture(scope="module")
 def study():
-    sys.path.insert(0, str(STUDY))
-    try:
-        return importlib.import_module("couette_disks")
-    finally:
-        sys.path.remove(str(STUDY))
+    return import_study("seed_examples", "couette_disks")
 
 
 def _tiny(study):

@@ -13,26 +13,19 @@ pseudo-tensor is epsilon_ijk, so the symmetric rate of strain drives no rotation
 """
 from __future__ import annotations
 
-import importlib
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-STUDY = ROOT / "studies" / "seed_examples"
+from study_import import import_study  # helper module next to this file
+
 EPS = np.finfo(float).eps
 
 
 @pytest.fixture(scope="module")
 def study():
-    sys.path.insert(0, str(STUDY))
-    try:
-        return importlib.import_module("rotation_neighbours")
-    finally:
-        sys.path.remove(str(STUDY))
+    return import_study("seed_examples", "rotation_neighbours")
 
 
 @pytest.mark.parametrize("phi, cell, fibre", [(0.3, 5.0, False), (0.2, 8.0, True)])

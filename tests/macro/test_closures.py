@@ -147,36 +147,36 @@ EXACT_PRINCIPAL = {"aligned": np.diag([1.0, 0.0, 0.0]),
                    "isotropic": np.full((3, 3), 1.0 / 15.0) + np.diag([2.0 / 15.0] * 3)}
 
 
+def assert_limit_error(name, diff, limit, eigenvalues, not_exact, not_exact_above):
+    """Check the error ``diff`` of closure ``name`` at the ``limit`` state ("isotropic" or
+    "aligned", principal values ``eigenvalues``): above ``not_exact_above`` for a closure
+    in ``not_exact``, the orthotropic fit's own error at that state for an orthotropic
+    closure, within ``LIMIT_TOLERANCE`` for the others."""
+    if name in not_exact:
+        assert np.abs(diff).max() > not_exact_above
+    elif name in ORTHOTROPIC:
+        err = np.sqrt(np.sum(diff**2))
+        expected = orthotropic_limit_error(name, eigenvalues, EXACT_PRINCIPAL[limit])
+        assert err == pytest.approx(expected, abs=1e-12), f"{name}: {limit} error {err:.3e} in this frame"
+        assert expected < ORTHOTROPIC_LIMIT_BOUND
+    else:
+        err = np.abs(diff).max()
+        tolerance = LIMIT_TOLERANCE.get(name, (1e-10, 1e-10))[("isotropic", "aligned").index(limit)]
+        assert err < tolerance, f"{name}: {limit} error {err:.2e}"
+
+
 @pytest.mark.parametrize("name,d", CASES)
 def test_closure_exact_for_aligned_fibres(name, d):
     a4 = closure_values(name, d)["aligned"]
     for k, q in enumerate(directions(d)):
         diff = a4[k] - np.asarray(T.aligned_a4(jnp.asarray(q)))
-        if name in NOT_EXACT_ALIGNED:
-            assert np.abs(diff).max() > 1e-2
-        elif name in ORTHOTROPIC:
-            err = np.sqrt(np.sum(diff**2))
-            expected = orthotropic_limit_error(name, (1.0, 0.0, 0.0), EXACT_PRINCIPAL["aligned"])
-            assert err == pytest.approx(expected, abs=1e-12), f"{name}: aligned error {err:.3e} in this frame"
-            assert expected < ORTHOTROPIC_LIMIT_BOUND
-        else:
-            err = np.abs(diff).max()
-            assert err < LIMIT_TOLERANCE.get(name, (1e-10, 1e-10))[1], f"{name}: aligned error {err:.2e}"
+        assert_limit_error(name, diff, "aligned", (1.0, 0.0, 0.0), NOT_EXACT_ALIGNED, 1e-2)
 
 
 @pytest.mark.parametrize("name,d", CASES)
 def test_closure_exact_at_isotropy(name, d):
     diff = closure_values(name, d)["isotropic"][0] - np.asarray(T.isotropic_a4(d))
-    if name in NOT_EXACT_ISOTROPIC:
-        assert np.abs(diff).max() > 1e-3
-    elif name in ORTHOTROPIC:
-        err = np.sqrt(np.sum(diff**2))
-        expected = orthotropic_limit_error(name, (1.0 / 3.0,) * 3, EXACT_PRINCIPAL["isotropic"])
-        assert err == pytest.approx(expected, abs=1e-12), f"{name}: isotropic error {err:.3e} in this frame"
-        assert expected < ORTHOTROPIC_LIMIT_BOUND
-    else:
-        err = np.abs(diff).max()
-        assert err < LIMIT_TOLERANCE.get(name, (1e-10, 1e-10))[0], f"{name}: isotropic error {err:.2e}"
+    assert_limit_error(name, diff, "isotropic", (1.0 / 3.0,) * 3, NOT_EXACT_ISOTROPIC, 1e-3)
 
 
 @pytest.mark.parametrize("name,d", CASES)
