@@ -14,123 +14,46 @@ module fold_settings
    implicit none
    private
 
-   !> Codes of model.hydrodynamics (/setup/resolved/hydrodynamics)
-   integer(ip), parameter, public :: FOLD_HYDRO_JEFFERY = 0, FOLD_HYDRO_STOKES = 1
-   !> Codes of numerics.stokes.backend (/setup/resolved/stokes_backend)
-   integer(ip), parameter, public :: FOLD_STOKES_FFT = 1, FOLD_STOKES_HYPRE = 2
-   !> Codes of numerics.stokes.derivative (/setup/resolved/stokes_derivative)
-   integer(ip), parameter, public :: FOLD_DERIV_SPECTRAL = 0, FOLD_DERIV_FD = 1
-   !> Codes of numerics.stokes.mixing (/setup/resolved/stokes_mixing)
-   integer(ip), parameter, public :: FOLD_MIX_ARITHMETIC = 0, FOLD_MIX_HARMONIC = 1, FOLD_MIX_GEOMETRIC = 2
-   !> Codes of numerics.stokes.fibre_ends (/setup/resolved/stokes_fibre_ends)
-   integer(ip), parameter, public :: FOLD_ENDS_FLAT = 0, FOLD_ENDS_CAPPED = 1
-   !> Codes of numerics.stokes.fft_precision (/setup/resolved/stokes_fft_precision)
-   integer(ip), parameter, public :: FOLD_FFT_DOUBLE = 0, FOLD_FFT_SINGLE = 1
-   !> Codes of numerics.stokes.rigidity (/setup/resolved/stokes_rigidity)
-   integer(ip), parameter, public :: FOLD_RIGIDITY_PENALTY = 0, FOLD_RIGIDITY_EXACT = 1
-   !> Codes of numerics.stokes.initial_guess (/setup/resolved/stokes_initial_guess)
-   integer(ip), parameter, public :: FOLD_GUESS_PREVIOUS = 1, FOLD_GUESS_EXTRAPOLATE = 2
+   integer(ip), parameter, public :: FOLD_HYDRO_JEFFERY = 0, FOLD_HYDRO_STOKES = 1  !< codes of model.hydrodynamics (/setup/resolved/hydrodynamics)
+   integer(ip), parameter, public :: FOLD_STOKES_FFT = 1, FOLD_STOKES_HYPRE = 2  !< codes of numerics.stokes.backend (/setup/resolved/stokes_backend)
+   integer(ip), parameter, public :: FOLD_DERIV_SPECTRAL = 0, FOLD_DERIV_FD = 1  !< codes of numerics.stokes.derivative (/setup/resolved/stokes_derivative)
+   integer(ip), parameter, public :: FOLD_MIX_ARITHMETIC = 0, FOLD_MIX_HARMONIC = 1, FOLD_MIX_GEOMETRIC = 2  !< codes of numerics.stokes.mixing (/setup/resolved/stokes_mixing)
+   integer(ip), parameter, public :: FOLD_ENDS_FLAT = 0, FOLD_ENDS_CAPPED = 1  !< codes of numerics.stokes.fibre_ends (/setup/resolved/stokes_fibre_ends)
+   integer(ip), parameter, public :: FOLD_FFT_DOUBLE = 0, FOLD_FFT_SINGLE = 1  !< codes of numerics.stokes.fft_precision (/setup/resolved/stokes_fft_precision)
+   integer(ip), parameter, public :: FOLD_RIGIDITY_PENALTY = 0, FOLD_RIGIDITY_EXACT = 1  !< codes of numerics.stokes.rigidity (/setup/resolved/stokes_rigidity)
+   integer(ip), parameter, public :: FOLD_GUESS_PREVIOUS = 1, FOLD_GUESS_EXTRAPOLATE = 2  !< codes of numerics.stokes.initial_guess (/setup/resolved/stokes_initial_guess)
 
    !> Bounds of the viscosity contrast kappa (registry KAPPA_MIN, KAPPA_MAX)
    real(dp), parameter, public :: FOLD_KAPPA_MIN = 1.0_dp, FOLD_KAPPA_MAX = 1000000000000.0_dp
 
-   !> cell.dim -> /setup/resolved/dim
-   integer(i8), parameter, public :: FOLD_LO_DIM = 2_i8
-   integer(i8), parameter, public :: FOLD_HI_DIM = 3_i8
-   integer(ip), parameter, public :: FOLD_DEF_DIM = 3_ip
-   !> fluid.viscosity -> /setup/resolved/viscosity
-   real(dp), parameter, public :: FOLD_LO_VISCOSITY = 1.0e-30_dp
-   real(dp), parameter, public :: FOLD_HI_VISCOSITY = 1.0e30_dp
-   real(dp), parameter, public :: FOLD_DEF_VISCOSITY = 1.0_dp
-   !> particles.shape -> /setup/resolved/family_shape
-   integer(i8), parameter, public :: FOLD_LO_SHAPE = 1_i8
-   integer(i8), parameter, public :: FOLD_HI_SHAPE = 3_i8
-   !> model.hydrodynamics -> /setup/resolved/hydrodynamics
-   integer(i8), parameter, public :: FOLD_LO_HYDRODYNAMICS = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_HYDRODYNAMICS = 1_i8
-   !> model.collisions -> /setup/resolved/collisions
-   integer(i8), parameter, public :: FOLD_LO_COLLISIONS = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_COLLISIONS = 2_i8
-   !> model.alpha -> /setup/resolved/alpha
-   real(dp), parameter, public :: FOLD_LO_ALPHA = 0.0_dp
-   real(dp), parameter, public :: FOLD_HI_ALPHA = huge(1.0_dp)
-   !> model.contact_max_iter -> /setup/resolved/contact_max_iter
-   integer(i8), parameter, public :: FOLD_LO_CONTACT_MAX_ITER = 1_i8
-   integer(i8), parameter, public :: FOLD_HI_CONTACT_MAX_ITER = 100000_i8
-   integer(ip), parameter, public :: FOLD_DEF_CONTACT_MAX_ITER = 100_ip
-   !> model.on_contact_cap -> /setup/resolved/on_contact_cap
-   integer(i8), parameter, public :: FOLD_LO_ON_CONTACT_CAP = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_ON_CONTACT_CAP = 1_i8
-   integer(ip), parameter, public :: FOLD_DEF_ON_CONTACT_CAP = 0_ip
-   !> model.lubrication -> /setup/resolved/lubrication
-   integer(i8), parameter, public :: FOLD_LO_LUBRICATION = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_LUBRICATION = 1_i8
-   logical, parameter, public :: FOLD_DEF_LUBRICATION = .false.
-   !> numerics.dt -> /setup/resolved/dt
-   real(dp), parameter, public :: FOLD_LO_DT = nearest(0.0_dp, 1.0_dp)
-   real(dp), parameter, public :: FOLD_HI_DT = huge(1.0_dp)
-   !> numerics.t_end -> /setup/resolved/t_end
-   real(dp), parameter, public :: FOLD_LO_T_END = nearest(0.0_dp, 1.0_dp)
-   real(dp), parameter, public :: FOLD_HI_T_END = huge(1.0_dp)
-   !> numerics.time_scheme -> /setup/resolved/time_scheme
-   integer(i8), parameter, public :: FOLD_LO_TIME_SCHEME = 1_i8
-   integer(i8), parameter, public :: FOLD_HI_TIME_SCHEME = 2_i8
-   integer(ip), parameter, public :: FOLD_DEF_TIME_SCHEME = 2_ip
-   !> numerics.stokes.backend -> /setup/resolved/stokes_backend
-   integer(i8), parameter, public :: FOLD_LO_STOKES_BACKEND = 1_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_BACKEND = 2_i8
-   !> numerics.stokes.tolerance -> /setup/resolved/stokes_tolerance
-   real(dp), parameter, public :: FOLD_LO_STOKES_TOLERANCE = nearest(0.0_dp, 1.0_dp)
-   real(dp), parameter, public :: FOLD_HI_STOKES_TOLERANCE = nearest(1.0_dp, -1.0_dp)
-   real(dp), parameter, public :: FOLD_DEF_STOKES_TOLERANCE = 1.0e-6_dp
-   !> numerics.stokes.max_iterations -> /setup/resolved/stokes_max_iterations
-   integer(i8), parameter, public :: FOLD_LO_STOKES_MAX_ITERATIONS = 1_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_MAX_ITERATIONS = 1000000_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_MAX_ITERATIONS = 1000_ip
-   !> numerics.stokes.kappa -> /setup/resolved/stokes_kappa
-   real(dp), parameter, public :: FOLD_LO_STOKES_KAPPA = 1.0_dp
-   real(dp), parameter, public :: FOLD_HI_STOKES_KAPPA = 1000000000000.0_dp
-   real(dp), parameter, public :: FOLD_DEF_STOKES_KAPPA = 1000.0_dp
-   !> numerics.stokes.derivative -> /setup/resolved/stokes_derivative
-   integer(i8), parameter, public :: FOLD_LO_STOKES_DERIVATIVE = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_DERIVATIVE = 1_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_DERIVATIVE = 1_ip
-   !> numerics.stokes.mixing -> /setup/resolved/stokes_mixing
-   integer(i8), parameter, public :: FOLD_LO_STOKES_MIXING = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_MIXING = 2_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_MIXING = 1_ip
-   !> numerics.stokes.subsamples -> /setup/resolved/stokes_subsamples
-   integer(i8), parameter, public :: FOLD_LO_STOKES_SUBSAMPLES = 1_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_SUBSAMPLES = 8_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_SUBSAMPLES = 3_ip
-   !> numerics.stokes.fibre_ends -> /setup/resolved/stokes_fibre_ends
-   integer(i8), parameter, public :: FOLD_LO_STOKES_FIBRE_ENDS = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_FIBRE_ENDS = 1_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_FIBRE_ENDS = 0_ip
-   !> numerics.stokes.warm_start -> /setup/resolved/stokes_warm_start
-   integer(i8), parameter, public :: FOLD_LO_STOKES_WARM_START = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_WARM_START = 1_i8
-   logical, parameter, public :: FOLD_DEF_STOKES_WARM_START = .true.
-   !> numerics.stokes.fft_plan -> /setup/resolved/stokes_fft_plan
-   integer(i8), parameter, public :: FOLD_LO_STOKES_FFT_PLAN = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_FFT_PLAN = 1_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_FFT_PLAN = 1_ip
-   !> numerics.stokes.fft_precision -> /setup/resolved/stokes_fft_precision (optional)
-   integer(i8), parameter, public :: FOLD_LO_STOKES_FFT_PRECISION = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_FFT_PRECISION = 1_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_FFT_PRECISION = 0_ip
-   !> numerics.stokes.rigidity -> /setup/resolved/stokes_rigidity (optional)
-   integer(i8), parameter, public :: FOLD_LO_STOKES_RIGIDITY = 0_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_RIGIDITY = 1_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_RIGIDITY = 0_ip
-   !> numerics.stokes.initial_guess -> /setup/resolved/stokes_initial_guess (optional)
-   integer(i8), parameter, public :: FOLD_LO_STOKES_INITIAL_GUESS = 1_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_INITIAL_GUESS = 2_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_INITIAL_GUESS = 1_ip
-   !> numerics.stokes.solve_every -> /setup/resolved/stokes_solve_every (optional)
-   integer(i8), parameter, public :: FOLD_LO_STOKES_SOLVE_EVERY = 1_i8
-   integer(i8), parameter, public :: FOLD_HI_STOKES_SOLVE_EVERY = 1000_i8
-   integer(ip), parameter, public :: FOLD_DEF_STOKES_SOLVE_EVERY = 1_ip
+   !> Range FOLD_LO_<name> ... FOLD_HI_<name> and default FOLD_DEF_<name> of each setting,
+   !> one line a setting: its scene path -> the dataset fold_run_file reads
+   integer(i8), parameter, public :: FOLD_LO_DIM = 2_i8, FOLD_HI_DIM = 3_i8; integer(ip), parameter, public :: FOLD_DEF_DIM = 3_ip  !< cell.dim -> /setup/resolved/dim
+   real(dp), parameter, public :: FOLD_LO_VISCOSITY = 1.0e-30_dp, FOLD_HI_VISCOSITY = 1.0e30_dp; real(dp), parameter, public :: FOLD_DEF_VISCOSITY = 1.0_dp  !< fluid.viscosity -> /setup/resolved/viscosity
+   integer(i8), parameter, public :: FOLD_LO_SHAPE = 1_i8, FOLD_HI_SHAPE = 3_i8  !< particles.shape -> /setup/resolved/family_shape
+   integer(i8), parameter, public :: FOLD_LO_HYDRODYNAMICS = 0_i8, FOLD_HI_HYDRODYNAMICS = 1_i8  !< model.hydrodynamics -> /setup/resolved/hydrodynamics
+   integer(i8), parameter, public :: FOLD_LO_COLLISIONS = 0_i8, FOLD_HI_COLLISIONS = 2_i8  !< model.collisions -> /setup/resolved/collisions
+   real(dp), parameter, public :: FOLD_LO_ALPHA = 0.0_dp, FOLD_HI_ALPHA = huge(1.0_dp)  !< model.alpha -> /setup/resolved/alpha
+   integer(i8), parameter, public :: FOLD_LO_CONTACT_MAX_ITER = 1_i8, FOLD_HI_CONTACT_MAX_ITER = 100000_i8; integer(ip), parameter, public :: FOLD_DEF_CONTACT_MAX_ITER = 100_ip  !< model.contact_max_iter -> /setup/resolved/contact_max_iter
+   integer(i8), parameter, public :: FOLD_LO_ON_CONTACT_CAP = 0_i8, FOLD_HI_ON_CONTACT_CAP = 1_i8; integer(ip), parameter, public :: FOLD_DEF_ON_CONTACT_CAP = 0_ip  !< model.on_contact_cap -> /setup/resolved/on_contact_cap
+   integer(i8), parameter, public :: FOLD_LO_LUBRICATION = 0_i8, FOLD_HI_LUBRICATION = 1_i8; logical, parameter, public :: FOLD_DEF_LUBRICATION = .false.  !< model.lubrication -> /setup/resolved/lubrication
+   real(dp), parameter, public :: FOLD_LO_DT = nearest(0.0_dp, 1.0_dp), FOLD_HI_DT = huge(1.0_dp)  !< numerics.dt -> /setup/resolved/dt
+   real(dp), parameter, public :: FOLD_LO_T_END = nearest(0.0_dp, 1.0_dp), FOLD_HI_T_END = huge(1.0_dp)  !< numerics.t_end -> /setup/resolved/t_end
+   integer(i8), parameter, public :: FOLD_LO_TIME_SCHEME = 1_i8, FOLD_HI_TIME_SCHEME = 2_i8; integer(ip), parameter, public :: FOLD_DEF_TIME_SCHEME = 2_ip  !< numerics.time_scheme -> /setup/resolved/time_scheme
+   integer(i8), parameter, public :: FOLD_LO_STOKES_BACKEND = 1_i8, FOLD_HI_STOKES_BACKEND = 2_i8  !< numerics.stokes.backend -> /setup/resolved/stokes_backend
+   real(dp), parameter, public :: FOLD_LO_STOKES_TOLERANCE = nearest(0.0_dp, 1.0_dp), FOLD_HI_STOKES_TOLERANCE = nearest(1.0_dp, -1.0_dp); real(dp), parameter, public :: FOLD_DEF_STOKES_TOLERANCE = 1.0e-6_dp  !< numerics.stokes.tolerance -> /setup/resolved/stokes_tolerance
+   integer(i8), parameter, public :: FOLD_LO_STOKES_MAX_ITERATIONS = 1_i8, FOLD_HI_STOKES_MAX_ITERATIONS = 1000000_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_MAX_ITERATIONS = 1000_ip  !< numerics.stokes.max_iterations -> /setup/resolved/stokes_max_iterations
+   real(dp), parameter, public :: FOLD_LO_STOKES_KAPPA = 1.0_dp, FOLD_HI_STOKES_KAPPA = 1000000000000.0_dp; real(dp), parameter, public :: FOLD_DEF_STOKES_KAPPA = 1000.0_dp  !< numerics.stokes.kappa -> /setup/resolved/stokes_kappa
+   integer(i8), parameter, public :: FOLD_LO_STOKES_DERIVATIVE = 0_i8, FOLD_HI_STOKES_DERIVATIVE = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_DERIVATIVE = 1_ip  !< numerics.stokes.derivative -> /setup/resolved/stokes_derivative
+   integer(i8), parameter, public :: FOLD_LO_STOKES_MIXING = 0_i8, FOLD_HI_STOKES_MIXING = 2_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_MIXING = 1_ip  !< numerics.stokes.mixing -> /setup/resolved/stokes_mixing
+   integer(i8), parameter, public :: FOLD_LO_STOKES_SUBSAMPLES = 1_i8, FOLD_HI_STOKES_SUBSAMPLES = 8_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_SUBSAMPLES = 3_ip  !< numerics.stokes.subsamples -> /setup/resolved/stokes_subsamples
+   integer(i8), parameter, public :: FOLD_LO_STOKES_FIBRE_ENDS = 0_i8, FOLD_HI_STOKES_FIBRE_ENDS = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_FIBRE_ENDS = 0_ip  !< numerics.stokes.fibre_ends -> /setup/resolved/stokes_fibre_ends
+   integer(i8), parameter, public :: FOLD_LO_STOKES_WARM_START = 0_i8, FOLD_HI_STOKES_WARM_START = 1_i8; logical, parameter, public :: FOLD_DEF_STOKES_WARM_START = .true.  !< numerics.stokes.warm_start -> /setup/resolved/stokes_warm_start
+   integer(i8), parameter, public :: FOLD_LO_STOKES_FFT_PLAN = 0_i8, FOLD_HI_STOKES_FFT_PLAN = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_FFT_PLAN = 1_ip  !< numerics.stokes.fft_plan -> /setup/resolved/stokes_fft_plan
+   integer(i8), parameter, public :: FOLD_LO_STOKES_FFT_PRECISION = 0_i8, FOLD_HI_STOKES_FFT_PRECISION = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_FFT_PRECISION = 0_ip  !< numerics.stokes.fft_precision -> /setup/resolved/stokes_fft_precision (optional)
+   integer(i8), parameter, public :: FOLD_LO_STOKES_RIGIDITY = 0_i8, FOLD_HI_STOKES_RIGIDITY = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_RIGIDITY = 0_ip  !< numerics.stokes.rigidity -> /setup/resolved/stokes_rigidity (optional)
+   integer(i8), parameter, public :: FOLD_LO_STOKES_INITIAL_GUESS = 1_i8, FOLD_HI_STOKES_INITIAL_GUESS = 2_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_INITIAL_GUESS = 1_ip  !< numerics.stokes.initial_guess -> /setup/resolved/stokes_initial_guess (optional)
+   integer(i8), parameter, public :: FOLD_LO_STOKES_SOLVE_EVERY = 1_i8, FOLD_HI_STOKES_SOLVE_EVERY = 1000_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_SOLVE_EVERY = 1_ip  !< numerics.stokes.solve_every -> /setup/resolved/stokes_solve_every (optional)
 
    !> Stokes backends (index: the FOLD_STOKES_* code) and their capabilities
    integer(ip), parameter, public :: FOLD_N_BACKENDS = 2

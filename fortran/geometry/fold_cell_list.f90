@@ -403,20 +403,9 @@ contains
          jxlo = int(floor((xw(1) + xshift - cl%rc)/cl%w(1)))
          jxhi = int(floor((xw(1) + xshift + cl%rc)/cl%w(1)))
          do jz = iz_lo, iz_hi
-            ! wrap only at the faces (integer divisions per bin cost more than the rest)
-            jzw = jz
-            mz = 0
-            if (jz < 0 .or. jz >= cl%nb(3)) then
-               jzw = modulo(jz, cl%nb(3))
-               mz = (jz - jzw)/cl%nb(3)
-            end if
+            call wrap_bin(jz, cl%nb(3), jzw, mz)
             do jx = jxlo, min(jxhi, jxlo + 3)
-               jxw = jx
-               mx = 0
-               if (jx < 0 .or. jx >= cl%nb(1)) then
-                  jxw = modulo(jx, cl%nb(1))
-                  mx = (jx - jxw)/cl%nb(1)
-               end if
+               call wrap_bin(jx, cl%nb(1), jxw, mx)
                nst = nst + 1
                bins(nst) = 1 + jxw + cl%nb(1)*(jyw + cl%nb(2)*jzw)
                shift(1, nst) = mx*cell%lengths(1) + my*cell%shear_offset
@@ -486,6 +475,20 @@ contains
          if (npairs <= size(pairs, 2)) pairs(:, npairs) = [a, b]
       end subroutine push
    end subroutine neighbour_pairs
+
+   !> The bin jw in 0 ... nb - 1 of bin j of the unwrapped lattice and its image m
+   !> (j = jw + m nb); wrapped only at the faces (integer divisions per bin cost more
+   !> than the rest).
+   pure subroutine wrap_bin(j, nb, jw, m)
+      integer, intent(in) :: j, nb
+      integer, intent(out) :: jw, m
+      jw = j
+      m = 0
+      if (j < 0 .or. j >= nb) then
+         jw = modulo(j, nb)
+         m = (j - jw)/nb
+      end if
+   end subroutine wrap_bin
 
    !> Insertion sort (candidate lists are short).
    pure subroutine sort_int(a)

@@ -433,10 +433,7 @@ contains
          if (stat /= FOLD_OK) return
       end if
       ! The record is complete on disk before the count says so.
-      call h5_flush(out%file, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_attr_int(out%file, RECORDS_COMPLETE, int(r, i8), stat, errmsg); if (stat /= FOLD_OK) return
-      out%n_records = r
-      call h5_flush(out%file, stat, errmsg)
+      call mark_complete(out%file, RECORDS_COMPLETE, r, out%n_records, stat, errmsg)
    end subroutine output_record
 
    !> Append a snapshot of positions and axes.
@@ -456,11 +453,23 @@ contains
       if (stat /= FOLD_OK) return
       call h5_var_append_real(out%file, "p", r, reshape(parts%p, [size(parts%p)]), stat, errmsg)
       if (stat /= FOLD_OK) return
-      call h5_flush(out%file, stat, errmsg); if (stat /= FOLD_OK) return
-      call h5_attr_int(out%file, SNAPSHOTS_COMPLETE, int(r, i8), stat, errmsg); if (stat /= FOLD_OK) return
-      out%n_snapshots = r
-      call h5_flush(out%file, stat, errmsg)
+      call mark_complete(out%file, SNAPSHOTS_COMPLETE, r, out%n_snapshots, stat, errmsg)
    end subroutine output_snapshot
+
+   !> Row r of a time axis is complete on disk (flushed) before its count attribute
+   !> says so; count <- r, then the attribute is flushed too.
+   subroutine mark_complete(file, count_attr, r, count, stat, errmsg)
+      integer(hid_t), intent(in) :: file
+      character(len=*), intent(in) :: count_attr
+      integer(hsize_t), intent(in) :: r
+      integer(hsize_t), intent(inout) :: count
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call h5_flush(file, stat, errmsg); if (stat /= FOLD_OK) return
+      call h5_attr_int(file, count_attr, int(r, i8), stat, errmsg); if (stat /= FOLD_OK) return
+      count = r
+      call h5_flush(file, stat, errmsg)
+   end subroutine mark_complete
 
    !> Write the checkpoint, so that a kill at any moment leaves a complete one: the state
    !> is written into `/checkpoint_shadow`, the file flushed, then into `/checkpoint`,

@@ -22,7 +22,7 @@ module fold_kinematics
    implicit none
    private
 
-   public :: jeffery_velocities, jeffery_omega, rigid_update, rotate_axis
+   public :: jeffery_velocities, jeffery_omega, rigid_update, rotate_axis, cross
 
 contains
 
@@ -120,6 +120,7 @@ contains
       end do
    end subroutine rigid_update
 
+   !> a x b (3-D vectors).
    pure function cross(a, b) result(c)
       real(dp), intent(in) :: a(3), b(3)
       real(dp) :: c(3)

@@ -18,19 +18,15 @@
 module fold_rigid_fit
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
-   use fold_stokes_solver, only: stokes_solver_t
+   use fold_stokes_solver, only: stokes_solver_t, field_ref_t
    use fold_voxelise, only: voxel_set_t
    use fold_particles, only: particle_set_t
+   use fold_kinematics, only: cross
    use fold_cell, only: cell_t, cell_mean_velocity
    implicit none
    private
 
    public :: rigid_fit
-
-   !> A field of the solver on the local slab
-   type :: field_ref_t
-      real(dp), pointer, contiguous :: r(:, :, :) => null()
-   end type field_ref_t
 
 contains
 
@@ -203,12 +199,6 @@ contains
       flat(1:size(t)) => t
       call solver%sum_all(flat)
    end subroutine sum_table
-
-   pure function cross(a, b) result(c)
-      real(dp), intent(in) :: a(3), b(3)
-      real(dp) :: c(3)
-      c = [a(2)*b(3) - a(3)*b(2), a(3)*b(1) - a(1)*b(3), a(1)*b(2) - a(2)*b(1)]
-   end function cross
 
    !> [a]x: the matrix with [a]x b = a x b.
    pure function crossmat(a) result(m)

@@ -440,11 +440,7 @@ contains
       end do
       s%fover = 0.0_dp
       do v = 1, s%nsol
-         i = s%sol(1, v)
-         j = s%sol(2, v)
-         k = s%sol(3, v)
-         i1 = merge(1_ip, i + 1, i == nx)
-         j1 = merge(1_ip, j + 1, j == ny)
+         call voxel_of(v)
          t = full(s%dir(:, v))
          ! tt(c, l) = sum_b tau(c, b) aith(b, l); corner o gets sum_l s_l(o) tt(c, l)
          tt = matmul(t, s%aith)
@@ -507,11 +503,7 @@ contains
       call s%fft%z_halo(size(s%hfirst, kind=i8), s%hfirst, s%hfirst, s%hscr, s%uhi)
       scale = 1.0_dp/real(grid_total(s%grid), dp)
       do v = 1, s%nsol
-         i = s%sol(1, v)
-         j = s%sol(2, v)
-         k = s%sol(3, v)
-         i1 = merge(1_ip, i + 1, i == nx)
-         j1 = merge(1_ip, j + 1, j == ny)
+         call voxel_of(v)
          do c = 1, 3
             call lattice_differences(s%work(c)%r, s%uhi(:, :, c), d(c, :))
          end do
@@ -521,6 +513,17 @@ contains
          s%sdir(:, v) = -scale*reduced(s, t) + s%comp(v)*s%dir(:, v)
       end do
    contains
+
+      !> (i, j, k): the voxel of listed point v; i1, j1 its upper neighbours across the
+      !> periodic x and y faces.
+      subroutine voxel_of(v)
+         integer(ip), intent(in) :: v
+         i = s%sol(1, v)
+         j = s%sol(2, v)
+         k = s%sol(3, v)
+         i1 = merge(1_ip, i + 1, i == nx)
+         j1 = merge(1_ip, j + 1, j == ny)
+      end subroutine voxel_of
 
       !> The unscaled lattice differences (x, y, z) of one component at the centre (i, j, k)
       !> from its eight corners (the upper z-plane from the next rank on the slab's last).
@@ -547,21 +550,6 @@ contains
          dd(2) = ((v010 + v110) - (v000 + v100)) + ((v011 + v111) - (v001 + v101))
          dd(3) = ((v001 + v101) - (v000 + v100)) + ((v011 + v111) - (v010 + v110))
       end subroutine lattice_differences
-
-      !> The full symmetric tensor of reduced components (3-D).
-      pure function full(r) result(m)
-         real(dp), intent(in) :: r(:)
-         real(dp) :: m(3, 3)
-         m(1, 1) = r(1)
-         m(2, 2) = r(2)
-         m(3, 3) = -(r(1) + r(2))
-         m(1, 2) = r(3)
-         m(2, 1) = r(3)
-         m(1, 3) = r(4)
-         m(3, 1) = r(4)
-         m(2, 3) = r(5)
-         m(3, 2) = r(5)
-      end function full
 
    end subroutine apply_schur_stencil
 
@@ -597,23 +585,31 @@ contains
       call s%fft%sum_all(red)
       red = red/real(grid_total(s%grid), dp)
       s%multiplier_dissipation = red(6)
-      m = 0.0_dp
       if (s%dim == 3) then
-         m(1, 1) = red(1)
-         m(2, 2) = red(2)
-         m(3, 3) = -(red(1) + red(2))
-         m(1, 2) = red(3)
-         m(1, 3) = red(4)
-         m(2, 3) = red(5)
+         m = full(red(1:5))
       else
+         m = 0.0_dp
          m(1, 1) = red(1)
          m(2, 2) = -red(1)
          m(1, 2) = red(2)
+         m(2, 1) = red(2)
       end if
-      m(2, 1) = m(1, 2)
-      m(3, 1) = m(1, 3)
-      m(3, 2) = m(2, 3)
       s%multiplier_stress = m
    end subroutine multiplier_mean
+
+   !> The full symmetric tensor of reduced components (3-D): r = (m11, m22, m12, m13, m23).
+   pure function full(r) result(m)
+      real(dp), intent(in) :: r(:)
+      real(dp) :: m(3, 3)
+      m(1, 1) = r(1)
+      m(2, 2) = r(2)
+      m(3, 3) = -(r(1) + r(2))
+      m(1, 2) = r(3)
+      m(2, 1) = r(3)
+      m(1, 3) = r(4)
+      m(3, 1) = r(4)
+      m(2, 3) = r(5)
+      m(3, 2) = r(5)
+   end function full
 
 end module fold_stokes_rigid

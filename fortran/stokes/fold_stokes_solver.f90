@@ -98,6 +98,11 @@ module fold_stokes_solver
       integer(ip) :: rigidity = FOLD_DEF_STOKES_RIGIDITY
    end type stokes_settings_t
 
+   !> A field of a solver on the local slab (a pointer into the backend's storage)
+   type, public :: field_ref_t
+      real(dp), pointer, contiguous :: r(:, :, :) => null()
+   end type field_ref_t
+
    !> What every Stokes backend holds and does.
    type, abstract, public :: stokes_solver_t
       type(stokes_settings_t) :: set

@@ -17,7 +17,7 @@ module fold_stress
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_grid, only: grid_total
-   use fold_stokes_solver, only: stokes_solver_t, FOLD_RIGID_COVERAGE
+   use fold_stokes_solver, only: stokes_solver_t, field_ref_t, FOLD_RIGID_COVERAGE
    implicit none
    private
 
@@ -39,11 +39,6 @@ module fold_stress
    end type bulk_stress_t
 
    public :: bulk_stress
-
-   !> A field of the solver on the local slab
-   type :: field_ref_t
-      real(dp), pointer, contiguous :: r(:, :, :) => null()
-   end type field_ref_t
 
 contains
 
