@@ -83,6 +83,10 @@ SETTINGS: dict[str, tuple[dict, str]] = {
     "exact1e-6": ({"rigidity": "exact", "tolerance": 1e-6}, "exact rigidity, tolerance 1e-6"),
     "exact1e-4": ({"rigidity": "exact", "tolerance": 1e-4}, "exact rigidity, tolerance 1e-4"),
     "exact1e-3": ({"rigidity": "exact", "tolerance": 1e-3}, "exact rigidity, tolerance 1e-3"),
+    # the multiplier's warm start against a cold start (zero multiplier) every solve
+    "exact1e-3_cold": ({"rigidity": "exact", "tolerance": 1e-3, "warm_start": False},
+                       "exact rigidity, tolerance 1e-3, cold start every solve"),
+    "tol1e-3_cold": ({"tolerance": 1e-3, "warm_start": False}, "tolerance 1e-3, cold start every solve"),
     "exact1e-2": ({"rigidity": "exact", "tolerance": 1e-2}, "exact rigidity, tolerance 1e-2"),
 }
 
