@@ -6,8 +6,10 @@
 !>
 !> Implementations: fold_hydro_jeffery (the exact Jeffery kinematics of the imposed
 !> flow) and fold_hydro_stokes (the fictitious-domain Stokes solve, with or without
-!> the sphere lubrication correction); fold_hydro_select makes the one a run's
-!> /setup/resolved/hydrodynamics names.
+!> the sphere lubrication correction); fold_hydro_select chooses the one a run's
+!> /setup/resolved/hydrodynamics names and makes it with that implementation's own
+!> init, which takes what its model needs. The no-flow behaviour is the default of
+!> every binding but velocities.
 module fold_hydro
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK
@@ -31,8 +33,6 @@ module fold_hydro
       !> Relative residual of the last solve [-] (NaN: none)
       real(dp) :: residual = 0.0_dp
    contains
-      !> Make the component for a run (rank 0 says what it is on stdout)
-      procedure(hydro_init_i), deferred :: init
       !> v, omega of every particle for the step from t
       procedure(hydro_velocities_i), deferred :: velocities
       !> Carry the stored velocities across the Lees-Edwards wrap just made (default:
@@ -48,19 +48,6 @@ module fold_hydro
    end type hydro_model_t
 
    abstract interface
-      subroutine hydro_init_i(self, setup, cell, parts, rank, nranks, stat, errmsg)
-         import :: hydro_model_t, run_setup_t, cell_t, particle_set_t, msg_len
-         class(hydro_model_t), intent(inout) :: self
-         type(run_setup_t), intent(in) :: setup
-         !> The run's cell (its velocity gradient)
-         type(cell_t), intent(in) :: cell
-         type(particle_set_t), intent(in) :: parts
-         !> This process's rank and the number of ranks of MPI_COMM_WORLD
-         integer, intent(in) :: rank, nranks
-         integer, intent(out) :: stat
-         character(len=msg_len), intent(out) :: errmsg
-      end subroutine hydro_init_i
-
       subroutine hydro_velocities_i(self, cell, parts, t, first, last)
          import :: hydro_model_t, cell_t, particle_set_t, dp, ip
          class(hydro_model_t), intent(inout) :: self

@@ -17,6 +17,8 @@ module fold_hydro_jeffery
    implicit none
    private
 
+   public :: jeffery_init
+
    !> Exact Jeffery kinematics of the imposed flow.
    type, extends(hydro_model_t), public :: hydro_jeffery_t
       type(jeffery_stepper_t) :: stepper
@@ -24,15 +26,17 @@ module fold_hydro_jeffery
       !> Counts and displacements of each rank's block in v (dim per particle) and omega (3)
       integer, allocatable :: count_v(:), offset_v(:), count_omega(:), offset_omega(:)
    contains
-      procedure :: init => jeffery_init
       procedure :: velocities => jeffery_velocities
    end type hydro_jeffery_t
 
 contains
 
+   !> Make the component for a run: the Jeffery stepper of the cell's velocity gradient
+   !> and each rank's block of particles.
    subroutine jeffery_init(self, setup, cell, parts, rank, nranks, stat, errmsg)
-      class(hydro_jeffery_t), intent(inout) :: self
+      type(hydro_jeffery_t), intent(inout) :: self
       type(run_setup_t), intent(in) :: setup
+      !> The run's cell (its velocity gradient)
       type(cell_t), intent(in) :: cell
       type(particle_set_t), intent(in) :: parts
       integer, intent(in) :: rank, nranks
