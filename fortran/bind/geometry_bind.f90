@@ -43,14 +43,7 @@ contains
       real(dp), intent(in), optional :: radius(n), length(n), xi(n)
       call make_cell(dim, lengths, walls, G, shear_offset, t, cell, stat, errmsg)
       if (stat /= FOLD_OK) return
-      call particles_init(parts, dim, n, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      parts%x = x
-      parts%p = p
-      if (present(shape)) parts%shape = shape
-      if (present(radius)) parts%radius = radius
-      if (present(length)) parts%length = length
-      if (present(xi)) parts%xi = xi
+      call particles_init(parts, dim, n, stat, errmsg, x=x, p=p, shape=shape, radius=radius, length=length, xi=xi)
    end subroutine make_set
 end module fold_geometry_bind_util
 

@@ -7,10 +7,9 @@ module fold_stokes_bind_util
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_stokes_fft, only: stokes_settings_t
    use fold_stokes_solver, only: stokes_solver_t
-   use fold_particles, only: particle_set_t, particles_init
    implicit none
    private
-   public :: make_settings, make_particles, velocity_out
+   public :: make_settings, velocity_out
 contains
    !> u(:, :, :, c) <- component c of the solver's velocity at the voxel centres (after
    !> compute_velocity), without the padding of its rows [m/s].
@@ -32,37 +31,13 @@ contains
       !> fold_stokes_solver FOLD_RIGIDITY_*
       integer(ip), intent(in) :: rigidity
       type(stokes_settings_t) :: set
-      set%eta_f = eta_f
-      set%kappa = kappa
-      set%tol = tol
-      set%max_iter = max_iter
-      set%derivative = derivative
-      set%mixing = mixing
-      set%subsamples = subsamples
-      set%fibre_ends = fibre_ends
       ! warm_start: 0 cold (zero guess), else the guess code (fold_stokes_fft FOLD_GUESS_*:
       ! 1 previous solution, 2 extrapolated from the last two)
-      set%warm_start = warm_start /= 0
-      set%guess = max(1_ip, min(int(warm_start, ip), 2_ip))
-      set%plan_effort = plan_effort
-      set%rigidity = rigidity
+      set = stokes_settings_t(eta_f=eta_f, kappa=kappa, tol=tol, max_iter=max_iter, derivative=derivative, &
+                              mixing=mixing, subsamples=subsamples, fibre_ends=fibre_ends, &
+                              warm_start=warm_start /= 0, guess=max(1_ip, min(int(warm_start, ip), 2_ip)), &
+                              plan_effort=plan_effort, rigidity=rigidity)
    end function make_settings
-
-   subroutine make_particles(dim, np, shape, radius, length, xi, x, p, parts, stat, errmsg)
-      integer(ip), intent(in) :: dim, np, shape(np)
-      real(dp), intent(in) :: radius(np), length(np), xi(np), x(dim, np), p(dim, np)
-      type(particle_set_t), intent(out) :: parts
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      call particles_init(parts, dim, np, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      parts%shape = shape
-      parts%radius = radius
-      parts%length = length
-      parts%xi = xi
-      parts%x = x
-      parts%p = p
-   end subroutine make_particles
 end module fold_stokes_bind_util
 
 subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa, tol, max_iter, derivative, mixing, &
@@ -122,9 +97,9 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
    use fold_cell, only: cell_t, cell_init
-   use fold_particles, only: particle_set_t
+   use fold_particles, only: particle_set_t, particles_init
    use fold_stokes_step
-   use fold_stokes_bind_util, only: make_settings, make_particles, velocity_out
+   use fold_stokes_bind_util, only: make_settings, velocity_out
    implicit none
    integer(ip), intent(in) :: dim, n1, n2, n3, np, max_iter, derivative, mixing, subsamples, fibre_ends, plan_effort, rigidity_code
    integer(ip), intent(in) :: shape(np)
@@ -154,7 +129,7 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    call cell_init(cell, dim, lengths, .false., g, stat, errmsg)
    if (stat /= FOLD_OK) return
    cell%shear_offset = shear_offset
-   call make_particles(dim, np, shape, radius, length, xi, x, p, parts, stat, errmsg)
+   call particles_init(parts, dim, np, stat, errmsg, x=x, p=p, shape=shape, radius=radius, length=length, xi=xi)
    if (stat /= FOLD_OK) return
    call stokes_context_init(ctx, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
                                                fibre_ends, 0_ip, plan_effort, rigidity_code), dim, [n1, n2, n3], &
@@ -183,9 +158,9 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
    use fold_cell, only: cell_t, cell_init
-   use fold_particles, only: particle_set_t
+   use fold_particles, only: particle_set_t, particles_init
    use fold_stokes_step
-   use fold_stokes_bind_util, only: make_settings, make_particles
+   use fold_stokes_bind_util, only: make_settings
    implicit none
    integer(ip), intent(in) :: dim, n1, n2, n3, np, nsteps, scheme, max_iter, derivative, mixing, subsamples
    integer(ip), intent(in) :: fibre_ends, warm_start, plan_effort, rigidity_code, shape(np)
@@ -208,7 +183,7 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    records = 0.0_dp
    call cell_init(cell, dim, lengths, .false., g, stat, errmsg)
    if (stat /= FOLD_OK) return
-   call make_particles(dim, np, shape, radius, length, xi, x0, p0, parts, stat, errmsg)
+   call particles_init(parts, dim, np, stat, errmsg, x=x0, p=p0, shape=shape, radius=radius, length=length, xi=xi)
    if (stat /= FOLD_OK) return
    call stokes_context_init(ctx, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
                                                fibre_ends, warm_start, plan_effort, rigidity_code), dim, &

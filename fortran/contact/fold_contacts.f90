@@ -212,25 +212,15 @@ contains
       integer(ip), intent(in) :: dim, shape
       real(dp), intent(in) :: radius, length
       real(dp) :: inertia
+      logical :: plane
+      plane = dim == 2
       select case (shape)
       case (FOLD_FIBRE)
-         if (dim == 2) then
-            inertia = (4.0_dp*radius**2 + length**2)/12.0_dp
-         else
-            inertia = (3.0_dp*radius**2 + length**2)/12.0_dp
-         end if
+         inertia = (merge(4.0_dp, 3.0_dp, plane)*radius**2 + length**2)/12.0_dp
       case (FOLD_SPHEROID)
-         if (dim == 2) then
-            inertia = (0.25_dp*length**2 + radius**2)/4.0_dp
-         else
-            inertia = (0.25_dp*length**2 + radius**2)/5.0_dp
-         end if
+         inertia = (0.25_dp*length**2 + radius**2)/merge(4.0_dp, 5.0_dp, plane)
       case default
-         if (dim == 2) then
-            inertia = 0.5_dp*radius**2
-         else
-            inertia = 0.4_dp*radius**2
-         end if
+         inertia = merge(0.5_dp, 0.4_dp, plane)*radius**2
       end select
    end function transverse_inertia
 

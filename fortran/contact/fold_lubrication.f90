@@ -108,7 +108,7 @@ module fold_lubrication
    real(dp), parameter :: PI = acos(-1.0_dp)
 
    public :: lubrication_threshold, lubrication_gap_floor, lubrication_coefficient, lubrication_force
-   public :: lubrication_pairs, lubrication_correct, lubrication_apply
+   public :: lubrication_correct, lubrication_apply
 
 contains
 
@@ -168,69 +168,6 @@ contains
       n = dx/dist
       f = -lubrication_coefficient(r_i, r_j, eta, dist - r_i - r_j, gap_min, h_c)*dot_product(du, n)*n
    end function lubrication_force
-
-   !> The lubricated pairs of the spheres (sphere(k) true) with their normal, coefficient and
-   !> flow approach rate w0, found with the cell lists.
-   subroutine lubrication_pairs(cell, x, radius, sphere, v0, eta, h_c, gap_min, pairs, stat, errmsg)
-      type(cell_t), intent(in) :: cell
-      !> Centres x(dim, n) [m], radii [m], which particles are spheres
-      real(dp), intent(in) :: x(:, :), radius(:)
-      logical, intent(in) :: sphere(:)
-      !> Flow velocities v0(dim, n) [m/s]
-      real(dp), intent(in) :: v0(:, :)
-      !> Fluid viscosity [Pa s], threshold and floor gaps [m]
-      real(dp), intent(in) :: eta, h_c, gap_min
-      type(lubrication_pairs_t), intent(out) :: pairs
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      integer(ip), allocatable :: idx(:), cand(:, :)
-      real(dp), allocatable :: xs(:, :)
-      integer(ip) :: m, np, k, a, b, dim
-      real(dp) :: dx(size(x, 1)), dist, gap, c, rc
-
-      dim = int(size(x, 1), ip)
-      allocate (pairs%ab(2, 0), pairs%nrm(dim, 0), pairs%c(0), pairs%w0(0), pairs%gap(0))
-      stat = FOLD_OK
-      errmsg = ""
-      idx = pack([(k, k=1, int(size(x, 2), ip))], sphere)
-      m = int(size(idx), ip)
-      if (m < 2) return
-      xs = x(:, idx)
-      rc = 2.0_dp*maxval(radius(idx)) + h_c
-      allocate (cand(2, 8*m))
-      do
-         call neighbour_pairs(cell, xs, rc, .true., cand, np, stat, errmsg)
-         if (stat == FOLD_OK) exit
-         if (np <= size(cand, 2)) then
-            errmsg = "lubrication: "//trim(errmsg)
-            return
-         end if
-         deallocate (cand)
-         allocate (cand(2, np))
-      end do
-      deallocate (pairs%ab, pairs%nrm, pairs%c, pairs%w0, pairs%gap)
-      allocate (pairs%ab(2, np), pairs%nrm(dim, np), pairs%c(np), pairs%w0(np), pairs%gap(np))
-      do k = 1, np
-         a = idx(cand(1, k))
-         b = idx(cand(2, k))
-         dx = x(:, a) - x(:, b)
-         call cell_min_image(cell, dx)
-         dist = norm2(dx)
-         gap = dist - radius(a) - radius(b)
-         c = lubrication_coefficient(radius(a), radius(b), eta, gap, gap_min, h_c)
-         if (.not. (c > 0.0_dp)) cycle
-         pairs%n = pairs%n + 1
-         pairs%ab(:, pairs%n) = [a, b]
-         pairs%nrm(:, pairs%n) = dx/dist
-         pairs%c(pairs%n) = c
-         pairs%gap(pairs%n) = gap
-         ! the image of b next to a sits at x_a - dx and moves with v0_b plus the
-         ! mean-flow difference between that image and b itself
-         pairs%w0(pairs%n) = dot_product(v0(:, a) - v0(:, b) - &
-                                         (cell_mean_velocity(cell, x(:, a) - dx) - cell_mean_velocity(cell, x(:, b))), &
-                                         dx/dist)
-      end do
-   end subroutine lubrication_pairs
 
    !> y_out = (M + L) y for the pairs (mob(k) = 6 pi eta R_k for spheres; y, y_out (dim, n)).
    pure subroutine lubrication_apply(pairs, mob, y, y_out)
@@ -300,7 +237,7 @@ contains
          errmsg = "lubrication: every sphere radius must be > 0"
          return
       end if
-      call lubrication_pairs(cell, x, radius, sphere, v0, eta, h_c, gap_min, pairs, stat, errmsg)
+      call find_pairs(pairs, stat, errmsg)
       if (stat /= FOLD_OK) return
       stats%pairs = pairs%n
       if (pairs%n == 0) return
@@ -369,6 +306,64 @@ contains
             " pairs did not reach the round-off residual after ", stats%iterations, " CG iterations (", &
             stats%residual, " N, bound ", stats%residual_bound, " N)"
       end if
+
+   contains
+
+      !> The lubricated pairs of the spheres (sphere(k) true) of lubrication_correct's
+      !> arguments, with their normal, coefficient and flow approach rate w0, found with
+      !> the cell lists.
+      subroutine find_pairs(pairs, stat, errmsg)
+         type(lubrication_pairs_t), intent(out) :: pairs
+         integer, intent(out) :: stat
+         character(len=msg_len), intent(out) :: errmsg
+         integer(ip), allocatable :: idx(:), cand(:, :)
+         real(dp), allocatable :: xs(:, :)
+         integer(ip) :: m, np, k, a, b, dim
+         real(dp) :: dx(size(x, 1)), dist, gap, c, rc
+
+         dim = int(size(x, 1), ip)
+         allocate (pairs%ab(2, 0), pairs%nrm(dim, 0), pairs%c(0), pairs%w0(0), pairs%gap(0))
+         stat = FOLD_OK
+         errmsg = ""
+         idx = pack([(k, k=1, int(size(x, 2), ip))], sphere)
+         m = int(size(idx), ip)
+         if (m < 2) return
+         xs = x(:, idx)
+         rc = 2.0_dp*maxval(radius(idx)) + h_c
+         allocate (cand(2, 8*m))
+         do
+            call neighbour_pairs(cell, xs, rc, .true., cand, np, stat, errmsg)
+            if (stat == FOLD_OK) exit
+            if (np <= size(cand, 2)) then
+               errmsg = "lubrication: "//trim(errmsg)
+               return
+            end if
+            deallocate (cand)
+            allocate (cand(2, np))
+         end do
+         deallocate (pairs%ab, pairs%nrm, pairs%c, pairs%w0, pairs%gap)
+         allocate (pairs%ab(2, np), pairs%nrm(dim, np), pairs%c(np), pairs%w0(np), pairs%gap(np))
+         do k = 1, np
+            a = idx(cand(1, k))
+            b = idx(cand(2, k))
+            dx = x(:, a) - x(:, b)
+            call cell_min_image(cell, dx)
+            dist = norm2(dx)
+            gap = dist - radius(a) - radius(b)
+            c = lubrication_coefficient(radius(a), radius(b), eta, gap, gap_min, h_c)
+            if (.not. (c > 0.0_dp)) cycle
+            pairs%n = pairs%n + 1
+            pairs%ab(:, pairs%n) = [a, b]
+            pairs%nrm(:, pairs%n) = dx/dist
+            pairs%c(pairs%n) = c
+            pairs%gap(pairs%n) = gap
+            ! the image of b next to a sits at x_a - dx and moves with v0_b plus the
+            ! mean-flow difference between that image and b itself
+            pairs%w0(pairs%n) = dot_product(v0(:, a) - v0(:, b) - &
+                                            (cell_mean_velocity(cell, x(:, a) - dx) - cell_mean_velocity(cell, x(:, b))), &
+                                            dx/dist)
+         end do
+      end subroutine find_pairs
    end subroutine lubrication_correct
 
 end module fold_lubrication

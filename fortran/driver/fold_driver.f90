@@ -173,8 +173,7 @@ contains
       ! run-file error instead of a failure at step 1.
       call measure_gaps(run%cell, run%parts, run%contacts, run%contact_stats, stat, errmsg)
       if (stat /= FOLD_OK) return
-      call hydro_select(run%setup, run%hydro)
-      call run%hydro%init(run%setup, run%cell, run%parts, run%rank, run%nranks, stat, errmsg)
+      call hydro_select(run%setup, run%cell, run%parts, run%rank, run%nranks, run%hydro, stat, errmsg)
       bad_input = stat == FOLD_INPUT_ERROR
       if (stat /= FOLD_OK) return
       run%first = int(int(run%rank, i8)*run%parts%n/run%nranks + 1, ip)

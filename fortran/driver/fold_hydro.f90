@@ -6,10 +6,13 @@
 !>
 !> Implementations: fold_hydro_jeffery (the exact Jeffery kinematics of the imposed
 !> flow) and fold_hydro_stokes (the fictitious-domain Stokes solve, with or without
-!> the sphere lubrication correction); fold_hydro_select makes the one a run's
-!> /setup/resolved/hydrodynamics names.
+!> the sphere lubrication correction); fold_hydro_select chooses the one a run's
+!> /setup/resolved/hydrodynamics names and makes it with that implementation's own
+!> init, which takes what its model needs. The no-flow behaviour is the default of
+!> every binding but velocities.
 module fold_hydro
    use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_status, only: FOLD_OK
    use fold_particles, only: particle_set_t
    use fold_cell, only: cell_t
    use fold_run_file, only: run_setup_t
@@ -30,34 +33,21 @@ module fold_hydro
       !> Relative residual of the last solve [-] (NaN: none)
       real(dp) :: residual = 0.0_dp
    contains
-      !> Make the component for a run (rank 0 says what it is on stdout)
-      procedure(hydro_init_i), deferred :: init
       !> v, omega of every particle for the step from t
       procedure(hydro_velocities_i), deferred :: velocities
-      !> Carry the stored velocities across the Lees-Edwards wrap just made
-      procedure(hydro_carry_i), deferred :: carry_across_wrap
-      !> A solve of the configuration is due after `step`
-      procedure(hydro_due_i), deferred :: solve_due
+      !> Carry the stored velocities across the Lees-Edwards wrap just made (default:
+      !> nothing stored to carry)
+      procedure :: carry_across_wrap => no_carry
+      !> A solve of the configuration is due after `step` (default: never)
+      procedure :: solve_due => never_due
       !> Flow of the current configuration: the velocities of the next step and the
-      !> stress of its record
-      procedure(hydro_solve_i), deferred :: solve_configuration
-      procedure(hydro_destroy_i), deferred :: destroy
+      !> stress of its record (default: no flow to solve)
+      procedure :: solve_configuration => no_solve
+      !> Release what init made (default: nothing)
+      procedure :: destroy => no_destroy
    end type hydro_model_t
 
    abstract interface
-      subroutine hydro_init_i(self, setup, cell, parts, rank, nranks, stat, errmsg)
-         import :: hydro_model_t, run_setup_t, cell_t, particle_set_t, msg_len
-         class(hydro_model_t), intent(inout) :: self
-         type(run_setup_t), intent(in) :: setup
-         !> The run's cell (its velocity gradient)
-         type(cell_t), intent(in) :: cell
-         type(particle_set_t), intent(in) :: parts
-         !> This process's rank and the number of ranks of MPI_COMM_WORLD
-         integer, intent(in) :: rank, nranks
-         integer, intent(out) :: stat
-         character(len=msg_len), intent(out) :: errmsg
-      end subroutine hydro_init_i
-
       subroutine hydro_velocities_i(self, cell, parts, t, first, last)
          import :: hydro_model_t, cell_t, particle_set_t, dp, ip
          class(hydro_model_t), intent(inout) :: self
@@ -69,41 +59,47 @@ module fold_hydro
          !> This rank's block of particles
          integer(ip), intent(in) :: first, last
       end subroutine hydro_velocities_i
-
-      subroutine hydro_carry_i(self, cell, x_before)
-         import :: hydro_model_t, cell_t, dp
-         class(hydro_model_t), intent(inout) :: self
-         type(cell_t), intent(in) :: cell
-         !> Positions before the wrap (dim, n) [m]
-         real(dp), intent(in) :: x_before(:, :)
-      end subroutine hydro_carry_i
-
-      logical function hydro_due_i(self, step)
-         import :: hydro_model_t, i8
-         class(hydro_model_t), intent(in) :: self
-         integer(i8), intent(in) :: step
-      end function hydro_due_i
-
-      subroutine hydro_solve_i(self, cell, parts, t, rec, stat, errmsg, untrusted)
-         import :: hydro_model_t, cell_t, particle_set_t, run_record_t, dp, msg_len
-         class(hydro_model_t), intent(inout) :: self
-         type(cell_t), intent(in) :: cell
-         !> The configuration (its v, omega are left as they are)
-         type(particle_set_t), intent(inout) :: parts
-         !> Time of the configuration [s]
-         real(dp), intent(in) :: t
-         !> Record the solve's statistics and stress go into
-         type(run_record_t), intent(inout) :: rec
-         integer, intent(out) :: stat
-         character(len=msg_len), intent(out) :: errmsg
-         !> The solve failed the stress check: no number of it went into rec
-         logical, intent(out) :: untrusted
-      end subroutine hydro_solve_i
-
-      subroutine hydro_destroy_i(self)
-         import :: hydro_model_t
-         class(hydro_model_t), intent(inout) :: self
-      end subroutine hydro_destroy_i
    end interface
+
+contains
+
+   !> No velocities stored: nothing to carry across the wrap.
+   subroutine no_carry(self, cell, x_before)
+      class(hydro_model_t), intent(inout) :: self
+      type(cell_t), intent(in) :: cell
+      !> Positions before the wrap (dim, n) [m]
+      real(dp), intent(in) :: x_before(:, :)
+   end subroutine no_carry
+
+   !> No solve is ever due.
+   logical function never_due(self, step)
+      class(hydro_model_t), intent(in) :: self
+      integer(i8), intent(in) :: step
+      never_due = .false.
+   end function never_due
+
+   !> No flow to solve: rec and the particles are left as they are.
+   subroutine no_solve(self, cell, parts, t, rec, stat, errmsg, untrusted)
+      class(hydro_model_t), intent(inout) :: self
+      type(cell_t), intent(in) :: cell
+      !> The configuration (its v, omega are left as they are)
+      type(particle_set_t), intent(inout) :: parts
+      !> Time of the configuration [s]
+      real(dp), intent(in) :: t
+      !> Record the solve's statistics and stress go into
+      type(run_record_t), intent(inout) :: rec
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      !> The solve failed the stress check: no number of it went into rec
+      logical, intent(out) :: untrusted
+      stat = FOLD_OK
+      errmsg = ""
+      untrusted = .false.
+   end subroutine no_solve
+
+   !> Nothing to release.
+   subroutine no_destroy(self)
+      class(hydro_model_t), intent(inout) :: self
+   end subroutine no_destroy
 
 end module fold_hydro

@@ -11,12 +11,13 @@ module fold_hydro_jeffery
    use fold_particles, only: particle_set_t
    use fold_cell, only: cell_t
    use fold_run_file, only: run_setup_t
-   use fold_output, only: run_record_t
    use fold_time_scheme, only: FOLD_EULER
    use fold_jeffery_step, only: jeffery_stepper_t, jeffery_stepper_init, jeffery_step_velocities
    use fold_hydro, only: hydro_model_t
    implicit none
    private
+
+   public :: jeffery_init
 
    !> Exact Jeffery kinematics of the imposed flow.
    type, extends(hydro_model_t), public :: hydro_jeffery_t
@@ -25,19 +26,17 @@ module fold_hydro_jeffery
       !> Counts and displacements of each rank's block in v (dim per particle) and omega (3)
       integer, allocatable :: count_v(:), offset_v(:), count_omega(:), offset_omega(:)
    contains
-      procedure :: init => jeffery_init
       procedure :: velocities => jeffery_velocities
-      procedure :: carry_across_wrap => jeffery_carry_across_wrap
-      procedure :: solve_due => jeffery_solve_due
-      procedure :: solve_configuration => jeffery_solve_configuration
-      procedure :: destroy => jeffery_destroy
    end type hydro_jeffery_t
 
 contains
 
+   !> Make the component for a run: the Jeffery stepper of the cell's velocity gradient
+   !> and each rank's block of particles.
    subroutine jeffery_init(self, setup, cell, parts, rank, nranks, stat, errmsg)
-      class(hydro_jeffery_t), intent(inout) :: self
+      type(hydro_jeffery_t), intent(inout) :: self
       type(run_setup_t), intent(in) :: setup
+      !> The run's cell (its velocity gradient)
       type(cell_t), intent(in) :: cell
       type(particle_set_t), intent(in) :: parts
       integer, intent(in) :: rank, nranks
@@ -78,37 +77,5 @@ contains
                              MPI_DOUBLE_PRECISION, MPI_COMM_WORLD)
       end if
    end subroutine jeffery_velocities
-
-   !> Nothing stored to carry.
-   subroutine jeffery_carry_across_wrap(self, cell, x_before)
-      class(hydro_jeffery_t), intent(inout) :: self
-      type(cell_t), intent(in) :: cell
-      real(dp), intent(in) :: x_before(:, :)
-   end subroutine jeffery_carry_across_wrap
-
-   logical function jeffery_solve_due(self, step)
-      class(hydro_jeffery_t), intent(in) :: self
-      integer(i8), intent(in) :: step
-      jeffery_solve_due = .false.
-   end function jeffery_solve_due
-
-   !> No flow to solve.
-   subroutine jeffery_solve_configuration(self, cell, parts, t, rec, stat, errmsg, untrusted)
-      class(hydro_jeffery_t), intent(inout) :: self
-      type(cell_t), intent(in) :: cell
-      type(particle_set_t), intent(inout) :: parts
-      real(dp), intent(in) :: t
-      type(run_record_t), intent(inout) :: rec
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      logical, intent(out) :: untrusted
-      stat = FOLD_OK
-      errmsg = ""
-      untrusted = .false.
-   end subroutine jeffery_solve_configuration
-
-   subroutine jeffery_destroy(self)
-      class(hydro_jeffery_t), intent(inout) :: self
-   end subroutine jeffery_destroy
 
 end module fold_hydro_jeffery

@@ -34,6 +34,8 @@ module fold_hydro_stokes
    implicit none
    private
 
+   public :: stokes_init
+
    !> Fictitious-domain Stokes hydrodynamics.
    type, extends(hydro_model_t), public :: hydro_stokes_t
       type(stokes_context_t) :: ctx
@@ -44,7 +46,6 @@ module fold_hydro_stokes
       !> A solve after every `solve_every`-th step
       integer(i8) :: solve_every = 1
    contains
-      procedure :: init => stokes_init
       procedure :: velocities => stokes_velocities
       procedure :: carry_across_wrap => stokes_carry_across_wrap
       procedure :: solve_due => stokes_solve_due
@@ -56,10 +57,9 @@ contains
 
    !> The solver (fold_stokes_factory, on MPI_COMM_WORLD) from the settings of
    !> /setup/resolved, an empty time-scheme state; rank 0 prints the solver line.
-   subroutine stokes_init(self, setup, cell, parts, rank, nranks, stat, errmsg)
-      class(hydro_stokes_t), intent(inout) :: self
+   subroutine stokes_init(self, setup, parts, rank, nranks, stat, errmsg)
+      type(hydro_stokes_t), intent(inout) :: self
       type(run_setup_t), intent(in) :: setup
-      type(cell_t), intent(in) :: cell
       type(particle_set_t), intent(in) :: parts
       integer, intent(in) :: rank, nranks
       integer, intent(out) :: stat

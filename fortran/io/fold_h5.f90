@@ -43,7 +43,6 @@ module fold_h5
    public :: h5_make_group, h5_delete
    public :: h5_scale_int, h5_scale_real, h5_var_create, h5_var_append_real, h5_var_append_int
    public :: h5_var_length, h5_var_truncate, h5_verify
-   public :: h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
    public :: h5_put_real_array, h5_put_real_scalar, h5_put_int_scalar
    public :: h5_cause, h5_abandon_file, h5_wedged
 
@@ -511,8 +510,11 @@ contains
 
    ! ------------------------------------------------------------------ plain datasets
 
-   !> Write a fixed-shape real dataset (replacing any previous one) with units.
-   subroutine h5_write_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
+   !> Write a fixed-shape real dataset with units. A dataset that exists with the same
+   !> shape and a floating-point type is overwritten in place: raw data only, no change
+   !> to the file's metadata (group heaps, object headers), which a kill could leave
+   !> torn. Any other previous object of that name is replaced.
+   subroutine h5_put_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
       real(dp), intent(in), target, contiguous :: buf(:)
@@ -521,53 +523,11 @@ contains
       character(len=*), intent(in) :: units, long_name
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      call write_dataset(loc, name, .false., shape, H5T_NATIVE_DOUBLE, c_loc(buf), units, long_name, stat, errmsg)
-   end subroutine h5_write_real_array
-
-   !> Write a scalar real dataset (replacing any previous one).
-   subroutine h5_write_real_scalar(loc, name, value, units, long_name, stat, errmsg)
-      integer(hid_t), intent(in) :: loc
-      character(len=*), intent(in) :: name
-      real(dp), intent(in) :: value
-      character(len=*), intent(in) :: units, long_name
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      real(dp), target :: v(1)
-      v(1) = value
-      call write_dataset(loc, name, .true., [integer(hsize_t) ::], H5T_NATIVE_DOUBLE, c_loc(v), units, long_name, &
-                         stat, errmsg)
-   end subroutine h5_write_real_scalar
-
-   !> Write a scalar 64-bit integer dataset (replacing any previous one).
-   subroutine h5_write_int_scalar(loc, name, value, long_name, stat, errmsg)
-      integer(hid_t), intent(in) :: loc
-      character(len=*), intent(in) :: name
-      integer(i8), intent(in) :: value
-      character(len=*), intent(in) :: long_name
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      integer(i8), target :: v(1)
-      v(1) = value
-      call write_dataset(loc, name, .true., [integer(hsize_t) ::], h5kind_to_type(c_int64_t, H5_INTEGER_KIND), &
-                         c_loc(v), "1", long_name, stat, errmsg)
-   end subroutine h5_write_int_scalar
-
-   !> Like h5_write_real_array, but a dataset that exists with the same shape and a
-   !> floating-point type is overwritten in place: raw data only, no change to the
-   !> file's metadata (group heaps, object headers), which a kill could leave torn.
-   subroutine h5_put_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
-      integer(hid_t), intent(in) :: loc
-      character(len=*), intent(in) :: name
-      real(dp), intent(in), target, contiguous :: buf(:)
-      integer(hsize_t), intent(in) :: shape(:)
-      character(len=*), intent(in) :: units, long_name
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      if (.not. overwritten(loc, name, shape, H5T_FLOAT_F, H5T_NATIVE_DOUBLE, c_loc(buf), stat, errmsg)) &
-         call h5_write_real_array(loc, name, buf, shape, units, long_name, stat, errmsg)
+      call put_dataset(loc, name, .false., shape, H5T_FLOAT_F, H5T_NATIVE_DOUBLE, c_loc(buf), units, long_name, &
+                       stat, errmsg)
    end subroutine h5_put_real_array
 
-   !> h5_write_real_scalar, in place when the scalar dataset exists (see h5_put_real_array).
+   !> Write a scalar real dataset, in place when it exists (see h5_put_real_array).
    subroutine h5_put_real_scalar(loc, name, value, units, long_name, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
@@ -577,11 +537,12 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       real(dp), target :: v(1)
       v(1) = value
-      if (.not. overwritten(loc, name, [integer(hsize_t) ::], H5T_FLOAT_F, H5T_NATIVE_DOUBLE, c_loc(v), stat, errmsg)) &
-         call h5_write_real_scalar(loc, name, value, units, long_name, stat, errmsg)
+      call put_dataset(loc, name, .true., [integer(hsize_t) ::], H5T_FLOAT_F, H5T_NATIVE_DOUBLE, c_loc(v), units, &
+                       long_name, stat, errmsg)
    end subroutine h5_put_real_scalar
 
-   !> h5_write_int_scalar, in place when the scalar dataset exists (see h5_put_real_array).
+   !> Write a scalar 64-bit integer dataset (units "1"), in place when it exists (see
+   !> h5_put_real_array).
    subroutine h5_put_int_scalar(loc, name, value, long_name, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
@@ -591,9 +552,8 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       integer(i8), target :: v(1)
       v(1) = value
-      if (.not. overwritten(loc, name, [integer(hsize_t) ::], H5T_INTEGER_F, &
-                            h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(v), stat, errmsg)) &
-         call h5_write_int_scalar(loc, name, value, long_name, stat, errmsg)
+      call put_dataset(loc, name, .true., [integer(hsize_t) ::], H5T_INTEGER_F, &
+                       h5kind_to_type(c_int64_t, H5_INTEGER_KIND), c_loc(v), "1", long_name, stat, errmsg)
    end subroutine h5_put_int_scalar
 
    ! ------------------------------------------------------------------ netCDF-style variables
@@ -1142,19 +1102,30 @@ contains
       call keep_first(err, "attribute "//name//": h5aclose_f failed", stat, errmsg)
    end subroutine write_attr
 
-   !> Write a fixed-shape dataset of memory type mtype from ptr (replacing any previous
-   !> one), with units and long_name: a scalar dataspace when `scalar`, else `shape`.
-   subroutine write_dataset(loc, name, scalar, shape, mtype, ptr, units, long_name, stat, errmsg)
+   !> Write a fixed-shape dataset of memory type mtype from ptr, with units and
+   !> long_name: a scalar dataspace when `scalar`, else `shape`. When `name` exists with
+   !> this shape and type class tclass (open_same) its raw data is overwritten in place;
+   !> otherwise any previous object of that name is replaced by a new dataset.
+   subroutine put_dataset(loc, name, scalar, shape, tclass, mtype, ptr, units, long_name, stat, errmsg)
       integer(hid_t), intent(in) :: loc, mtype
       character(len=*), intent(in) :: name
       logical, intent(in) :: scalar
       integer(hsize_t), intent(in) :: shape(:)
+      integer, intent(in) :: tclass
       type(c_ptr), intent(in) :: ptr
       character(len=*), intent(in) :: units, long_name
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
       integer(hid_t) :: space, dset
       integer :: err
+      stat = FOLD_OK
+      errmsg = ""
+      if (open_same(loc, name, shape, tclass, dset)) then
+         call h5dwrite_f(dset, mtype, ptr, err)
+         call check_err(err, name//": write failed", stat, errmsg)
+         call close_dataset(dset, name, stat, errmsg)
+         return
+      end if
       call h5_delete(loc, name, stat, errmsg)
       if (stat /= FOLD_OK) return
       if (scalar) then
@@ -1171,28 +1142,7 @@ contains
       call h5dwrite_f(dset, mtype, ptr, err)
       if (ok(err, name//": write failed", stat, errmsg)) call annotate(dset, name, units, long_name, stat, errmsg)
       call close_dataset(dset, name, stat, errmsg)
-   end subroutine write_dataset
-
-   !> Overwrite `name` in place from ptr (memory type mtype) when it exists with this
-   !> shape and type class (open_same); false, and nothing done, otherwise.
-   logical function overwritten(loc, name, shape, tclass, mtype, ptr, stat, errmsg)
-      integer(hid_t), intent(in) :: loc, mtype
-      character(len=*), intent(in) :: name
-      integer(hsize_t), intent(in) :: shape(:)
-      integer, intent(in) :: tclass
-      type(c_ptr), intent(in) :: ptr
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      integer(hid_t) :: dset
-      integer :: err
-      stat = FOLD_OK
-      errmsg = ""
-      overwritten = open_same(loc, name, shape, tclass, dset)
-      if (.not. overwritten) return
-      call h5dwrite_f(dset, mtype, ptr, err)
-      call check_err(err, name//": write failed", stat, errmsg)
-      call close_dataset(dset, name, stat, errmsg)
-   end function overwritten
+   end subroutine put_dataset
 
    !> A 1-D coordinate of n values at ptr (memory type mtype) that is a dimension scale.
    subroutine write_scale(loc, name, kind, n, unlimited, mtype, ptr, units, long_name, stat, errmsg)
@@ -1231,8 +1181,10 @@ contains
       call close_dataset(dset, name, stat, errmsg)
    end subroutine finish_scale
 
-   !> write_one_record, with a failure message naming the dataset by its full path
-   !> (variables are created at the root: "a2: ..." becomes "/a2: ...").
+   !> Write entry `record` (1-based, along the last, growing dimension; extended when
+   !> needed) of the variable `name` from ptr (count values of memory type mtype). A
+   !> failure message names the dataset by its full path (variables are created at
+   !> the root: "a2: ..." becomes "/a2: ...").
    subroutine write_record(loc, name, record, mtype, ptr, count, stat, errmsg)
       integer(hid_t), intent(in) :: loc
       character(len=*), intent(in) :: name
@@ -1242,62 +1194,57 @@ contains
       integer(hsize_t), intent(in) :: count
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      call write_one_record(loc, name, record, mtype, ptr, count, stat, errmsg)
+      call write_one_record()
       if (stat /= FOLD_OK .and. name(1:1) /= "/") errmsg = "/"//trim(errmsg)
-   end subroutine write_record
 
-   subroutine write_one_record(loc, name, record, mtype, ptr, count, stat, errmsg)
-      integer(hid_t), intent(in) :: loc
-      character(len=*), intent(in) :: name
-      integer(hsize_t), intent(in) :: record
-      integer(hid_t), intent(in) :: mtype
-      type(c_ptr), intent(in) :: ptr
-      integer(hsize_t), intent(in) :: count
-      integer, intent(out) :: stat
-      character(len=msg_len), intent(out) :: errmsg
-      integer(hid_t) :: dset, fspace, mspace
-      integer(hsize_t) :: shape(7), offset(7), block(7)
-      integer :: rank, err
+   contains
 
-      call h5_shape(loc, name, rank, shape, stat, errmsg)
-      if (stat /= FOLD_OK) return
-      if (product(shape(1:rank - 1)) /= count) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,a,i0,a,i0)') name, ": record of ", count, " values, expected ", product(shape(1:rank - 1))
-         return
-      end if
-      if (.not. open_dataset(loc, name, dset, stat, errmsg)) return
-      if (record > shape(rank)) then
-         shape(rank) = record
-         call h5dset_extent_f(dset, shape(1:rank), err)
-         if (.not. ok(err, name//": cannot extend", stat, errmsg)) then
+      !> The write itself, on write_record's arguments.
+      subroutine write_one_record()
+         integer(hid_t) :: dset, fspace, mspace
+         integer(hsize_t) :: shape(7), offset(7), block(7)
+         integer :: rank, err
+
+         call h5_shape(loc, name, rank, shape, stat, errmsg)
+         if (stat /= FOLD_OK) return
+         if (product(shape(1:rank - 1)) /= count) then
+            stat = FOLD_INPUT_ERROR
+            write (errmsg, '(a,a,i0,a,i0)') name, ": record of ", count, " values, expected ", product(shape(1:rank - 1))
+            return
+         end if
+         if (.not. open_dataset(loc, name, dset, stat, errmsg)) return
+         if (record > shape(rank)) then
+            shape(rank) = record
+            call h5dset_extent_f(dset, shape(1:rank), err)
+            if (.not. ok(err, name//": cannot extend", stat, errmsg)) then
+               call close_dataset(dset, name, stat, errmsg)
+               return
+            end if
+         end if
+         call h5dget_space_f(dset, fspace, err)
+         if (.not. ok(err, name//": cannot read its dataspace", stat, errmsg)) then
             call close_dataset(dset, name, stat, errmsg)
             return
          end if
-      end if
-      call h5dget_space_f(dset, fspace, err)
-      if (.not. ok(err, name//": cannot read its dataspace", stat, errmsg)) then
-         call close_dataset(dset, name, stat, errmsg)
-         return
-      end if
-      offset = 0
-      offset(rank) = record - 1
-      block(1:rank) = shape(1:rank)
-      block(rank) = 1
-      call h5sselect_hyperslab_f(fspace, H5S_SELECT_SET_F, offset(1:rank), block(1:rank), err)
-      if (ok(err, name//": cannot select the record", stat, errmsg)) then
-         call h5screate_simple_f(1, [count], mspace, err)
-         if (ok(err, name//": cannot create the memory dataspace", stat, errmsg)) then
-            call h5dwrite_f(dset, mtype, ptr, err, mspace, fspace)
-            call check_err(err, name//": write failed", stat, errmsg)
-            call h5sclose_f(mspace, err)
-            call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+         offset = 0
+         offset(rank) = record - 1
+         block(1:rank) = shape(1:rank)
+         block(rank) = 1
+         call h5sselect_hyperslab_f(fspace, H5S_SELECT_SET_F, offset(1:rank), block(1:rank), err)
+         if (ok(err, name//": cannot select the record", stat, errmsg)) then
+            call h5screate_simple_f(1, [count], mspace, err)
+            if (ok(err, name//": cannot create the memory dataspace", stat, errmsg)) then
+               call h5dwrite_f(dset, mtype, ptr, err, mspace, fspace)
+               call check_err(err, name//": write failed", stat, errmsg)
+               call h5sclose_f(mspace, err)
+               call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+            end if
          end if
-      end if
-      call h5sclose_f(fspace, err)
-      call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
-      ! The data may reach the file only here (chunk cache): a full disk fails the close.
-      call close_dataset(dset, name, stat, errmsg)
-   end subroutine write_one_record
+         call h5sclose_f(fspace, err)
+         call keep_first(err, name//": h5sclose_f failed", stat, errmsg)
+         ! The data may reach the file only here (chunk cache): a full disk fails the close.
+         call close_dataset(dset, name, stat, errmsg)
+      end subroutine write_one_record
+   end subroutine write_record
 
 end module fold_h5

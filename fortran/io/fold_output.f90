@@ -50,8 +50,7 @@ module fold_output
                       h5_exists, h5_read_int, h5_read_real, h5_read_int_array, h5_read_real_array, &
                       h5_attr_string, h5_attr_int, h5_read_attr_int, h5_make_group, h5_delete, &
                       h5_scale_int, h5_scale_real, &
-                      h5_var_create, h5_var_append_real, h5_var_append_int, h5_var_length, h5_var_truncate, h5_verify, &
-                      h5_write_real_array, h5_write_int_scalar, h5_write_real_scalar
+                      h5_var_create, h5_var_append_real, h5_var_append_int, h5_var_length, h5_var_truncate, h5_verify
    implicit none
    private
 

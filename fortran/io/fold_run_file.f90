@@ -271,32 +271,20 @@ contains
       if (stat /= FOLD_OK) return
       s%time_scheme = int(iv, ip)
       ! optional: run files written before the setting existed used the previous solution
-      s%stokes%guess = FOLD_DEF_STOKES_INITIAL_GUESS
-      if (h5_exists(file, R//"stokes_initial_guess")) then
-         call get_int(file, R//"stokes_initial_guess", FOLD_LO_STOKES_INITIAL_GUESS, FOLD_HI_STOKES_INITIAL_GUESS, iv, &
-                      stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes%guess = int(iv, ip)
-      end if
+      call get_int(file, R//"stokes_initial_guess", FOLD_LO_STOKES_INITIAL_GUESS, FOLD_HI_STOKES_INITIAL_GUESS, iv, &
+                   stat, errmsg, if_absent=FOLD_DEF_STOKES_INITIAL_GUESS); if (stat /= FOLD_OK) return
+      s%stokes%guess = int(iv, ip)
       ! optional: run files written before the setting existed transformed in double
-      s%stokes%fft_precision = FOLD_DEF_STOKES_FFT_PRECISION
-      if (h5_exists(file, R//"stokes_fft_precision")) then
-         call get_int(file, R//"stokes_fft_precision", FOLD_LO_STOKES_FFT_PRECISION, FOLD_HI_STOKES_FFT_PRECISION, iv, &
-                      stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes%fft_precision = int(iv, ip)
-      end if
+      call get_int(file, R//"stokes_fft_precision", FOLD_LO_STOKES_FFT_PRECISION, FOLD_HI_STOKES_FFT_PRECISION, iv, &
+                   stat, errmsg, if_absent=FOLD_DEF_STOKES_FFT_PRECISION); if (stat /= FOLD_OK) return
+      s%stokes%fft_precision = int(iv, ip)
       ! optional: run files written before the setting existed are penalised
-      s%stokes%rigidity = FOLD_DEF_STOKES_RIGIDITY
-      if (h5_exists(file, R//"stokes_rigidity")) then
-         call get_int(file, R//"stokes_rigidity", FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, iv, &
-                      stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes%rigidity = int(iv, ip)
-      end if
-      s%stokes_solve_every = FOLD_DEF_STOKES_SOLVE_EVERY
-      if (h5_exists(file, R//"stokes_solve_every")) then
-         call get_int(file, R//"stokes_solve_every", FOLD_LO_STOKES_SOLVE_EVERY, FOLD_HI_STOKES_SOLVE_EVERY, iv, &
-                      stat, errmsg); if (stat /= FOLD_OK) return
-         s%stokes_solve_every = int(iv, ip)
-      end if
+      call get_int(file, R//"stokes_rigidity", FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, iv, &
+                   stat, errmsg, if_absent=FOLD_DEF_STOKES_RIGIDITY); if (stat /= FOLD_OK) return
+      s%stokes%rigidity = int(iv, ip)
+      call get_int(file, R//"stokes_solve_every", FOLD_LO_STOKES_SOLVE_EVERY, FOLD_HI_STOKES_SOLVE_EVERY, iv, &
+                   stat, errmsg, if_absent=FOLD_DEF_STOKES_SOLVE_EVERY); if (stat /= FOLD_OK) return
+      s%stokes_solve_every = int(iv, ip)
    end subroutine read_stokes
 
    subroutine read_initial(file, s, parts, stat, errmsg)
@@ -377,14 +365,24 @@ contains
       if (stat /= FOLD_OK) errmsg = INI//": "//trim(errmsg)
    end subroutine read_initial
 
-   !> Integer scalar dataset within [lo, hi].
-   subroutine get_int(file, name, lo, hi, val, stat, errmsg)
+   !> Integer scalar dataset within [lo, hi]; with if_absent, an optional one.
+   subroutine get_int(file, name, lo, hi, val, stat, errmsg, if_absent)
       integer(hid_t), intent(in) :: file
       character(len=*), intent(in) :: name
       integer(i8), intent(in) :: lo, hi
       integer(i8), intent(out) :: val
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> The value when the dataset is absent (a setting older run files lack)
+      integer(ip), intent(in), optional :: if_absent
+      if (present(if_absent)) then
+         if (.not. h5_exists(file, name)) then
+            val = int(if_absent, i8)
+            stat = FOLD_OK
+            errmsg = ""
+            return
+         end if
+      end if
       call h5_read_int(file, name, val, stat, errmsg)
       if (stat /= FOLD_OK) return
       if (val < lo .or. val > hi) then

@@ -56,8 +56,9 @@ module fold_particles
 contains
 
    !> Allocate a set of n particles in dimension dim; fields are zeroed, shapes set
-   !> to fibres, axes to e_x. The caller fills shape/radius/length/xi/x/p.
-   subroutine particles_init(parts, dim, n, stat, errmsg)
+   !> to fibres, axes to e_x, except the fields given (x, p, shape, radius, length,
+   !> xi); the caller fills the others it needs.
+   subroutine particles_init(parts, dim, n, stat, errmsg, x, p, shape, radius, length, xi)
       type(particle_set_t), intent(out) :: parts
       !> Spatial dimension (2 or 3)
       integer(ip), intent(in) :: dim
@@ -65,6 +66,11 @@ contains
       integer(ip), intent(in) :: n
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> Centres (dim, n) [m] and unit axes (dim, n) of the set, when given
+      real(dp), intent(in), optional :: x(dim, n), p(dim, n)
+      !> Shape codes, radii [m], lengths [m] and shape factors (n), when given
+      integer(ip), intent(in), optional :: shape(n)
+      real(dp), intent(in), optional :: radius(n), length(n), xi(n)
 
       call check_dim(dim, "particles_init", stat, errmsg)
       if (stat /= FOLD_OK) return
@@ -87,6 +93,12 @@ contains
       if (n > 0) parts%p(1, :) = 1.0_dp
       parts%v = 0.0_dp
       parts%omega = 0.0_dp
+      if (present(x)) parts%x = x
+      if (present(p)) parts%p = p
+      if (present(shape)) parts%shape = shape
+      if (present(radius)) parts%radius = radius
+      if (present(length)) parts%length = length
+      if (present(xi)) parts%xi = xi
    end subroutine particles_init
 
    !> Check that a filled set is physically meaningful: known shapes, R > 0,
