@@ -26,11 +26,8 @@ module fold_fft_mpi
       !> The spectrum is left transposed (3-D default)
       logical :: transposed = .false.
    contains
-      procedure :: r2c => slab_r2c
-      procedure :: c2r => slab_c2r
+      procedure :: transform => slab_transform
       procedure :: plan_single => slab_plan_single
-      procedure :: r2c_sp => slab_r2c_sp
-      procedure :: c2r_sp => slab_c2r_sp
       procedure :: sum_all => slab_sum
       procedure :: max_all => slab_max
       procedure :: z_halo => slab_z_halo
@@ -197,29 +194,22 @@ contains
       end if
    end subroutine slab_plan_single
 
-   subroutine slab_r2c_sp(self, f)
+   subroutine slab_transform(self, f, forward, single)
       class(fft_mpi_t), intent(inout) :: self
       type(fft_field_t), intent(inout) :: f
-      call fftwf_mpi_execute_dft_r2c(self%fwd_sp, f%rs, f%cs)
-   end subroutine slab_r2c_sp
-
-   subroutine slab_c2r_sp(self, f)
-      class(fft_mpi_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftwf_mpi_execute_dft_c2r(self%bwd_sp, f%cs, f%rs)
-   end subroutine slab_c2r_sp
-
-   subroutine slab_r2c(self, f)
-      class(fft_mpi_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftw_mpi_execute_dft_r2c(self%fwd, f%r, f%c)
-   end subroutine slab_r2c
-
-   subroutine slab_c2r(self, f)
-      class(fft_mpi_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftw_mpi_execute_dft_c2r(self%bwd, f%c, f%r)
-   end subroutine slab_c2r
+      logical, intent(in) :: forward, single
+      if (single) then
+         if (forward) then
+            call fftwf_mpi_execute_dft_r2c(self%fwd_sp, f%rs, f%cs)
+         else
+            call fftwf_mpi_execute_dft_c2r(self%bwd_sp, f%cs, f%rs)
+         end if
+      else if (forward) then
+         call fftw_mpi_execute_dft_r2c(self%fwd, f%r, f%c)
+      else
+         call fftw_mpi_execute_dft_c2r(self%bwd, f%c, f%r)
+      end if
+   end subroutine slab_transform
 
    subroutine slab_sum(self, x)
       class(fft_mpi_t), intent(in) :: self

@@ -29,7 +29,7 @@ module fold_fft_transport
    !> One FFTW-aligned field usable for in-place transforms: the same memory seen
    !> as a padded real array and as a half spectrum, in double precision (r, c) and,
    !> on the first half of the same memory, in single precision (rs, cs; the
-   !> transforms r2c_sp/c2r_sp). The single views share the double ones' storage, so
+   !> single-precision transforms). The single views share the double ones' storage, so
    !> a field holds either, never both.
    type, public :: fft_field_t
       type(c_ptr) :: mem = c_null_ptr
@@ -70,16 +70,15 @@ module fold_fft_transport
       !> Single-precision (fftwf) plans, made by plan_single only
       type(c_ptr) :: fwd_sp = c_null_ptr, bwd_sp = c_null_ptr
    contains
-      !> In-place forward transform of a field (real view -> complex view), unnormalised
-      procedure(transform_iface), deferred :: r2c
-      !> In-place backward transform (complex view -> real view), unnormalised; destroys the input
-      procedure(transform_iface), deferred :: c2r
-      !> Make the single-precision plans (fftwf) of the grid; once, before r2c_sp/c2r_sp
+      !> In-place transform of a field by the plan of one direction and precision,
+      !> unnormalised: forward real view -> complex view, backward complex view -> real
+      !> view (destroys the input); single: the fftwf plans on rs/cs (after plan_single)
+      procedure(transform_iface), deferred :: transform
+      !> In-place double-precision forward / backward transform (transform)
+      procedure :: r2c => transport_r2c
+      procedure :: c2r => transport_c2r
+      !> Make the single-precision plans (fftwf) of the grid; once, before a single transform
       procedure(plan_single_iface), deferred :: plan_single
-      !> In-place single-precision forward transform (rs -> cs), unnormalised
-      procedure(transform_iface), deferred :: r2c_sp
-      !> In-place single-precision backward transform (cs -> rs), unnormalised; destroys the input
-      procedure(transform_iface), deferred :: c2r_sp
       !> Sum an array over all ranks (in place)
       procedure(reduce_iface), deferred :: sum_all
       !> Maximum of an array over all ranks (in place)
@@ -100,10 +99,11 @@ module fold_fft_transport
    end type fft_transport_t
 
    abstract interface
-      subroutine transform_iface(self, f)
+      subroutine transform_iface(self, f, forward, single)
          import :: fft_transport_t, fft_field_t
          class(fft_transport_t), intent(inout) :: self
          type(fft_field_t), intent(inout) :: f
+         logical, intent(in) :: forward, single
       end subroutine transform_iface
       subroutine plan_single_iface(self, effort, stat, errmsg)
          import :: fft_transport_t, msg_len
@@ -150,6 +150,18 @@ contains
       call c_f_pointer(f%mem, f%cs, self%nsl)
       f%r = 0.0_dp
    end subroutine transport_alloc_field
+
+   subroutine transport_r2c(self, f)
+      class(fft_transport_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call self%transform(f, .true., .false.)
+   end subroutine transport_r2c
+
+   subroutine transport_c2r(self, f)
+      class(fft_transport_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call self%transform(f, .false., .false.)
+   end subroutine transport_c2r
 
    !> Unfused reference: c2r, w = c eta w on the nx data columns, r2c.
    subroutine transport_c2r_scale_r2c(self, f, c, eta)

@@ -993,43 +993,21 @@ contains
          end do
          red = [stencil_pass(s), 0.0_dp]
          do c = 1, 3
-            call op_r2c(s, s%work(c))
+            call s%fft%transform(s%work(c), .true., s%single)
          end do
       else
          do c = 1, s%ncg
-            call op_c2r(s, s%work(s%cg_comp(c)))
+            call s%fft%transform(s%work(s%cg_comp(c)), .false., s%single)
          end do
          ! times 2 eta (the 1/N of the unnormalised c2r folds in); <p, A p> on the way
          red = [cg_viscous_energy(s), 0.0_dp]
          do c = 1, s%ncg
-            call op_r2c(s, s%work(s%cg_comp(c)))
+            call s%fft%transform(s%work(s%cg_comp(c)), .true., s%single)
          end do
       end if
       call s%fft%sum_all(red)
       pq = red(1)
    end subroutine cg_stress
-
-   !> The operator's forward / backward transform of a work field, in the precision of
-   !> the settings (fft_precision).
-   subroutine op_r2c(s, f)
-      type(stokes_fft_t), intent(inout) :: s
-      type(fft_field_t), intent(inout) :: f
-      if (s%single) then
-         call s%fft%r2c_sp(f)
-      else
-         call s%fft%r2c(f)
-      end if
-   end subroutine op_r2c
-
-   subroutine op_c2r(s, f)
-      type(stokes_fft_t), intent(inout) :: s
-      type(fft_field_t), intent(inout) :: f
-      if (s%single) then
-         call s%fft%c2r_sp(f)
-      else
-         call s%fft%c2r(f)
-      end if
-   end subroutine op_c2r
 
    !> The stencil pass on the corner velocity in vel(1:3)%r: the next rank's first
    !> corner plane in, the corner force of the non-uniform viscosity into work(1:3)

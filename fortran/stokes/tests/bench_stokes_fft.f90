@@ -252,8 +252,8 @@ program bench_stokes_fft
          if (s%single) then
             t0 = MPI_Wtime()
             do i = 1, 10
-               call s%fft%r2c_sp(s%work(1))
-               call s%fft%c2r_sp(s%work(1))
+               call s%fft%transform(s%work(1), .true., .true.)
+               call s%fft%transform(s%work(1), .false., .true.)
             end do
             call MPI_Barrier(MPI_COMM_WORLD)
             t_fft_sp = (MPI_Wtime() - t0)/20
