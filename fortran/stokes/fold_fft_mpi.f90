@@ -14,7 +14,8 @@ module fold_fft_mpi
                       MPI_DOUBLE_PRECISION, MPI_SUM, MPI_MAX, MPI_Sendrecv, MPI_STATUS_IGNORE
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural, &
+                                 single_plans_check
    implicit none
    private
 
@@ -188,10 +189,7 @@ contains
                                                  scratch%cs, scratch%rs, self%comm%MPI_VAL, flag_bwd)
       end if
       call field_free(scratch)
-      if (.not. (c_associated(self%fwd_sp) .and. c_associated(self%bwd_sp))) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = "fft_mpi: FFTW-MPI could not make the single-precision plans"
-      end if
+      call single_plans_check(self, "fft_mpi: FFTW-MPI", stat, errmsg)
    end subroutine slab_plan_single
 
    subroutine slab_transform(self, f, forward, single)

@@ -4,7 +4,8 @@ module fold_fft_serial
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural, &
+                                 single_plans_check
    implicit none
    private
 
@@ -71,14 +72,8 @@ contains
       integer, intent(in) :: effort
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      stat = FOLD_OK
-      errmsg = ""
-      if (c_associated(self%fwd_sp)) return
-      call serial_plans(self, effort, .true.)
-      if (.not. (c_associated(self%fwd_sp) .and. c_associated(self%bwd_sp))) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = "fft_serial: FFTW could not make the single-precision plans"
-      end if
+      if (.not. c_associated(self%fwd_sp)) call serial_plans(self, effort, .true.)
+      call single_plans_check(self, "fft_serial: FFTW", stat, errmsg)
    end subroutine serial_plan_single
 
    !> Make the in-place r2c/c2r plans of the grid in one precision (single: fftwf on the

@@ -21,6 +21,7 @@
 module fold_fft_transport
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    implicit none
    private
 
@@ -130,7 +131,7 @@ module fold_fft_transport
       end subroutine destroy_iface
    end interface
 
-   public :: plans_free, field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
+   public :: plans_free, single_plans_check, field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
 
    !> FFTW planning effort: FFTW_ESTIMATE (instant) or FFTW_MEASURE (seconds, faster transforms)
    integer, parameter :: FOLD_PLAN_ESTIMATE = 0, FOLD_PLAN_MEASURE = 1
@@ -200,6 +201,21 @@ contains
       self%fwd_sp = c_null_ptr
       self%bwd_sp = c_null_ptr
    end subroutine plans_free
+
+   !> The status of plan_single: FOLD_INPUT_ERROR with "<who> could not make the
+   !> single-precision plans" unless both fftwf plans exist.
+   subroutine single_plans_check(self, who, stat, errmsg)
+      class(fft_transport_t), intent(in) :: self
+      !> Transport and library in the message ("fft_serial: FFTW")
+      character(len=*), intent(in) :: who
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      stat = FOLD_OK
+      errmsg = ""
+      if (c_associated(self%fwd_sp) .and. c_associated(self%bwd_sp)) return
+      stat = FOLD_INPUT_ERROR
+      errmsg = who//" could not make the single-precision plans"
+   end subroutine single_plans_check
 
    !> Free a field (no-op when not allocated).
    subroutine field_free(f)
