@@ -28,17 +28,15 @@ program test_stokes_hypre
    use fold_particles, only: particle_set_t, particles_init, FOLD_SPHERE
    use fold_voxelise, only: voxel_set_t, voxelise
    use fold_rigid_fit, only: rigid_fit
-   use stokes_test_check, only: check, check_start, check_passed
+   use stokes_test_check, only: check
+   use stokes_test_solver, only: mpi_test_start, mpi_test_end
    implicit none
    integer :: rank, failures
    character(len=32) :: group
 
-   call MPI_Init()
-   call MPI_Comm_rank(MPI_COMM_WORLD, rank)
-   failures = 0
    group = "couette"
    if (command_argument_count() >= 1) call get_command_argument(1, group)
-   call check_start("test_stokes_hypre "//trim(group), rank == 0)
+   call mpi_test_start("test_stokes_hypre "//trim(group), rank, failures)
    select case (trim(group))
    case ("couette")
       call couette_layers(2, [16_ip, 32_ip, 1_ip], 10.0_dp, failures)
@@ -69,8 +67,7 @@ program test_stokes_hypre
       if (rank == 0) print '(a,a)', "test_stokes_hypre: unknown group ", trim(group)
       failures = failures + 1
    end select
-   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
-   call MPI_Finalize()
+   call mpi_test_end(failures)
 
 contains
 
