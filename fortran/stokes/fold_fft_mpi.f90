@@ -15,7 +15,7 @@ module fold_fft_mpi
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural, &
-                                 single_plans_check
+                                 single_plans_check, grid_check
    implicit none
    private
 
@@ -63,18 +63,8 @@ contains
       logical :: tr
       type(fft_field_t) :: scratch
 
-      stat = FOLD_OK
-      errmsg = ""
-      if (dim /= 2 .and. dim /= 3) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,i0)') "fft_mpi_create: dim must be 2 or 3, got ", dim
-         return
-      end if
-      if (any(n(1:dim) < 2)) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,3(1x,i0))') "fft_mpi_create: every grid size must be >= 2, got", n(1:dim)
-         return
-      end if
+      call grid_check("fft_mpi_create", dim, n, stat, errmsg)
+      if (stat /= FOLD_OK) return
       tr = dim == 3
       if (present(transposed)) tr = transposed .and. dim == 3
       call slab_destroy(self)

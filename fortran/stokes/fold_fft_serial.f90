@@ -3,9 +3,9 @@
 module fold_fft_serial
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
-   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_status, only: FOLD_OK
    use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural, &
-                                 single_plans_check
+                                 single_plans_check, grid_check
    implicit none
    private
 
@@ -38,18 +38,8 @@ contains
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
 
-      stat = FOLD_OK
-      errmsg = ""
-      if (dim /= 2 .and. dim /= 3) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,i0)') "fft_serial_create: dim must be 2 or 3, got ", dim
-         return
-      end if
-      if (any(n(1:dim) < 2)) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,3(1x,i0))') "fft_serial_create: every grid size must be >= 2, got", n(1:dim)
-         return
-      end if
+      call grid_check("fft_serial_create", dim, n, stat, errmsg)
+      if (stat /= FOLD_OK) return
       call serial_destroy(self)
       self%dim = dim
       self%n = 1

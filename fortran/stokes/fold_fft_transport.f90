@@ -22,6 +22,7 @@ module fold_fft_transport
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_check, only: check_dim
    implicit none
    private
 
@@ -131,12 +132,25 @@ module fold_fft_transport
       end subroutine destroy_iface
    end interface
 
-   public :: plans_free, single_plans_check, field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
+   public :: grid_check, plans_free, single_plans_check, field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
 
    !> FFTW planning effort: FFTW_ESTIMATE (instant) or FFTW_MEASURE (seconds, faster transforms)
    integer, parameter :: FOLD_PLAN_ESTIMATE = 0, FOLD_PLAN_MEASURE = 1
 
 contains
+
+   !> FOLD_INPUT_ERROR unless dim is 2 or 3 and every grid size n(1:dim) >= 2; the
+   !> message starts with who (the creating routine).
+   subroutine grid_check(who, dim, n, stat, errmsg)
+      character(len=*), intent(in) :: who
+      integer(ip), intent(in) :: dim, n(3)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call check_dim(dim, who, stat, errmsg)
+      if (stat /= FOLD_OK .or. all(n(1:dim) >= 2)) return
+      stat = FOLD_INPUT_ERROR
+      write (errmsg, '(a,3(1x,i0))') who//": every grid size must be >= 2, got", n(1:dim)
+   end subroutine grid_check
 
    !> Allocate an FFTW-aligned field (every field of a grid has the same
    !> alignment, which FFTW's new-array execute functions require).
