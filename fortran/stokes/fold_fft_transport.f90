@@ -132,7 +132,7 @@ module fold_fft_transport
       end subroutine destroy_iface
    end interface
 
-   public :: grid_check, plans_free, single_plans_check, field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
+   public :: grid_check, plans_free, single_plans_check, field_free, fields_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
 
    !> FFTW planning effort: FFTW_ESTIMATE (instant) or FFTW_MEASURE (seconds, faster transforms)
    integer, parameter :: FOLD_PLAN_ESTIMATE = 0, FOLD_PLAN_MEASURE = 1
@@ -241,6 +241,17 @@ contains
       f%rs => null()
       f%cs => null()
    end subroutine field_free
+
+   !> Free every field of an array and the array (no-op when not allocated).
+   subroutine fields_free(f)
+      type(fft_field_t), allocatable, intent(inout) :: f(:)
+      integer :: c
+      if (.not. allocated(f)) return
+      do c = 1, size(f)
+         call field_free(f(c))
+      end do
+      deallocate (f)
+   end subroutine fields_free
 
    !> Spectral layout in the real-space order: c(nxh, nl(2), nl(3)) (serial, 2-D MPI).
    subroutine spectral_natural(self)

@@ -88,7 +88,7 @@ module fold_stokes_fft
    use, intrinsic :: iso_c_binding, only: c_float, c_float_complex
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
-   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, FOLD_PLAN_ESTIMATE
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, fields_free, FOLD_PLAN_ESTIMATE
    use fold_grid, only: grid_t, grid_init, grid_set_lattice, grid_total
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, &
                                  FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, FOLD_MIX_HARMONIC, &
@@ -613,19 +613,8 @@ contains
    !> Release plans and storage.
    subroutine stokes_fft_destroy(s)
       class(stokes_fft_t), intent(inout) :: s
-      integer :: c
-      if (allocated(s%work)) then
-         do c = 1, size(s%work)
-            call field_free(s%work(c))
-         end do
-         deallocate (s%work)
-      end if
-      if (allocated(s%vel)) then
-         do c = 1, size(s%vel)
-            call field_free(s%vel(c))
-         end do
-         deallocate (s%vel)
-      end if
+      call fields_free(s%work)
+      call fields_free(s%vel)
       call field_free(s%eta)
       if (allocated(s%eta_sp)) deallocate (s%eta_sp)
       if (allocated(s%ceta)) deallocate (s%ceta)

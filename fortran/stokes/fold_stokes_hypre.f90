@@ -501,11 +501,7 @@ contains
    subroutine hypre_destroy(s)
       class(stokes_hypre_t), intent(inout) :: s
       integer :: ierr
-      if (s%have_solver) then
-         call HYPRE_ParCSRPCGDestroy(s%pcg, ierr)
-         call HYPRE_BoomerAMGDestroy(s%amg, ierr)
-         s%have_solver = .false.
-      end if
+      call free_inner(s)
       if (s%have_matrix) then
          call HYPRE_IJMatrixDestroy(s%hA, ierr)
          s%have_matrix = .false.
@@ -846,10 +842,7 @@ contains
    subroutine setup_inner(s)
       type(stokes_hypre_t), intent(inout) :: s
       integer :: ierr
-      if (s%have_solver) then
-         call HYPRE_ParCSRPCGDestroy(s%pcg, ierr)
-         call HYPRE_BoomerAMGDestroy(s%amg, ierr)
-      end if
+      call free_inner(s)
       call HYPRE_ParCSRPCGCreate(s%comm%MPI_VAL, s%pcg, ierr)
       call HYPRE_ParCSRPCGSetTol(s%pcg, s%tol_inner, ierr)
       call HYPRE_ParCSRPCGSetMaxIter(s%pcg, 1000, ierr)
@@ -880,6 +873,16 @@ contains
       call HYPRE_ParCSRPCGSetup(s%pcg, s%parA, s%parb, s%parx, ierr)
       s%have_solver = .true.
    end subroutine setup_inner
+
+   !> Destroy the inner PCG and its BoomerAMG preconditioner, if made.
+   subroutine free_inner(s)
+      class(stokes_hypre_t), intent(inout) :: s
+      integer :: ierr
+      if (.not. s%have_solver) return
+      call HYPRE_ParCSRPCGDestroy(s%pcg, ierr)
+      call HYPRE_BoomerAMGDestroy(s%amg, ierr)
+      s%have_solver = .false.
+   end subroutine free_inner
 
    !> y = A^-1 x (to tol_inner), halos of y filled.
    subroutine inner_solve(s, x, y, iters, stat)
