@@ -14,7 +14,8 @@ module fold_fft_mpi
                       MPI_DOUBLE_PRECISION, MPI_SUM, MPI_MAX, MPI_Sendrecv, MPI_STATUS_IGNORE
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural, &
+                                 single_plans_check, grid_check
    implicit none
    private
 
@@ -26,11 +27,8 @@ module fold_fft_mpi
       !> The spectrum is left transposed (3-D default)
       logical :: transposed = .false.
    contains
-      procedure :: r2c => slab_r2c
-      procedure :: c2r => slab_c2r
+      procedure :: transform => slab_transform
       procedure :: plan_single => slab_plan_single
-      procedure :: r2c_sp => slab_r2c_sp
-      procedure :: c2r_sp => slab_c2r_sp
       procedure :: sum_all => slab_sum
       procedure :: max_all => slab_max
       procedure :: z_halo => slab_z_halo
@@ -65,18 +63,8 @@ contains
       logical :: tr
       type(fft_field_t) :: scratch
 
-      stat = FOLD_OK
-      errmsg = ""
-      if (dim /= 2 .and. dim /= 3) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,i0)') "fft_mpi_create: dim must be 2 or 3, got ", dim
-         return
-      end if
-      if (any(n(1:dim) < 2)) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,3(1x,i0))') "fft_mpi_create: every grid size must be >= 2, got", n(1:dim)
-         return
-      end if
+      call grid_check("fft_mpi_create", dim, n, stat, errmsg)
+      if (stat /= FOLD_OK) return
       tr = dim == 3
       if (present(transposed)) tr = transposed .and. dim == 3
       call slab_destroy(self)
@@ -191,35 +179,25 @@ contains
                                                  scratch%cs, scratch%rs, self%comm%MPI_VAL, flag_bwd)
       end if
       call field_free(scratch)
-      if (.not. (c_associated(self%fwd_sp) .and. c_associated(self%bwd_sp))) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = "fft_mpi: FFTW-MPI could not make the single-precision plans"
-      end if
+      call single_plans_check(self, "fft_mpi: FFTW-MPI", stat, errmsg)
    end subroutine slab_plan_single
 
-   subroutine slab_r2c_sp(self, f)
+   subroutine slab_transform(self, f, forward, single)
       class(fft_mpi_t), intent(inout) :: self
       type(fft_field_t), intent(inout) :: f
-      call fftwf_mpi_execute_dft_r2c(self%fwd_sp, f%rs, f%cs)
-   end subroutine slab_r2c_sp
-
-   subroutine slab_c2r_sp(self, f)
-      class(fft_mpi_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftwf_mpi_execute_dft_c2r(self%bwd_sp, f%cs, f%rs)
-   end subroutine slab_c2r_sp
-
-   subroutine slab_r2c(self, f)
-      class(fft_mpi_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftw_mpi_execute_dft_r2c(self%fwd, f%r, f%c)
-   end subroutine slab_r2c
-
-   subroutine slab_c2r(self, f)
-      class(fft_mpi_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftw_mpi_execute_dft_c2r(self%bwd, f%c, f%r)
-   end subroutine slab_c2r
+      logical, intent(in) :: forward, single
+      if (single) then
+         if (forward) then
+            call fftwf_mpi_execute_dft_r2c(self%fwd_sp, f%rs, f%cs)
+         else
+            call fftwf_mpi_execute_dft_c2r(self%bwd_sp, f%cs, f%rs)
+         end if
+      else if (forward) then
+         call fftw_mpi_execute_dft_r2c(self%fwd, f%r, f%c)
+      else
+         call fftw_mpi_execute_dft_c2r(self%bwd, f%c, f%r)
+      end if
+   end subroutine slab_transform
 
    subroutine slab_sum(self, x)
       class(fft_mpi_t), intent(in) :: self

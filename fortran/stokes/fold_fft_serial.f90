@@ -3,8 +3,9 @@
 module fold_fft_serial
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
-   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural
+   use fold_status, only: FOLD_OK
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, plans_free, plan_flag, spectral_natural, &
+                                 single_plans_check, grid_check
    implicit none
    private
 
@@ -13,11 +14,8 @@ module fold_fft_serial
    !> Serial in-place r2c/c2r plans of one grid.
    type, extends(fft_transport_t), public :: fft_serial_t
    contains
-      procedure :: r2c => serial_r2c
-      procedure :: c2r => serial_c2r
+      procedure :: transform => serial_transform
       procedure :: plan_single => serial_plan_single
-      procedure :: r2c_sp => serial_r2c_sp
-      procedure :: c2r_sp => serial_c2r_sp
       procedure :: sum_all => serial_reduce
       procedure :: max_all => serial_reduce
       procedure :: z_halo => serial_z_halo
@@ -39,20 +37,9 @@ contains
       integer, intent(in) :: effort
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      type(fft_field_t) :: scratch
 
-      stat = FOLD_OK
-      errmsg = ""
-      if (dim /= 2 .and. dim /= 3) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,i0)') "fft_serial_create: dim must be 2 or 3, got ", dim
-         return
-      end if
-      if (any(n(1:dim) < 2)) then
-         stat = FOLD_INPUT_ERROR
-         write (errmsg, '(a,3(1x,i0))') "fft_serial_create: every grid size must be >= 2, got", n(1:dim)
-         return
-      end if
+      call grid_check("fft_serial_create", dim, n, stat, errmsg)
+      if (stat /= FOLD_OK) return
       call serial_destroy(self)
       self%dim = dim
       self%n = 1
@@ -65,16 +52,7 @@ contains
       self%alloc_complex = int(self%nxh, i8)*self%n(2)*self%n(3)
       self%rank = 0
       self%nranks = 1
-      call self%alloc_field(scratch)
-      ! Column-major a(nx, ny, nz) is FFTW's row-major (nz, ny, nx): sizes reversed.
-      if (dim == 3) then
-         self%fwd = fftw_plan_dft_r2c_3d(self%n(3), self%n(2), self%n(1), scratch%r, scratch%c, plan_flag(effort))
-         self%bwd = fftw_plan_dft_c2r_3d(self%n(3), self%n(2), self%n(1), scratch%c, scratch%r, plan_flag(effort))
-      else
-         self%fwd = fftw_plan_dft_r2c_2d(self%n(2), self%n(1), scratch%r, scratch%c, plan_flag(effort))
-         self%bwd = fftw_plan_dft_c2r_2d(self%n(2), self%n(1), scratch%c, scratch%r, plan_flag(effort))
-      end if
-      call field_free(scratch)
+      call serial_plans(self, effort, .false.)
    end subroutine fft_serial_create
 
    !> The fftwf plans of the grid (same layout as the double ones, on the first half
@@ -84,48 +62,55 @@ contains
       integer, intent(in) :: effort
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
-      type(fft_field_t) :: scratch
-      stat = FOLD_OK
-      errmsg = ""
-      if (c_associated(self%fwd_sp)) return
-      call self%alloc_field(scratch)
-      if (self%dim == 3) then
-         self%fwd_sp = fftwf_plan_dft_r2c_3d(self%n(3), self%n(2), self%n(1), scratch%rs, scratch%cs, plan_flag(effort))
-         self%bwd_sp = fftwf_plan_dft_c2r_3d(self%n(3), self%n(2), self%n(1), scratch%cs, scratch%rs, plan_flag(effort))
-      else
-         self%fwd_sp = fftwf_plan_dft_r2c_2d(self%n(2), self%n(1), scratch%rs, scratch%cs, plan_flag(effort))
-         self%bwd_sp = fftwf_plan_dft_c2r_2d(self%n(2), self%n(1), scratch%cs, scratch%rs, plan_flag(effort))
-      end if
-      call field_free(scratch)
-      if (.not. (c_associated(self%fwd_sp) .and. c_associated(self%bwd_sp))) then
-         stat = FOLD_INPUT_ERROR
-         errmsg = "fft_serial: FFTW could not make the single-precision plans"
-      end if
+      if (.not. c_associated(self%fwd_sp)) call serial_plans(self, effort, .true.)
+      call single_plans_check(self, "fft_serial: FFTW", stat, errmsg)
    end subroutine serial_plan_single
 
-   subroutine serial_r2c_sp(self, f)
+   !> Make the in-place r2c/c2r plans of the grid in one precision (single: fftwf on the
+   !> rs/cs views) on a scratch field. Column-major a(nx, ny, nz) is FFTW's row-major
+   !> (nz, ny, nx): sizes reversed.
+   subroutine serial_plans(self, effort, single)
       class(fft_serial_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftwf_execute_dft_r2c(self%fwd_sp, f%rs, f%cs)
-   end subroutine serial_r2c_sp
+      integer, intent(in) :: effort
+      logical, intent(in) :: single
+      type(fft_field_t) :: scratch
+      integer :: flag
+      flag = plan_flag(effort)
+      call self%alloc_field(scratch)
+      associate (n => self%n)
+         if (single .and. self%dim == 3) then
+            self%fwd_sp = fftwf_plan_dft_r2c_3d(n(3), n(2), n(1), scratch%rs, scratch%cs, flag)
+            self%bwd_sp = fftwf_plan_dft_c2r_3d(n(3), n(2), n(1), scratch%cs, scratch%rs, flag)
+         else if (single) then
+            self%fwd_sp = fftwf_plan_dft_r2c_2d(n(2), n(1), scratch%rs, scratch%cs, flag)
+            self%bwd_sp = fftwf_plan_dft_c2r_2d(n(2), n(1), scratch%cs, scratch%rs, flag)
+         else if (self%dim == 3) then
+            self%fwd = fftw_plan_dft_r2c_3d(n(3), n(2), n(1), scratch%r, scratch%c, flag)
+            self%bwd = fftw_plan_dft_c2r_3d(n(3), n(2), n(1), scratch%c, scratch%r, flag)
+         else
+            self%fwd = fftw_plan_dft_r2c_2d(n(2), n(1), scratch%r, scratch%c, flag)
+            self%bwd = fftw_plan_dft_c2r_2d(n(2), n(1), scratch%c, scratch%r, flag)
+         end if
+      end associate
+      call field_free(scratch)
+   end subroutine serial_plans
 
-   subroutine serial_c2r_sp(self, f)
+   subroutine serial_transform(self, f, forward, single)
       class(fft_serial_t), intent(inout) :: self
       type(fft_field_t), intent(inout) :: f
-      call fftwf_execute_dft_c2r(self%bwd_sp, f%cs, f%rs)
-   end subroutine serial_c2r_sp
-
-   subroutine serial_r2c(self, f)
-      class(fft_serial_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftw_execute_dft_r2c(self%fwd, f%r, f%c)
-   end subroutine serial_r2c
-
-   subroutine serial_c2r(self, f)
-      class(fft_serial_t), intent(inout) :: self
-      type(fft_field_t), intent(inout) :: f
-      call fftw_execute_dft_c2r(self%bwd, f%c, f%r)
-   end subroutine serial_c2r
+      logical, intent(in) :: forward, single
+      if (single) then
+         if (forward) then
+            call fftwf_execute_dft_r2c(self%fwd_sp, f%rs, f%cs)
+         else
+            call fftwf_execute_dft_c2r(self%bwd_sp, f%cs, f%rs)
+         end if
+      else if (forward) then
+         call fftw_execute_dft_r2c(self%fwd, f%r, f%c)
+      else
+         call fftw_execute_dft_c2r(self%bwd, f%c, f%r)
+      end if
+   end subroutine serial_transform
 
    !> One process: a global sum or maximum is the local value.
    subroutine serial_reduce(self, x)

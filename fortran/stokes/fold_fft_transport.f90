@@ -21,6 +21,8 @@
 module fold_fft_transport
    use, intrinsic :: iso_c_binding
    use fold_kinds, only: dp, ip, i8, msg_len
+   use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
+   use fold_check, only: check_dim
    implicit none
    private
 
@@ -29,7 +31,7 @@ module fold_fft_transport
    !> One FFTW-aligned field usable for in-place transforms: the same memory seen
    !> as a padded real array and as a half spectrum, in double precision (r, c) and,
    !> on the first half of the same memory, in single precision (rs, cs; the
-   !> transforms r2c_sp/c2r_sp). The single views share the double ones' storage, so
+   !> single-precision transforms). The single views share the double ones' storage, so
    !> a field holds either, never both.
    type, public :: fft_field_t
       type(c_ptr) :: mem = c_null_ptr
@@ -70,16 +72,15 @@ module fold_fft_transport
       !> Single-precision (fftwf) plans, made by plan_single only
       type(c_ptr) :: fwd_sp = c_null_ptr, bwd_sp = c_null_ptr
    contains
-      !> In-place forward transform of a field (real view -> complex view), unnormalised
-      procedure(transform_iface), deferred :: r2c
-      !> In-place backward transform (complex view -> real view), unnormalised; destroys the input
-      procedure(transform_iface), deferred :: c2r
-      !> Make the single-precision plans (fftwf) of the grid; once, before r2c_sp/c2r_sp
+      !> In-place transform of a field by the plan of one direction and precision,
+      !> unnormalised: forward real view -> complex view, backward complex view -> real
+      !> view (destroys the input); single: the fftwf plans on rs/cs (after plan_single)
+      procedure(transform_iface), deferred :: transform
+      !> In-place double-precision forward / backward transform (transform)
+      procedure :: r2c => transport_r2c
+      procedure :: c2r => transport_c2r
+      !> Make the single-precision plans (fftwf) of the grid; once, before a single transform
       procedure(plan_single_iface), deferred :: plan_single
-      !> In-place single-precision forward transform (rs -> cs), unnormalised
-      procedure(transform_iface), deferred :: r2c_sp
-      !> In-place single-precision backward transform (cs -> rs), unnormalised; destroys the input
-      procedure(transform_iface), deferred :: c2r_sp
       !> Sum an array over all ranks (in place)
       procedure(reduce_iface), deferred :: sum_all
       !> Maximum of an array over all ranks (in place)
@@ -100,10 +101,11 @@ module fold_fft_transport
    end type fft_transport_t
 
    abstract interface
-      subroutine transform_iface(self, f)
+      subroutine transform_iface(self, f, forward, single)
          import :: fft_transport_t, fft_field_t
          class(fft_transport_t), intent(inout) :: self
          type(fft_field_t), intent(inout) :: f
+         logical, intent(in) :: forward, single
       end subroutine transform_iface
       subroutine plan_single_iface(self, effort, stat, errmsg)
          import :: fft_transport_t, msg_len
@@ -130,12 +132,25 @@ module fold_fft_transport
       end subroutine destroy_iface
    end interface
 
-   public :: plans_free, field_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
+   public :: grid_check, plans_free, single_plans_check, field_free, fields_free, FOLD_PLAN_ESTIMATE, FOLD_PLAN_MEASURE, plan_flag, scale_rows, spectral_natural
 
    !> FFTW planning effort: FFTW_ESTIMATE (instant) or FFTW_MEASURE (seconds, faster transforms)
    integer, parameter :: FOLD_PLAN_ESTIMATE = 0, FOLD_PLAN_MEASURE = 1
 
 contains
+
+   !> FOLD_INPUT_ERROR unless dim is 2 or 3 and every grid size n(1:dim) >= 2; the
+   !> message starts with who (the creating routine).
+   subroutine grid_check(who, dim, n, stat, errmsg)
+      character(len=*), intent(in) :: who
+      integer(ip), intent(in) :: dim, n(3)
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      call check_dim(dim, who, stat, errmsg)
+      if (stat /= FOLD_OK .or. all(n(1:dim) >= 2)) return
+      stat = FOLD_INPUT_ERROR
+      write (errmsg, '(a,3(1x,i0))') who//": every grid size must be >= 2, got", n(1:dim)
+   end subroutine grid_check
 
    !> Allocate an FFTW-aligned field (every field of a grid has the same
    !> alignment, which FFTW's new-array execute functions require).
@@ -150,6 +165,18 @@ contains
       call c_f_pointer(f%mem, f%cs, self%nsl)
       f%r = 0.0_dp
    end subroutine transport_alloc_field
+
+   subroutine transport_r2c(self, f)
+      class(fft_transport_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call self%transform(f, .true., .false.)
+   end subroutine transport_r2c
+
+   subroutine transport_c2r(self, f)
+      class(fft_transport_t), intent(inout) :: self
+      type(fft_field_t), intent(inout) :: f
+      call self%transform(f, .false., .false.)
+   end subroutine transport_c2r
 
    !> Unfused reference: c2r, w = c eta w on the nx data columns, r2c.
    subroutine transport_c2r_scale_r2c(self, f, c, eta)
@@ -189,6 +216,21 @@ contains
       self%bwd_sp = c_null_ptr
    end subroutine plans_free
 
+   !> The status of plan_single: FOLD_INPUT_ERROR with "<who> could not make the
+   !> single-precision plans" unless both fftwf plans exist.
+   subroutine single_plans_check(self, who, stat, errmsg)
+      class(fft_transport_t), intent(in) :: self
+      !> Transport and library in the message ("fft_serial: FFTW")
+      character(len=*), intent(in) :: who
+      integer, intent(out) :: stat
+      character(len=msg_len), intent(out) :: errmsg
+      stat = FOLD_OK
+      errmsg = ""
+      if (c_associated(self%fwd_sp) .and. c_associated(self%bwd_sp)) return
+      stat = FOLD_INPUT_ERROR
+      errmsg = who//" could not make the single-precision plans"
+   end subroutine single_plans_check
+
    !> Free a field (no-op when not allocated).
    subroutine field_free(f)
       type(fft_field_t), intent(inout) :: f
@@ -199,6 +241,17 @@ contains
       f%rs => null()
       f%cs => null()
    end subroutine field_free
+
+   !> Free every field of an array and the array (no-op when not allocated).
+   subroutine fields_free(f)
+      type(fft_field_t), allocatable, intent(inout) :: f(:)
+      integer :: c
+      if (.not. allocated(f)) return
+      do c = 1, size(f)
+         call field_free(f(c))
+      end do
+      deallocate (f)
+   end subroutine fields_free
 
    !> Spectral layout in the real-space order: c(nxh, nl(2), nl(3)) (serial, 2-D MPI).
    subroutine spectral_natural(self)

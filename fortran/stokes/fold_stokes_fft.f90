@@ -88,7 +88,7 @@ module fold_stokes_fft
    use, intrinsic :: iso_c_binding, only: c_float, c_float_complex
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NUMERICAL
-   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, FOLD_PLAN_ESTIMATE
+   use fold_fft_transport, only: fft_transport_t, fft_field_t, field_free, fields_free, FOLD_PLAN_ESTIMATE
    use fold_grid, only: grid_t, grid_init, grid_set_lattice, grid_total
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_settings_check, &
                                  FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, FOLD_MIX_HARMONIC, &
@@ -613,19 +613,8 @@ contains
    !> Release plans and storage.
    subroutine stokes_fft_destroy(s)
       class(stokes_fft_t), intent(inout) :: s
-      integer :: c
-      if (allocated(s%work)) then
-         do c = 1, size(s%work)
-            call field_free(s%work(c))
-         end do
-         deallocate (s%work)
-      end if
-      if (allocated(s%vel)) then
-         do c = 1, size(s%vel)
-            call field_free(s%vel(c))
-         end do
-         deallocate (s%vel)
-      end if
+      call fields_free(s%work)
+      call fields_free(s%vel)
       call field_free(s%eta)
       if (allocated(s%eta_sp)) deallocate (s%eta_sp)
       if (allocated(s%ceta)) deallocate (s%ceta)
@@ -993,43 +982,21 @@ contains
          end do
          red = [stencil_pass(s), 0.0_dp]
          do c = 1, 3
-            call op_r2c(s, s%work(c))
+            call s%fft%transform(s%work(c), .true., s%single)
          end do
       else
          do c = 1, s%ncg
-            call op_c2r(s, s%work(s%cg_comp(c)))
+            call s%fft%transform(s%work(s%cg_comp(c)), .false., s%single)
          end do
          ! times 2 eta (the 1/N of the unnormalised c2r folds in); <p, A p> on the way
          red = [cg_viscous_energy(s), 0.0_dp]
          do c = 1, s%ncg
-            call op_r2c(s, s%work(s%cg_comp(c)))
+            call s%fft%transform(s%work(s%cg_comp(c)), .true., s%single)
          end do
       end if
       call s%fft%sum_all(red)
       pq = red(1)
    end subroutine cg_stress
-
-   !> The operator's forward / backward transform of a work field, in the precision of
-   !> the settings (fft_precision).
-   subroutine op_r2c(s, f)
-      type(stokes_fft_t), intent(inout) :: s
-      type(fft_field_t), intent(inout) :: f
-      if (s%single) then
-         call s%fft%r2c_sp(f)
-      else
-         call s%fft%r2c(f)
-      end if
-   end subroutine op_r2c
-
-   subroutine op_c2r(s, f)
-      type(stokes_fft_t), intent(inout) :: s
-      type(fft_field_t), intent(inout) :: f
-      if (s%single) then
-         call s%fft%c2r_sp(f)
-      else
-         call s%fft%c2r(f)
-      end if
-   end subroutine op_c2r
 
    !> The stencil pass on the corner velocity in vel(1:3)%r: the next rank's first
    !> corner plane in, the corner force of the non-uniform viscosity into work(1:3)

@@ -501,11 +501,7 @@ contains
    subroutine hypre_destroy(s)
       class(stokes_hypre_t), intent(inout) :: s
       integer :: ierr
-      if (s%have_solver) then
-         call HYPRE_ParCSRPCGDestroy(s%pcg, ierr)
-         call HYPRE_BoomerAMGDestroy(s%amg, ierr)
-         s%have_solver = .false.
-      end if
+      call free_inner(s)
       if (s%have_matrix) then
          call HYPRE_IJMatrixDestroy(s%hA, ierr)
          s%have_matrix = .false.
@@ -846,10 +842,7 @@ contains
    subroutine setup_inner(s)
       type(stokes_hypre_t), intent(inout) :: s
       integer :: ierr
-      if (s%have_solver) then
-         call HYPRE_ParCSRPCGDestroy(s%pcg, ierr)
-         call HYPRE_BoomerAMGDestroy(s%amg, ierr)
-      end if
+      call free_inner(s)
       call HYPRE_ParCSRPCGCreate(s%comm%MPI_VAL, s%pcg, ierr)
       call HYPRE_ParCSRPCGSetTol(s%pcg, s%tol_inner, ierr)
       call HYPRE_ParCSRPCGSetMaxIter(s%pcg, 1000, ierr)
@@ -881,6 +874,16 @@ contains
       s%have_solver = .true.
    end subroutine setup_inner
 
+   !> Destroy the inner PCG and its BoomerAMG preconditioner, if made.
+   subroutine free_inner(s)
+      class(stokes_hypre_t), intent(inout) :: s
+      integer :: ierr
+      if (.not. s%have_solver) return
+      call HYPRE_ParCSRPCGDestroy(s%pcg, ierr)
+      call HYPRE_BoomerAMGDestroy(s%amg, ierr)
+      s%have_solver = .false.
+   end subroutine free_inner
+
    !> y = A^-1 x (to tol_inner), halos of y filled.
    subroutine inner_solve(s, x, y, iters, stat)
       type(stokes_hypre_t), intent(inout) :: s
@@ -902,45 +905,30 @@ contains
       call halo(s, y)
    end subroutine inner_solve
 
-   !> Own face values of x (row order) into the IJ vector v.
+   !> Own face values of x (row order: face component fastest, then x, y, z) into the
+   !> IJ vector v, through s%buf.
    subroutine pack_faces(s, x, v)
       type(stokes_hypre_t), intent(inout) :: s
       real(dp), intent(in) :: x(s%lb(1):, s%lb(2):, s%lb(3):, :)
       integer(8), intent(in) :: v
-      integer(ip) :: a, i, j, k
-      integer :: m, ierr
-      m = 0
-      do k = own_lo(s, 3), own_hi(s, 3)
-         do j = own_lo(s, 2), own_hi(s, 2)
-            do i = 0, s%grid%n(1) - 1
-               do a = 1, s%dim
-                  m = m + 1
-                  s%buf(m) = x(i, j, k, a)
-               end do
-            end do
-         end do
-      end do
+      integer :: ierr
+      associate (n1 => s%grid%n(1), nl => s%grid%nl, j0 => own_lo(s, 2), j1 => own_hi(s, 2), &
+                 k0 => own_lo(s, 3), k1 => own_hi(s, 3))
+         s%buf(1:s%nloc) = reshape(reshape(x(0:n1 - 1, j0:j1, k0:k1, 1:s%dim), [s%dim, n1, nl(2), nl(3)], &
+                                           order=[2, 3, 4, 1]), [s%nloc])
+      end associate
       call HYPRE_IJVectorSetValues(v, s%nloc, s%rows, s%buf, ierr)
       call HYPRE_IJVectorAssemble(v, ierr)
    end subroutine pack_faces
 
-   !> s%buf (row order) into the own faces of y.
+   !> s%buf (row order, as pack_faces) into the own faces of y.
    subroutine unpack_faces(s, y)
       type(stokes_hypre_t), intent(in) :: s
       real(dp), intent(inout) :: y(s%lb(1):, s%lb(2):, s%lb(3):, :)
-      integer(ip) :: a, i, j, k
-      integer :: m
-      m = 0
-      do k = own_lo(s, 3), own_hi(s, 3)
-         do j = own_lo(s, 2), own_hi(s, 2)
-            do i = 0, s%grid%n(1) - 1
-               do a = 1, s%dim
-                  m = m + 1
-                  y(i, j, k, a) = s%buf(m)
-               end do
-            end do
-         end do
-      end do
+      associate (n1 => s%grid%n(1), nl => s%grid%nl, j0 => own_lo(s, 2), j1 => own_hi(s, 2), &
+                 k0 => own_lo(s, 3), k1 => own_hi(s, 3))
+         y(0:n1 - 1, j0:j1, k0:k1, 1:s%dim) = reshape(s%buf(1:s%nloc), [n1, nl(2), nl(3), s%dim], order=[4, 1, 2, 3])
+      end associate
    end subroutine unpack_faces
 
    ! ------------------------------------------------------------------ Schur iteration

@@ -159,15 +159,8 @@ program bench_stokes_fft
 
    if (trim(mode) == "fft") then
       do rep = 1, nrep
-         t0 = MPI_Wtime()
-         call cpu_time(c0)
-         do i = 1, 50
-            call s%fft%r2c(s%work(1))
-            call s%fft%c2r(s%work(1))
-         end do
-         call cpu_time(c1)
-         t_fft = (MPI_Wtime() - t0)/100
-         if (rank == 0) print '(a,i0,a,es12.5,a,es12.5)', "FFT n=", n, " t_fft_wall=", t_fft, " t_fft_cpu=", (c1 - c0)/100
+         call round_trips(50, .false., t_fft, c_fft)
+         if (rank == 0) print '(a,i0,a,es12.5,a,es12.5)', "FFT n=", n, " t_fft_wall=", t_fft, " t_fft_cpu=", c_fft
       end do
    else if (trim(mode) == "batch") then
       ! howmany = 5 interleaved fields (component fastest), transposed spectrum
@@ -237,27 +230,9 @@ program bench_stokes_fft
    else
       do rep = 1, nrep
          ! hot: one field forth and back, 10 times
-         call MPI_Barrier(MPI_COMM_WORLD)
-         t0 = MPI_Wtime()
-         call cpu_time(c0)
-         do i = 1, 10
-            call s%fft%r2c(s%work(1))
-            call s%fft%c2r(s%work(1))
-         end do
-         call MPI_Barrier(MPI_COMM_WORLD)
-         call cpu_time(c1)
-         t_fft = (MPI_Wtime() - t0)/20
-         c_fft = (c1 - c0)/20
+         call round_trips(10, .false., t_fft, c_fft)
          t_fft_sp = 0.0_dp
-         if (s%single) then
-            t0 = MPI_Wtime()
-            do i = 1, 10
-               call s%fft%r2c_sp(s%work(1))
-               call s%fft%c2r_sp(s%work(1))
-            end do
-            call MPI_Barrier(MPI_COMM_WORLD)
-            t_fft_sp = (MPI_Wtime() - t0)/20
-         end if
+         if (s%single) call round_trips(10, .true., t_fft_sp, c1)
          ! as in an iteration: c2r then r2c of each CG strain field in turn
          t0 = MPI_Wtime()
          do c = 1, s%ncg
@@ -285,6 +260,27 @@ program bench_stokes_fft
    call MPI_Finalize()
 
 contains
+
+   !> Wall and CPU time per transform [s] of count forward-and-back transforms of one
+   !> work field (single: the fftwf plans), between barriers.
+   subroutine round_trips(count, single, wall, cpu)
+      integer, intent(in) :: count
+      logical, intent(in) :: single
+      real(dp), intent(out) :: wall, cpu
+      real(dp) :: t, c
+      integer :: m
+      call MPI_Barrier(MPI_COMM_WORLD)
+      t = MPI_Wtime()
+      call cpu_time(c)
+      do m = 1, count
+         call s%fft%transform(s%work(1), .true., single)
+         call s%fft%transform(s%work(1), .false., single)
+      end do
+      call MPI_Barrier(MPI_COMM_WORLD)
+      call cpu_time(cpu)
+      wall = (MPI_Wtime() - t)/(2*count)
+      cpu = (cpu - c)/(2*count)
+   end subroutine round_trips
 
    subroutine check(what)
       character(len=*), intent(in) :: what

@@ -28,17 +28,15 @@ program test_stokes_hypre
    use fold_particles, only: particle_set_t, particles_init, FOLD_SPHERE
    use fold_voxelise, only: voxel_set_t, voxelise
    use fold_rigid_fit, only: rigid_fit
-   use stokes_test_check, only: check, check_start, check_passed
+   use stokes_test_check, only: check
+   use stokes_test_solver, only: mpi_test_start, mpi_test_end
    implicit none
    integer :: rank, failures
    character(len=32) :: group
 
-   call MPI_Init()
-   call MPI_Comm_rank(MPI_COMM_WORLD, rank)
-   failures = 0
    group = "couette"
    if (command_argument_count() >= 1) call get_command_argument(1, group)
-   call check_start("test_stokes_hypre "//trim(group), rank == 0)
+   call mpi_test_start("test_stokes_hypre "//trim(group), rank, failures)
    select case (trim(group))
    case ("couette")
       call couette_layers(2, [16_ip, 32_ip, 1_ip], 10.0_dp, failures)
@@ -69,8 +67,7 @@ program test_stokes_hypre
       if (rank == 0) print '(a,a)', "test_stokes_hypre: unknown group ", trim(group)
       failures = failures + 1
    end select
-   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
-   call MPI_Finalize()
+   call mpi_test_end(failures)
 
 contains
 
@@ -702,22 +699,50 @@ contains
       call HYPRE_IJVectorGetValues(s%hb, s%nloc, s%rows, y, ierr)
    end subroutine apply_a
 
-   !> Two spheres of radii radius at x1 and x2 (the first dim coordinates), axes along x.
-   subroutine two_spheres(dim, radius, x1, x2, parts)
+   !> Spheres of radii radius(i) at x(:, i) (the first dim coordinates), axes along x.
+   subroutine spheres(dim, radius, x, parts)
       integer(ip), intent(in) :: dim
-      real(dp), intent(in) :: radius(2), x1(3), x2(3)
+      real(dp), intent(in) :: radius(:), x(:, :)
       type(particle_set_t), intent(out) :: parts
       integer :: stat
       character(len=msg_len) :: msg
-      call particles_init(parts, dim, 2_ip, stat, msg)
+      call particles_init(parts, dim, size(radius, kind=ip), stat, msg)
       parts%shape = FOLD_SPHERE
       parts%radius = radius
       parts%length = 2.0_dp*parts%radius
-      parts%x(:, 1) = x1(1:dim)
-      parts%x(:, 2) = x2(1:dim)
+      parts%x = x(1:dim, :)
       parts%p = 0.0_dp
       parts%p(1, :) = 1.0_dp
-   end subroutine two_spheres
+   end subroutine spheres
+
+   !> Solve in shear G on a cell of sides L (walls as set%walls) of n voxels over all
+   !> ranks and fit the rigid motion of parts (parts%v, parts%omega); label names the
+   !> case in the failure messages.
+   subroutine fit_scene(set, dim, n, L, G, parts, label, failures)
+      type(stokes_settings_t), intent(in) :: set
+      integer(ip), intent(in) :: dim, n(3)
+      real(dp), intent(in) :: L(3), G(3, 3)
+      type(particle_set_t), intent(inout) :: parts
+      character(len=*), intent(in) :: label
+      integer, intent(inout) :: failures
+      class(stokes_solver_t), allocatable :: s
+      type(cell_t) :: cell
+      type(voxel_set_t) :: vox
+      integer :: stat
+      character(len=msg_len) :: msg
+      real(dp) :: resid(parts%n)
+      call stokes_solver_create(set, dim, n, MPI_COMM_WORLD, s, stat, msg)
+      call check(stat == FOLD_OK, label//" create: "//msg, failures)
+      call cell_init(cell, dim, L, set%walls, G, stat, msg)
+      call s%set_lattice(box(L), stat, msg)
+      call check(stat == FOLD_OK, label//" lattice: "//msg, failures)
+      call voxelise(s%grid, parts, set%subsamples, set%fibre_ends, vox, stat, msg)
+      call s%solve(vox%chi, G, stat, msg)
+      call check(stat == FOLD_OK, label//" solve: "//msg, failures)
+      call s%compute_velocity()
+      call rigid_fit(s, cell, vox, parts, resid, stat, msg)
+      call s%destroy()
+   end subroutine fit_scene
 
    !> Rigid (V, omega) of a periodic scene with backend 1 or 2 (n cells per side)
    subroutine scene_rigid(backend, dim, cr, v, om, failures)
@@ -725,13 +750,8 @@ contains
       real(dp), intent(out) :: v(3, 2), om(3, 2)
       integer, intent(inout) :: failures
       type(stokes_settings_t) :: set
-      class(stokes_solver_t), allocatable :: s
-      type(cell_t) :: cell
       type(particle_set_t) :: parts
-      type(voxel_set_t) :: vox
-      integer :: stat
-      character(len=msg_len) :: msg
-      real(dp) :: L(3), G(3, 3), resid(2)
+      real(dp) :: L(3), G(3, 3)
       integer(ip) :: n(3)
       L = 4.0_dp
       n = 4*cr
@@ -741,21 +761,11 @@ contains
       set = walled_settings(1.0e3_dp, 1.0e-8_dp)
       set%walls = .false.
       set%backend = backend
-      call stokes_solver_create(set, dim, n, MPI_COMM_WORLD, s, stat, msg)
-      call check(stat == FOLD_OK, "scene create: "//msg, failures)
-      call cell_init(cell, dim, L, .false., G, stat, msg)
-      call s%set_lattice(box(L), stat, msg)
-      call check(stat == FOLD_OK, "scene lattice: "//msg, failures)
-      call two_spheres(dim, [1.0_dp, 0.6_dp], [1.3_dp, 1.2_dp, 1.5_dp], [2.9_dp, 2.3_dp, 2.6_dp], parts)
-      call voxelise(s%grid, parts, set%subsamples, set%fibre_ends, vox, stat, msg)
-      call s%solve(vox%chi, G, stat, msg)
-      call check(stat == FOLD_OK, "scene solve: "//msg, failures)
-      call s%compute_velocity()
-      call rigid_fit(s, cell, vox, parts, resid, stat, msg)
+      call spheres(dim, [1.0_dp, 0.6_dp], reshape([1.3_dp, 1.2_dp, 1.5_dp, 2.9_dp, 2.3_dp, 2.6_dp], [3, 2]), parts)
+      call fit_scene(set, dim, n, L, G, parts, "scene", failures)
       v = 0.0_dp
       v(1:dim, :) = parts%v
       om = parts%omega
-      call s%destroy()
    end subroutine scene_rigid
 
    !> Periodic cell (zero offset), a sphere of radius R = 1 and one of 0.6 R in
@@ -812,7 +822,7 @@ contains
       call cell_init(cell, dim, L, walls, G, stat, msg)
       call sw%set_lattice(box(L), stat, msg)
       call ss%set_lattice(box(L), stat, msg)
-      call two_spheres(dim, [0.8_dp, 0.5_dp], [1.3_dp, 1.4_dp, 1.5_dp], [2.9_dp, 2.5_dp, 2.6_dp], parts)
+      call spheres(dim, [0.8_dp, 0.5_dp], reshape([1.3_dp, 1.4_dp, 1.5_dp, 2.9_dp, 2.5_dp, 2.6_dp], [3, 2]), parts)
       call voxelise(sw%grid, parts, set%subsamples, set%fibre_ends, vw, stat, msg)
       call voxelise(ss%grid, parts, set%subsamples, set%fibre_ends, vs, stat, msg)
       call sw%solve(vw%chi, G, stat, msg)
@@ -840,44 +850,25 @@ contains
       call ss%destroy()
    end subroutine ranks
 
+   !> A sphere of radius R0 = 1 (a disk in 2-D) at the centre of a walled cell of side
+   !> hr R0 with cr voxels per R0, in simple shear: its spin om and speed vt.
    subroutine one_disk(dim, hr, cr, om, vt, failures)
       integer(ip), intent(in) :: dim, hr, cr
       real(dp), intent(out) :: om, vt
       integer, intent(inout) :: failures
       integer(ip) :: n(3)
-      real(dp) :: L(3), G(3, 3), R0, resid(1)
-      type(stokes_settings_t) :: set
-      class(stokes_solver_t), allocatable :: s
-      type(cell_t) :: cell
+      real(dp) :: L(3), G(3, 3), R0
       type(particle_set_t) :: parts
-      type(voxel_set_t) :: vox
-      integer :: stat
-      character(len=msg_len) :: msg
       R0 = 1.0_dp
       L = real(hr, dp)*R0
       G = 0.0_dp
       G(1, 2) = 1.0_dp
       n = hr*cr
       if (dim == 2) n(3) = 1
-      set = walled_settings(1.0e3_dp, 1.0e-6_dp)
-      call stokes_solver_create(set, dim, n, MPI_COMM_WORLD, s, stat, msg)
-      call cell_init(cell, dim, L, .true., G, stat, msg)
-      call s%set_lattice(box(L), stat, msg)
-      call particles_init(parts, dim, 1_ip, stat, msg)
-      parts%shape = FOLD_SPHERE
-      parts%radius = R0
-      parts%length = 2.0_dp*R0
-      parts%x(:, 1) = 0.5_dp*L(1:dim)
-      parts%p = 0.0_dp
-      parts%p(1, 1) = 1.0_dp
-      call voxelise(s%grid, parts, set%subsamples, set%fibre_ends, vox, stat, msg)
-      call s%solve(vox%chi, G, stat, msg)
-      call check(stat == FOLD_OK, "disk solve: "//msg, failures)
-      call s%compute_velocity()
-      call rigid_fit(s, cell, vox, parts, resid, stat, msg)
+      call spheres(dim, [R0], reshape(0.5_dp*L, [3, 1]), parts)
+      call fit_scene(walled_settings(1.0e3_dp, 1.0e-6_dp), dim, n, L, G, parts, "disk", failures)
       om = parts%omega(3, 1)
       vt = norm2(parts%v(:, 1))
-      call s%destroy()
    end subroutine one_disk
 
 end program test_stokes_hypre

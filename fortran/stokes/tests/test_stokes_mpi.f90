@@ -22,16 +22,13 @@ program test_stokes_mpi
    use fold_stokes_build, only: stokes_transport_solver
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_init, stokes_context_attach, &
                                stokes_rigid_velocities, stokes_context_destroy
-   use stokes_test_check, only: check_start, check_passed
+   use stokes_test_solver, only: mpi_test_start, mpi_test_end
    implicit none
    include 'fftw3-mpi.f03'
    integer :: rank, failures
 
-   call MPI_Init()
+   call mpi_test_start("test_stokes_mpi", rank, failures)
    call fftw_mpi_init()
-   call MPI_Comm_rank(MPI_COMM_WORLD, rank)
-   failures = 0
-   call check_start("test_stokes_mpi", rank == 0)
    call check_spectral_map(3, [12, 10, 9], 0, failures)
    call check_spectral_map(3, [12, 10, 9], 1, failures)
    call check_spectral_map(3, [12, 10, 9], 2, failures)
@@ -42,8 +39,7 @@ program test_stokes_mpi
    call compare(3, [16, 15, 12], .true., failures)
    call compare(2, [40, 30, 1], .true., failures)
    call fftw_mpi_cleanup()
-   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
-   call MPI_Finalize()
+   call mpi_test_end(failures)
 
 contains
 

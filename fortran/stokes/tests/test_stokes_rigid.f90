@@ -16,18 +16,15 @@ program test_stokes_rigid
    use fold_status, only: FOLD_OK
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_RIGIDITY_EXACT
    use fold_stokes_rigid, only: stokes_rigid_t
-   use stokes_test_check, only: check, check_start, check_passed, ball_chi
-   use stokes_test_solver, only: sheared_solver
+   use stokes_test_check, only: check, ball_chi
+   use stokes_test_solver, only: sheared_solver, mpi_test_start, mpi_test_end
    implicit none
    integer :: rank, failures
    real(dp) :: sig(3, 3, 2), vel(2), tol
    integer(ip) :: its(2)
    integer :: form
 
-   call MPI_Init()
-   call MPI_Comm_rank(MPI_COMM_WORLD, rank)
-   failures = 0
-   call check_start("test_stokes_rigid", rank == 0)
+   call mpi_test_start("test_stokes_rigid", rank, failures)
    tol = 1.0e-11_dp
    do form = 1, 2
       call solve([14_ip, 12_ip, 10_ip], form == 1, tol, sig(:, :, form), vel(form), its(form), failures)
@@ -40,8 +37,7 @@ program test_stokes_rigid
               "same particle stress within the solve's error", failures)
    call check(abs(vel(1) - vel(2)) <= 2.0e4_dp*tol*vel(2), "same velocity field within the solve's error", &
               failures)
-   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
-   call MPI_Finalize()
+   call mpi_test_end(failures)
 
 contains
 

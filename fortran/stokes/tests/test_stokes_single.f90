@@ -25,20 +25,17 @@ program test_stokes_single
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_fft, only: stokes_fft_t, stokes_fft_true_residual, stokes_fft_apply, single_tol_min
-   use stokes_test_check, only: check, check_start, check_passed
+   use stokes_test_check, only: check
+   use stokes_test_solver, only: mpi_test_start, mpi_test_end
    implicit none
    integer :: rank, failures
 
-   call MPI_Init()
-   call MPI_Comm_rank(MPI_COMM_WORLD, rank)
-   failures = 0
-   call check_start("test_stokes_single", rank == 0)
+   call mpi_test_start("test_stokes_single", rank, failures)
    call compare(3, [24, 24, 20], 10.0_dp, failures)
    call compare(3, [24, 24, 20], 1.0e3_dp, failures)
    call compare(2, [48, 40, 1], 1.0e3_dp, failures)
    call refusals(failures)
-   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
-   call MPI_Finalize()
+   call mpi_test_end(failures)
 
 contains
 

@@ -27,20 +27,16 @@ program test_stokes_stencil
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE
    use fold_stokes_fft, only: stokes_fft_t, stokes_fft_apply, stokes_fft_apply_cg, stokes_fft_project, &
                               stokes_fft_true_residual, FOLD_SINGLE_ROUNDOFF
-   use stokes_test_check, only: check, check_start, check_passed, ball_chi
-   use stokes_test_solver, only: sheared_solver
+   use stokes_test_check, only: check, ball_chi
+   use stokes_test_solver, only: sheared_solver, mpi_test_start, mpi_test_end
    implicit none
    integer :: rank, failures
 
-   call MPI_Init()
-   call MPI_Comm_rank(MPI_COMM_WORLD, rank)
-   failures = 0
-   call check_start("test_stokes_stencil", rank == 0)
+   call mpi_test_start("test_stokes_stencil", rank, failures)
    call compare([12_ip, 10_ip, 8_ip], 1.0e3_dp, FOLD_FFT_DOUBLE, failures)
    call compare([15_ip, 9_ip, 13_ip], 10.0_dp, FOLD_FFT_DOUBLE, failures)
    call compare([12_ip, 10_ip, 8_ip], 1.0e3_dp, FOLD_FFT_SINGLE, failures)
-   if (.not. check_passed(failures)) call MPI_Abort(MPI_COMM_WORLD, 1)
-   call MPI_Finalize()
+   call mpi_test_end(failures)
 
 contains
 
