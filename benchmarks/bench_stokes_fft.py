@@ -311,22 +311,18 @@ def main() -> None:
     exe = Path(tempfile.mkdtemp(prefix="bench_stokes_")) / "bench_stokes_fft"
     shutil.copy2(built, exe)
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
-    if args.precision:
-        precision_rounds(exe, args.grids, args.rounds, args.repeats)
-        print(f"\nload average after: {load()}")
-        return
-    if args.forms:
-        forms_rounds(exe, args.grids, args.rounds, args.repeats)
-        print(f"\nload average after: {load()}")
-        return
-    if args.rigidity:
-        rigidity_table(exe, args.grids, args.repeats)
-        print(f"\nload average after: {load()}")
-        return
-    if args.mpi:
-        mpi_rounds(exe, args.grids, args.rounds, args.repeats)
-        print(f"\nload average after: {load()}")
-        return
+    # the "only" options, in the order they take precedence: the first one given runs alone
+    only = [
+        (args.precision, lambda: precision_rounds(exe, args.grids, args.rounds, args.repeats)),
+        (args.forms, lambda: forms_rounds(exe, args.grids, args.rounds, args.repeats)),
+        (args.rigidity, lambda: rigidity_table(exe, args.grids, args.repeats)),
+        (args.mpi, lambda: mpi_rounds(exe, args.grids, args.rounds, args.repeats)),
+    ]
+    for given, table in only:
+        if given:
+            table()
+            print(f"\nload average after: {load()}")
+            return
 
     # Parameters
     # (grid, ranks, backend): "auto" = serial FFTW on one rank (what fold_run uses),

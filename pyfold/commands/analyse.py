@@ -22,6 +22,7 @@ import argparse
 from pathlib import Path
 
 from pyfold import model_fit
+from pyfold.commands._options import add_run_tolerance_options
 from pyfold.files import atomic_output, regular_file
 from pyfold.run_checks import DEFAULT_CLOSURES
 
@@ -36,13 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit even when the estimator does not apply: particles without orientation (spheres, "
                              "disks) or a strain shorter than one Jeffery period of the particles (refused by "
                              "default, exit 2); the outputs then carry the warning")
-    parser.add_argument("--allow-failed", action="store_true",
-                        help="fit a run whose status is not \"ok\" (a blown-up or killed run): only the records "
-                             "up to its last good state are used, with a warning")
-    parser.add_argument("--allow-damaged", action="store_true",
-                        help="analyse the intact part of a run file whose checksums fail (refused by default, "
-                             "exit 2 naming the damaged datasets): records from the first damaged chunk on and "
-                             "other damaged datasets are left out, with a warning naming them")
+    add_run_tolerance_options(parser)  # --allow-failed, --allow-damaged
     model_fit.add_arguments(parser)  # --model, --params, --export: orientation models for moulding codes
 
 

@@ -59,8 +59,9 @@ def check_range(name: str, value, low: float | None = None, high: float | None =
 class OrientationModel(eqx.Module):
     """Base class: a model is a pure ``rate(t, a2, L) -> da2/dt``.
 
-    Subclasses declare their parameters with :func:`parameter`, a ``closure`` field
-    and a static ``dim`` (3 or 2), and implement :meth:`_rate`.
+    Subclasses declare their parameters with :func:`parameter`, a ``closure`` field,
+    a shape factor ``xi`` and a static ``dim`` (3 or 2), and implement :meth:`_rate`;
+    :class:`ClosureModel` declares the last three once for the models of this package.
 
     Attributes
     ----------
@@ -130,3 +131,24 @@ class OrientationModel(eqx.Module):
             if isinstance(table_dim, int) and table_dim != d:
                 raise InputError(f"closure: tabulated a4 has d = {table_dim}, but the model has dim = {d}")
         check_range("xi", self.xi, -1.0, 1.0)  # type: ignore[attr-defined]
+
+
+class ClosureModel(OrientationModel):
+    """An orientation model with the fields every model of this package shares.
+
+    Attributes
+    ----------
+    xi : float
+        Shape factor ``(beta^2 - 1)/(beta^2 + 1)`` in [-1, 1] (default 1: slender fibres).
+    closure : str | callable | TabulatedA4
+        Closure for ``a4`` (see :func:`pyfold.closures.resolve`; default ``"ibof"``).
+    dim : int
+        3 (spatial) or 2 (planar orientation); static.
+
+    Subclasses add their own parameters with :func:`parameter` and implement
+    :meth:`OrientationModel._rate`.
+    """
+
+    xi: jax.Array = parameter(1.0)
+    closure: Any = closure_field()
+    dim: int = eqx.field(default=3, static=True)

@@ -9,13 +9,11 @@ from __future__ import annotations
 
 import abc
 
-from typing import Any, ClassVar
-
-import equinox as eqx
+from typing import ClassVar
 
 from pyfold._jax import jax, jnp
 from pyfold.errors import InputError
-from pyfold.models._base import OrientationModel, closure_field, parameter
+from pyfold.models._base import ClosureModel, parameter
 from pyfold.models._terms import (
     ard_diffusion,
     flow_parts,
@@ -57,7 +55,7 @@ def rpr_correction(a2: jax.Array, x: jax.Array, alpha, beta) -> jax.Array:
     return alpha * (y - beta * quadratic)
 
 
-class _ARDBase(OrientationModel):
+class _ARDBase(ClosureModel):
     """Hydrodynamic + ARD term for the subclass's ``diffusivity(a2, D, gamma_dot)``."""
 
     @abc.abstractmethod
@@ -109,9 +107,6 @@ class ARDRSC(_ARDBase):
     b4: jax.Array = parameter(1.168e-5)
     b5: jax.Array = parameter(0.0)
     kappa: jax.Array = parameter(1.0 / 30.0, low=0.0, high=1.0)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def diffusivity(self, a2, D, gamma_dot):
         inv = _safe_inverse(gamma_dot)
@@ -154,9 +149,6 @@ class IARD(_ARDBase):
 
     ci: jax.Array = parameter(0.0627, low=0.0)
     cm: jax.Array = parameter(0.9908, low=0.0, high=1.0)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def diffusivity(self, a2, D, gamma_dot):
         return _iard_diffusivity(self.ci, self.cm, D, gamma_dot)
@@ -191,9 +183,6 @@ class IARDRPR(_ARDBase):
     cm: jax.Array = parameter(0.9908, low=0.0, high=1.0)
     alpha: jax.Array = parameter(0.0, low=0.0, high=1.0)
     beta: jax.Array = parameter(0.0)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def __check_init__(self):
         _check_beta_dim(self.beta, self.dim)
@@ -246,9 +235,6 @@ class PARD(_ARDBase):
 
     ci: jax.Array = parameter(0.0218, low=0.0)
     omega: jax.Array = parameter(0.9673, low=0.0, high=1.0)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def diffusivity(self, a2, D, gamma_dot):
         return self.ci * principal_tensor(a2, _pard_coefficients(self.omega, a2.shape[-1]))

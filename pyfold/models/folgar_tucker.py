@@ -1,12 +1,8 @@
 """Folgar-Tucker model and its Maier-Saupe extension (FTMS)."""
 from __future__ import annotations
 
-from typing import Any
-
-import equinox as eqx
-
 from pyfold._jax import jax
-from pyfold.models._base import OrientationModel, closure_field, parameter
+from pyfold.models._base import ClosureModel, parameter
 from pyfold.models._terms import (
     flow_parts,
     isotropic_diffusion,
@@ -16,18 +12,18 @@ from pyfold.models._terms import (
 )
 
 
-def _folgar_tucker_rate(model: OrientationModel, t, a2, L):
+def _folgar_tucker_rate(model: ClosureModel, t, a2, L):
     # Jeffery's rotation and stretching (a4:D from the model's closure) plus isotropic
     # rotary diffusion with the model's ci, xi: the Folgar-Tucker rate.
     D, W, gamma_dot = flow_parts(L)
     return (
         rotation_term(a2, W)
-        + stretching_term_contracted(a2, model.a4_contract(a2, D, t), D, model.xi)  # type: ignore[attr-defined]
+        + stretching_term_contracted(a2, model.a4_contract(a2, D, t), D, model.xi)
         + isotropic_diffusion(a2, model.ci, gamma_dot)  # type: ignore[attr-defined]
     )
 
 
-class FolgarTucker(OrientationModel):
+class FolgarTucker(ClosureModel):
     """Folgar-Tucker model (Folgar & Tucker 1984, J. Reinf. Plast. Compos. 3:98).
 
     ``Da/Dt = W.a - a.W + xi (D.a + a.D - 2 a4:D) + 2 C_I gamma_dot (I - d a)``
@@ -48,15 +44,12 @@ class FolgarTucker(OrientationModel):
     """
 
     ci: jax.Array = parameter(0.01, low=0.0)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def _rate(self, t, a2, L):
         return _folgar_tucker_rate(self, t, a2, L)
 
 
-class FTMS(OrientationModel):
+class FTMS(ClosureModel):
     """Folgar-Tucker model with a Maier-Saupe potential (FTMS).
 
     ``Da/Dt = W.a - a.W + xi (D.a + a.D - 2 a4:D)
@@ -83,9 +76,6 @@ class FTMS(OrientationModel):
 
     ci: jax.Array = parameter(0.01, low=0.0)
     u0: jax.Array = parameter(0.0, low=0.0)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def _rate(self, t, a2, L):
         _, _, gamma_dot = flow_parts(L)

@@ -1,8 +1,6 @@
 """Jeffery's equation: for the orientation tensor (with a closure) and exactly for vectors."""
 from __future__ import annotations
 
-from typing import Any
-
 import diffrax
 import equinox as eqx
 import numpy as np
@@ -10,13 +8,13 @@ import numpy as np
 from pyfold._jax import jax, jnp
 from pyfold.errors import ConvergenceError, InputError
 from pyfold.kinematics import ConstantGradient, velocity_gradient
-from pyfold.models._base import OrientationModel, check_range, closure_field, parameter
+from pyfold.models._base import ClosureModel, check_range
 from pyfold.models._terms import flow_parts, rotation_term, stretching_term_contracted
 
 __all__ = ["Jeffery", "jeffery_vectors"]
 
 
-class Jeffery(OrientationModel):
+class Jeffery(ClosureModel):
     """Jeffery's equation for ``a2`` of non-interacting fibres (Jeffery 1922,
     Proc. R. Soc. A 102:161; tensor form Advani & Tucker 1987, J. Rheol. 31:751).
 
@@ -34,9 +32,6 @@ class Jeffery(OrientationModel):
         3 or 2.
     """
 
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def _rate(self, t, a2, L):
         D, W, _ = flow_parts(L)

@@ -1,16 +1,12 @@
 """Jeffery-type orientation equation with Mori-Tanaka fibre interaction."""
 from __future__ import annotations
 
-from typing import Any
-
-import equinox as eqx
-
 from pyfold._jax import jax
-from pyfold.models._base import OrientationModel, closure_field, parameter
+from pyfold.models._base import ClosureModel, parameter
 from pyfold.models._terms import flow_parts, mat, rotation_term, stretching_term
 
 
-class MoriTanaka(OrientationModel):
+class MoriTanaka(ClosureModel):
     """Mori-Tanaka modified Jeffery equation (Karl & Böhlke 2023, "Generalized
     micromechanical formulation of fiber orientation tensor evolution equations",
     Int. J. Mech. Sci., doi:10.1016/j.ijmecsci.2023.108771; as implemented in
@@ -34,9 +30,6 @@ class MoriTanaka(OrientationModel):
     """
 
     cf: jax.Array = parameter(0.1, low=0.0, high=0.999)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def _rate(self, t, a2, L):
         D, W, _ = flow_parts(L)

@@ -1,12 +1,10 @@
 """Moldflow rotational diffusion (MRD) model."""
 from __future__ import annotations
 
-from typing import Any, ClassVar
-
-import equinox as eqx
+from typing import ClassVar
 
 from pyfold._jax import jax, jnp
-from pyfold.models._base import closure_field, parameter
+from pyfold.models._base import parameter
 from pyfold.models._terms import principal_tensor
 from pyfold.models.ard import _ARDBase
 
@@ -42,9 +40,6 @@ class MRD(_ARDBase):
     d1: jax.Array = parameter(1.0, low=0.0)
     d2: jax.Array = parameter(0.8, low=0.0)
     d3: jax.Array = parameter(0.15, low=0.0)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def diffusivity(self, a2, D, gamma_dot):
         coeffs = [self.d1, self.d2, self.d3][: a2.shape[-1]]

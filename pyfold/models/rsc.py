@@ -1,12 +1,10 @@
 """Reduced-strain-closure (RSC) model and the principal-frame slow-down it rests on."""
 from __future__ import annotations
 
-from typing import Any, ClassVar
-
-import equinox as eqx
+from typing import ClassVar
 
 from pyfold._jax import jax
-from pyfold.models._base import OrientationModel, closure_field, parameter
+from pyfold.models._base import ClosureModel, parameter
 from pyfold.models._terms import (
     flow_parts,
     isotropic_diffusion,
@@ -30,7 +28,7 @@ def reduce_principal_rate(a2: jax.Array, x: jax.Array, kappa) -> jax.Array:
     return x - (1.0 - kappa) * principal_projection(a2, x)
 
 
-class RSC(OrientationModel):
+class RSC(ClosureModel):
     """Reduced strain closure model (Wang, O'Gara & Tucker 2008, J. Rheol. 52:1179).
 
     ``Da/Dt = W.a - a.W + xi (D.a + a.D - 2 [a4 + (1-kappa)(L4 - M4:a4)]:D)
@@ -84,9 +82,6 @@ class RSC(OrientationModel):
 
     ci: jax.Array = parameter(0.01, low=0.0)
     kappa: jax.Array = parameter(0.1, low=0.0, high=1.0)
-    xi: jax.Array = parameter(1.0)
-    closure: Any = closure_field()
-    dim: int = eqx.field(default=3, static=True)
 
     def _rate(self, t, a2, L):
         D, W, gamma_dot = flow_parts(L)

@@ -323,21 +323,8 @@ def run(a):
                   vpd=("vpd", vpds, {"units": "1", "long_name": "voxels per diameter"}),
                   node=("node", np.arange(a.nphi + 1), {"long_name": "quarter-orbit node k (phi = pi k / (2 nphi))"}))
     dims3, dimsK = ("shape", "beta", "vpd"), ("shape", "beta", "vpd", "node")
-    data = dict(
-        theta=_var(dimsK, get("theta"), "rad", "orientation from the flow direction"),
-        omega=_var(dimsK, get("omega"), "1/s", "rotation rate omega_z at fixed orientation"),
-        weight=_var(dimsK, get("weight"), "rad", "trapezoid weight in theta (T = 4 sum w/|omega|)"),
-        iterations=_var(dimsK, get("iterations"), "1", "CG iterations"),
-        rigidity=_var(dimsK, get("rigidity"), "1", "rigidity residual of the particle"),
-        period=_var(dims3, get("T"), "s", "orbit period T"),
-        period_half_nodes=_var(dims3, get("T_half"), "s", "period from every other node"),
-        bretherton_a=_var(dims3, get("a"), "1", "fit omega = -(gd/2)(a - lam cos 2theta): a (1 unbounded)"),
-        bretherton_lambda=_var(dims3, get("lam"), "1", "fit omega = -(gd/2)(a - lam cos 2theta): lam"),
-        bretherton_rms=_var(dims3, get("rms"), "1", "time-weighted rms residual of that fit / (gd/2)"),
-        grid=_var(dims3, get("n"), "1", "voxels per cell edge"),
-        cell=_var(dims3, get("cell"), "1", "cell edge / particle length"),
-        cpu_time=_var(dims3, get("cpu"), "s", "CPU time of the orbit"),
-    )
+    data = {name: _var(dimsK, get(name), *meta) for name, meta in NODE_VARIABLES.items()}
+    data.update({name: _var(dims3, get(key), *meta) for name, (key, *meta) in ORBIT_VARIABLES.items()})
     if image:
         cells = np.array([image["cylinder", c]["cell"] for c in a.image_cells])
         coords["image_cell"] = ("image_cell", cells, {"units": "1", "long_name": "cell edge / particle length"})
@@ -358,6 +345,27 @@ def run(a):
         cell_lengths=a.cell, image_beta=a.image_beta, image_vpd=a.image_vpd, fibre_ends=settings.fibre_ends,
         mixing=settings.mixing, derivative=settings.derivative, subsamples=settings.subsamples,
         cpu_time_total=cpu))
+
+
+#: orbit() results saved per quarter-orbit node: name (also orbit()'s key) -> (units, long_name)
+NODE_VARIABLES = {
+    "theta": ("rad", "orientation from the flow direction"),
+    "omega": ("1/s", "rotation rate omega_z at fixed orientation"),
+    "weight": ("rad", "trapezoid weight in theta (T = 4 sum w/|omega|)"),
+    "iterations": ("1", "CG iterations"),
+    "rigidity": ("1", "rigidity residual of the particle"),
+}
+#: orbit() results saved once per orbit: name in the file -> (orbit()'s key, units, long_name)
+ORBIT_VARIABLES = {
+    "period": ("T", "s", "orbit period T"),
+    "period_half_nodes": ("T_half", "s", "period from every other node"),
+    "bretherton_a": ("a", "1", "fit omega = -(gd/2)(a - lam cos 2theta): a (1 unbounded)"),
+    "bretherton_lambda": ("lam", "1", "fit omega = -(gd/2)(a - lam cos 2theta): lam"),
+    "bretherton_rms": ("rms", "1", "time-weighted rms residual of that fit / (gd/2)"),
+    "grid": ("n", "1", "voxels per cell edge"),
+    "cell": ("cell", "1", "cell edge / particle length"),
+    "cpu_time": ("cpu", "s", "CPU time of the orbit"),
+}
 
 
 def _var(dims, x, units, long_name, derived=False):

@@ -6,6 +6,8 @@ of given and random families; `pyfold run` starts from exactly the given state."
 from __future__ import annotations
 
 import itertools
+import sys
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -14,18 +16,15 @@ from conftest import write_scene
 from pyfold.cli import main
 from pyfold.scene import load_scene
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "micro"))
+from test_run_common import jeffery_scene  # noqa: E402
+
 #: 2 x 2 x 2 simple cubic array of spheres in a 2^3 cell (spacing 1, R = 0.3)
 SC = [[0.5 + i, 0.5 + j, 0.5 + k] for k, j, i in itertools.product(range(2), repeat=3)]
 
 
 def _scene(particles, size=(2.0, 2.0, 2.0), **model):
-    return {
-        "cell": {"size": list(size)},
-        "flow": {"type": "simple_shear", "rate": 1.0},
-        "particles": particles,
-        "model": {"hydrodynamics": "jeffery", **model},
-        "numerics": {"dt": 0.01, "t_end": 0.05, "seed": 4},
-    }
+    return jeffery_scene(particles, size, t_end=0.05, seed=4, **model)
 
 
 def _spheres(**kw):

@@ -87,6 +87,18 @@ def one_sphere_scene(path: Path, **over) -> Path:
     return path
 
 
+def jeffery_scene(particles: list[dict], size, *, t_end: float, seed: int, **model) -> dict:
+    """A scene (as a dict) of ``particles`` in a periodic cell of edges ``size``: simple
+    shear at rate 1, Jeffery hydrodynamics plus the ``model`` keys, ``dt = 0.01``."""
+    return {
+        "cell": {"size": list(size)},
+        "flow": {"type": "simple_shear", "rate": 1.0},
+        "particles": particles,
+        "model": {"hydrodynamics": "jeffery", **model},
+        "numerics": {"dt": 0.01, "t_end": t_end, "seed": seed},
+    }
+
+
 def stokes_settings(**kw):
     """``pyfold.native.stokes.StokesSettings`` with the suite's FFTW planning."""
     from pyfold.native.stokes import StokesSettings
@@ -111,40 +123,25 @@ STOKES_DEFAULTS = {
 }
 
 
-def write_run_file(
-    path,
-    *,
-    x,
-    p,
-    radius,
-    length,
-    xi,
-    shape=None,
-    family=None,
-    family_names=("fibres",),
-    dim=3,
-    cell_lengths=(1.0, 1.0, 1.0),
-    walls=0,
-    shear_rate=1.0,
-    dt=0.01,
-    t_end=0.1,
-    collisions=0,
-    alpha=0.0,
-    contact_max_iter=50,
-    on_contact_cap=0,
-    lubrication=0,
-    output_every=1,
-    snapshot_every=0,
-    checkpoint_every=0,
-    seed=1,
-    drop=(),
-    override=None,
-    stokes=None,
-):
-    """Write a run file. ``drop`` lists /setup/resolved or /initial datasets to leave
+#: /setup/resolved integers that write_run_file takes as keywords, with their defaults
+INTEGER_SETTINGS = {
+    "walls": 0, "seed": 1, "collisions": 0, "contact_max_iter": 50, "on_contact_cap": 0, "lubrication": 0,
+    "output_every": 1, "snapshot_every": 0, "checkpoint_every": 0,
+}
+
+
+def write_run_file(path, *, x, p, radius, length, xi, shape=None, family=None, family_names=("fibres",), dim=3,
+                   cell_lengths=(1.0, 1.0, 1.0), shear_rate=1.0, dt=0.01, t_end=0.1, alpha=0.0, drop=(),
+                   override=None, stokes=None, **integers):
+    """Write a run file. ``integers`` sets keys of INTEGER_SETTINGS (the others keep
+    their defaults). ``drop`` lists /setup/resolved or /initial datasets to leave
     out, ``override`` maps dataset paths to replacement values (to make bad files).
     ``stokes``: a dict of Stokes settings (keys of STOKES_DEFAULTS) switches
     hydrodynamics to 1 (stokes) and writes them."""
+    unknown = sorted(set(integers) - set(INTEGER_SETTINGS))
+    if unknown:
+        raise TypeError(f"write_run_file: unknown settings {unknown}; allowed: {sorted(INTEGER_SETTINGS)}")
+    ints = {key: np.int64(value) for key, value in {**INTEGER_SETTINGS, **integers}.items()}
     x = np.asarray(x, dtype=float)
     n = x.shape[0]
     shape = np.full(n, 1) if shape is None else np.asarray(shape)
@@ -153,24 +150,16 @@ def write_run_file(
     resolved = {
         "dim": np.int64(dim),
         "cell_lengths": cell,
-        "walls": np.int64(walls),
         "wall_speed": 0.5 * shear_rate * cell[1],
         "velocity_gradient": shear(shear_rate),
         "shear_rate": float(shear_rate),
         "viscosity": 1.0,
         "dt": float(dt),
         "t_end": float(t_end),
-        "seed": np.int64(seed),
         "hydrodynamics": np.int64(0),
         "hydrodynamics_reason": "test: jeffery requested",
-        "collisions": np.int64(collisions),
         "alpha": float(alpha),
-        "contact_max_iter": np.int64(contact_max_iter),
-        "on_contact_cap": np.int64(on_contact_cap),
-        "lubrication": np.int64(lubrication),
-        "output_every": np.int64(output_every),
-        "snapshot_every": np.int64(snapshot_every),
-        "checkpoint_every": np.int64(checkpoint_every),
+        **ints,
         "family_names": np.array(list(family_names), dtype=object),
     }
     if stokes is not None:

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import tomli_w
 
-from test_run_common import run_fold, write_run_file
+from test_run_common import jeffery_scene, run_fold, write_run_file
 from pyfold.cli import main
 from pyfold.native import geometry as geo
 from pyfold.scene import shapes
@@ -33,13 +33,7 @@ def _write(path, scene: dict):
 
 
 def _scene(particles, size, **model):
-    return {
-        "cell": {"size": list(size)},
-        "flow": {"type": "simple_shear", "rate": 1.0},
-        "particles": particles,
-        "model": {"hydrodynamics": "jeffery", **model},
-        "numerics": {"dt": 0.01, "t_end": 0.02, "seed": 1},
-    }
+    return jeffery_scene(particles, size, t_end=0.02, seed=1, **model)
 
 
 @pytest.mark.parametrize("alpha", [0.0, 0.004, 0.01, 0.05])
