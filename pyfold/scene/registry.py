@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Mapping
+from typing import ClassVar, Mapping
 
 __all__ = ["Setting", "Backend", "Rigidity", "SETTINGS", "BACKENDS", "RIGIDITIES", "AUTO_BACKEND", "setting", "codes", "resolved",
            "in_range", "range_text",
@@ -371,10 +371,28 @@ def in_range(path: str, value: float) -> bool:
 AUTO_BACKEND = "auto"
 
 
+class _Coded:
+    """A registry entry named by a word of an enumerated setting (``SETTING``)."""
+
+    #: TOML path of the setting whose words name the entries
+    SETTING: ClassVar[str] = ""
+
+    @property
+    def code(self) -> int:
+        """Its integer code in /setup/resolved."""
+        return setting(self.SETTING).codes[self.name]  # type: ignore[attr-defined]
+
+    @property
+    def fortran_code(self) -> str:
+        """Name of its generated Fortran code constant (``FOLD_STOKES_HYPRE``, ``FOLD_RIGIDITY_EXACT``)."""
+        return f"{setting(self.SETTING).fortran_codes}{self.name.upper()}"  # type: ignore[attr-defined]
+
+
 @dataclass(frozen=True)
-class Backend:
+class Backend(_Coded):
     """A Stokes backend of fortran/stokes and its capabilities."""
 
+    SETTING: ClassVar[str] = "numerics.stokes.backend"
     name: str
     #: solves a cell with no-slip walls at y = 0, Ly
     walls: bool
@@ -401,16 +419,6 @@ class Backend:
     fortran_module: str | None = None
     constructor: str | None = None
 
-    @property
-    def code(self) -> int:
-        """Its /setup/resolved/stokes_backend code."""
-        return setting("numerics.stokes.backend").codes[self.name]
-
-    @property
-    def fortran_code(self) -> str:
-        """Name of its generated Fortran code constant (``FOLD_STOKES_HYPRE``)."""
-        return f"{setting('numerics.stokes.backend').fortran_codes}{self.name.upper()}"
-
 
 #: Stokes backends. A new one is an entry here (with its word and code in the
 #: numerics.stokes.backend setting) and its module in fortran/stokes: a backend on an FFT
@@ -431,10 +439,11 @@ BACKENDS: Mapping[str, Backend] = MappingProxyType({
 
 
 @dataclass(frozen=True)
-class Rigidity:
+class Rigidity(_Coded):
     """A rigidity formulation of the Stokes solve (a ``numerics.stokes.rigidity`` word):
     what the rest of the code asks of it instead of testing its name."""
 
+    SETTING: ClassVar[str] = "numerics.stokes.rigidity"
     name: str
     #: the solid is a viscosity kappa eta_f (numerics.stokes.kappa applies, and its
     #: grid-dependent bound, pyfold/scene/kappa_range.py and fold_stokes_trust)
@@ -448,16 +457,6 @@ class Rigidity:
     #: its code (generated from fortran/stokes/solver_modules.txt)
     fortran_module: str
     constructor: str
-
-    @property
-    def code(self) -> int:
-        """Its /setup/resolved/stokes_rigidity code."""
-        return setting("numerics.stokes.rigidity").codes[self.name]
-
-    @property
-    def fortran_code(self) -> str:
-        """Name of its generated Fortran code constant (``FOLD_RIGIDITY_EXACT``)."""
-        return f"{setting('numerics.stokes.rigidity').fortran_codes}{self.name.upper()}"
 
 
 #: Rigidity formulations of the FFT-transport backends. A new one is an entry here (with
