@@ -5,8 +5,7 @@
 module fold_stokes_bind_util
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
-   use fold_stokes_fft, only: stokes_settings_t
-   use fold_stokes_solver, only: stokes_solver_t
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
    implicit none
    private
    public :: make_settings, velocity_out
@@ -28,7 +27,7 @@ contains
                           plan_effort, rigidity) result(set)
       real(dp), intent(in) :: eta_f, kappa, tol
       integer(ip), intent(in) :: max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, plan_effort
-      !> fold_stokes_solver FOLD_RIGIDITY_*
+      !> fold_settings FOLD_RIGIDITY_*
       integer(ip), intent(in) :: rigidity
       type(stokes_settings_t) :: set
       ! warm_start: 0 cold (zero guess), else the guess code (fold_stokes_fft FOLD_GUESS_*:

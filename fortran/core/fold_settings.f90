@@ -58,6 +58,9 @@ module fold_settings
    !> Stokes backends (index: the FOLD_STOKES_* code) and their capabilities
    integer(ip), parameter, public :: FOLD_N_BACKENDS = 2
    character(len=5), parameter, public :: FOLD_BACKEND_NAME(2) = [character(len=5) :: "fft", "hypre"]
+   !> the backend "auto" stands for in a periodic cell (registry backend_for): the default
+   !> of callers that set no backend (stokes_settings_t)
+   integer(ip), parameter, public :: FOLD_DEF_STOKES_BACKEND = FOLD_STOKES_FFT
    !> imposes no-slip walls at y = 0 and y = Ly
    logical, parameter, public :: FOLD_BACKEND_WALLS(2) = [.false., .true.]
    !> follows the sheared (Lees-Edwards) lattice of a periodic cell

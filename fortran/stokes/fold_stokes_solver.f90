@@ -23,10 +23,10 @@ module fold_stokes_solver
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_grid, only: grid_t
-   use fold_settings, only: FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, &
+   use fold_settings, only: FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, &
                             FOLD_MIX_ARITHMETIC, FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, &
                             FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, FOLD_FFT_SINGLE, &
-                            FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT, FOLD_ENDS_FLAT, FOLD_ENDS_CAPPED, &
+                            FOLD_ENDS_FLAT, FOLD_ENDS_CAPPED, FOLD_RIGIDITY_NAME, FOLD_DEF_STOKES_BACKEND, &
                             FOLD_KAPPA_MIN, FOLD_KAPPA_MAX, FOLD_N_BACKENDS, FOLD_BACKEND_NAME, FOLD_BACKEND_WALLS, &
                             FOLD_BACKEND_RIGIDITY, FOLD_BACKEND_FFT_TRANSPORT, FOLD_BACKEND_SERIAL, &
                             FOLD_BACKEND_LEES_EDWARDS, FOLD_BACKEND_SINGLE, &
@@ -45,10 +45,14 @@ module fold_stokes_solver
    implicit none
    private
 
-   !> Codes of the settings (fold_settings), under the names the backends use
-   public :: FOLD_STOKES_FFT, FOLD_STOKES_HYPRE, FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, &
+   !> Codes of the settings (fold_settings), under the names the backends use. The codes of
+   !> the backends and rigidity formulations themselves (FOLD_STOKES_*, FOLD_RIGIDITY_*) are
+   !> named only by the construction that meson generates from the registry
+   !> (fold_stokes_build, fold_stokes_factory) and by each one's own module and tests:
+   !> nothing else branches on one (tests/micro/test_solver_seam.py).
+   public :: FOLD_DERIV_SPECTRAL, FOLD_DERIV_FD, FOLD_MIX_ARITHMETIC, &
              FOLD_MIX_HARMONIC, FOLD_MIX_GEOMETRIC, FOLD_GUESS_PREVIOUS, FOLD_GUESS_EXTRAPOLATE, FOLD_FFT_DOUBLE, &
-             FOLD_FFT_SINGLE, FOLD_RIGIDITY_PENALTY, FOLD_RIGIDITY_EXACT, FOLD_ENDS_FLAT, FOLD_ENDS_CAPPED, &
+             FOLD_FFT_SINGLE, FOLD_ENDS_FLAT, FOLD_ENDS_CAPPED, &
              FOLD_KAPPA_MIN, FOLD_KAPPA_MAX
 
    !> Coverage from which a voxel is rigid under exact rigidity. 1/2: the union of these
@@ -64,8 +68,8 @@ module fold_stokes_solver
    !> (fortran/bind/stokes_bind.f90); the defaults below, the registry's (FOLD_DEF_*),
    !> serve Fortran-only callers (fortran/stokes/tests).
    type, public :: stokes_settings_t
-      !> Backend (FOLD_STOKES_*)
-      integer(ip) :: backend = FOLD_STOKES_FFT
+      !> Backend (FOLD_STOKES_*); by default the one of a periodic cell
+      integer(ip) :: backend = FOLD_DEF_STOKES_BACKEND
       !> Fluid viscosity eta_f [Pa s]
       real(dp) :: eta_f = 1.0_dp
       !> Viscosity contrast kappa = eta_solid/eta_f in [FOLD_KAPPA_MIN, FOLD_KAPPA_MAX] [-]
@@ -119,7 +123,7 @@ module fold_stokes_solver
       real(dp), allocatable :: history(:)
       !> Mean strain rate E = sym(G) of the last solve [1/s]
       real(dp) :: E(3, 3) = 0.0_dp
-      !> The particles are rigid by a multiplier (FOLD_RIGIDITY_EXACT): their stress is
+      !> The particles are rigid by a multiplier (rigidity exact): their stress is
       !> multiplier_stress, not 2 (eta - eta_f) eps, and their voxels are those with
       !> chi >= FOLD_RIGID_COVERAGE (fold_stress, fold_rigid_fit)
       logical :: exact_rigidity = .false.
@@ -164,8 +168,6 @@ module fold_stokes_solver
       logical :: walls = .false.
       !> A sheared (Lees-Edwards) or deforming lattice
       logical :: lees_edwards = .false.
-      !> Exact rigidity (FOLD_RIGIDITY_EXACT) besides the penalty
-      logical :: exact_rigidity = .false.
       !> Single-precision transforms (FOLD_FFT_SINGLE)
       logical :: single_precision = .false.
    end type stokes_backend_t
@@ -213,7 +215,7 @@ module fold_stokes_solver
       end subroutine reduce_iface
    end interface
 
-   public :: stokes_settings_check, stokes_backend, stokes_backend_name
+   public :: stokes_settings_check, stokes_backend, stokes_backend_name, code_legend
 
 contains
 
@@ -225,9 +227,7 @@ contains
       if (code < 1 .or. code > FOLD_N_BACKENDS) return
       b = stokes_backend_t(code=code, name=FOLD_BACKEND_NAME(code), fft_transport=FOLD_BACKEND_FFT_TRANSPORT(code), &
                            serial=FOLD_BACKEND_SERIAL(code), walls=FOLD_BACKEND_WALLS(code), &
-                           lees_edwards=FOLD_BACKEND_LEES_EDWARDS(code), &
-                           exact_rigidity=FOLD_BACKEND_RIGIDITY(FOLD_RIGIDITY_EXACT, code), &
-                           single_precision=FOLD_BACKEND_SINGLE(code))
+                           lees_edwards=FOLD_BACKEND_LEES_EDWARDS(code), single_precision=FOLD_BACKEND_SINGLE(code))
    end function stokes_backend
 
    !> Name of backend code ("fft", "hypre"; "?" for an unknown code).
@@ -253,10 +253,11 @@ contains
       errmsg = ""
       if (set%backend < 1 .or. set%backend > FOLD_N_BACKENDS) then
          write (errmsg, '(a,i0,a,i0)') "stokes settings: backend must be 1 ... ", FOLD_N_BACKENDS, &
-            " (1 fft, 2 hypre), got ", set%backend
+            " ("//code_legend(FOLD_BACKEND_NAME, 1_ip)//"), got ", set%backend
       else if (set%walls .and. .not. FOLD_BACKEND_WALLS(set%backend)) then
          write (errmsg, '(a,i0,a)') "stokes settings: backend ", set%backend, " ("//trim(FOLD_BACKEND_NAME(set%backend))// &
-            ") solves fully periodic cells only; a cell with walls needs a backend that imposes walls (2 hypre)"
+            ") solves fully periodic cells only; a cell with walls needs a backend that imposes walls ("// &
+            code_legend(FOLD_BACKEND_NAME, 1_ip, FOLD_BACKEND_WALLS)//")"
       else if (.not. (set%eta_f > 0.0_dp)) then
          write (errmsg, '(a,es10.3)') "stokes settings: eta_f must be > 0, got ", set%eta_f
       else if (.not. (set%kappa >= FOLD_KAPPA_MIN .and. set%kappa <= FOLD_KAPPA_MAX)) then
@@ -279,15 +280,41 @@ contains
       else if (set%fibre_ends < FOLD_LO_STOKES_FIBRE_ENDS .or. set%fibre_ends > FOLD_HI_STOKES_FIBRE_ENDS) then
          write (errmsg, '(a,i0)') "stokes settings: fibre_ends must be 0 (flat) or 1 (capped), got ", set%fibre_ends
       else if (set%rigidity < FOLD_LO_STOKES_RIGIDITY .or. set%rigidity > FOLD_HI_STOKES_RIGIDITY) then
-         write (errmsg, '(a,i0)') "stokes settings: rigidity must be 0 (penalty) or 1 (exact), got ", set%rigidity
+         write (errmsg, '(a,i0,a,i0,a,i0)') "stokes settings: rigidity must be ", FOLD_LO_STOKES_RIGIDITY, " ... ", &
+            FOLD_HI_STOKES_RIGIDITY, " ("//code_legend(FOLD_RIGIDITY_NAME, int(FOLD_LO_STOKES_RIGIDITY, ip))// &
+            "), got ", set%rigidity
       else if (.not. FOLD_BACKEND_RIGIDITY(set%rigidity, set%backend)) then
-         write (errmsg, '(a,i0,a,i0,a)') "stokes settings: rigidity ", set%rigidity, " is not a formulation of backend ", &
-            set%backend, " ("//trim(FOLD_BACKEND_NAME(set%backend))//"); rigidity 1 (exact) needs backend 1 (fft)"
+         write (errmsg, '(a,i0,a,i0,a)') "stokes settings: rigidity ", set%rigidity, " ("// &
+            trim(FOLD_RIGIDITY_NAME(set%rigidity))//") is not a formulation of backend ", set%backend, &
+            " ("//trim(FOLD_BACKEND_NAME(set%backend))//"); the backends that have it: "// &
+            code_legend(FOLD_BACKEND_NAME, 1_ip, FOLD_BACKEND_RIGIDITY(set%rigidity, :))
       else if (set%guess < FOLD_LO_STOKES_INITIAL_GUESS .or. set%guess > FOLD_HI_STOKES_INITIAL_GUESS) then
          write (errmsg, '(a,i0)') "stokes settings: guess must be 1 (previous) or 2 (extrapolate), got ", set%guess
       else
          stat = FOLD_OK
       end if
    end subroutine stokes_settings_check
+
+   !> "1 fft, 2 hypre": the code and name of each entry of a generated name table
+   !> (fold_settings FOLD_BACKEND_NAME, FOLD_RIGIDITY_NAME; codes from first on), or of
+   !> those where mask holds, for messages that list the allowed choices.
+   pure function code_legend(names, first, mask) result(text)
+      character(len=*), intent(in) :: names(:)
+      !> Code of names(1)
+      integer(ip), intent(in) :: first
+      logical, intent(in), optional :: mask(:)
+      character(len=:), allocatable :: text
+      character(len=24) :: code
+      integer :: i
+      text = ""
+      do i = 1, size(names)
+         if (present(mask)) then
+            if (.not. mask(i)) cycle
+         end if
+         write (code, '(i0)') first + i - 1
+         if (len(text) > 0) text = text//", "
+         text = text//trim(code)//" "//trim(names(i))
+      end do
+   end function code_legend
 
 end module fold_stokes_solver

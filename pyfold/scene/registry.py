@@ -15,7 +15,11 @@ Views of these tables (generated or computed, never copied by hand):
 * ``fortran/core/fold_settings.f90``: codes, ranges, defaults and capabilities that
   ``fortran/io/fold_run_file.f90`` and ``fortran/stokes/fold_stokes_solver.f90`` use,
   written by ``scripts/generate_settings``,
-* the tables of ``docs/scenes.md`` between ``<!-- settings:... -->`` markers, same script.
+* the tables of ``docs/scenes.md`` between ``<!-- settings:... -->`` markers, same script,
+* ``fortran/stokes/solver_modules.txt``: the module, constructor and code constant of each
+  rigidity formulation and of each backend not on an FFT transport, same script; from it
+  ``fortran/stokes/meson.build`` compiles the modules and writes the construction calls into
+  ``fold_stokes_build.f90.in`` and ``fold_stokes_factory.f90.in``.
 
 ``tests/micro/test_settings_registry.py`` fails when a generated copy is stale.
 This module uses the standard library only, so the generator runs without the
@@ -25,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Mapping
+from typing import ClassVar, Mapping
 
 __all__ = ["Setting", "Backend", "Rigidity", "SETTINGS", "BACKENDS", "RIGIDITIES", "AUTO_BACKEND", "setting", "codes", "resolved",
            "in_range", "range_text",
@@ -367,10 +371,28 @@ def in_range(path: str, value: float) -> bool:
 AUTO_BACKEND = "auto"
 
 
+class _Coded:
+    """A registry entry named by a word of an enumerated setting (``SETTING``)."""
+
+    #: TOML path of the setting whose words name the entries
+    SETTING: ClassVar[str] = ""
+
+    @property
+    def code(self) -> int:
+        """Its integer code in /setup/resolved."""
+        return setting(self.SETTING).codes[self.name]  # type: ignore[attr-defined]
+
+    @property
+    def fortran_code(self) -> str:
+        """Name of its generated Fortran code constant (``FOLD_STOKES_HYPRE``, ``FOLD_RIGIDITY_EXACT``)."""
+        return f"{setting(self.SETTING).fortran_codes}{self.name.upper()}"  # type: ignore[attr-defined]
+
+
 @dataclass(frozen=True)
-class Backend:
+class Backend(_Coded):
     """A Stokes backend of fortran/stokes and its capabilities."""
 
+    SETTING: ClassVar[str] = "numerics.stokes.backend"
     name: str
     #: solves a cell with no-slip walls at y = 0, Ly
     walls: bool
@@ -390,28 +412,38 @@ class Backend:
     serial: bool
     #: what it is, for messages
     summary: str
+    #: a backend not on an FFT transport: its module (fortran/stokes/<module>.f90) and
+    #: constructor, ``constructor(set, dim, n, comm, solver, stat, errmsg)``, which
+    #: fold_stokes_factory calls for its code (generated from solver_modules.txt). None for
+    #: an FFT-transport backend: the rigidity formulation (:class:`Rigidity`) makes it.
+    fortran_module: str | None = None
+    constructor: str | None = None
 
-    @property
-    def code(self) -> int:
-        """Its /setup/resolved/stokes_backend code."""
-        return setting("numerics.stokes.backend").codes[self.name]
 
-
+#: Stokes backends. A new one is an entry here (with its word and code in the
+#: numerics.stokes.backend setting) and its module in fortran/stokes: a backend on an FFT
+#: transport is made by the rigidity formulations (RIGIDITIES); any other names its
+#: fortran_module and constructor, which scripts/generate_settings lists in
+#: fortran/stokes/solver_modules.txt: meson compiles the module and writes its construction
+#: call into fold_stokes_factory. Nothing else names it (tests/micro/test_solver_seam.py);
+#: docs/architecture.md, "A Stokes solver".
 BACKENDS: Mapping[str, Backend] = MappingProxyType({
     "fft": Backend("fft", walls=False, lees_edwards=True, deforming_lattice=False, fft_precisions=("double", "single"),
                    mpi=True, rigidities=("penalty", "exact"), fft_transport=True, serial=True,
                    summary="FFT-preconditioned CG on the periodic, Lees-Edwards cell"),
     "hypre": Backend("hypre", walls=True, lees_edwards=False, deforming_lattice=False, fft_precisions=(),
                      mpi=True, rigidities=("penalty",), fft_transport=False, serial=False,
-                     summary="staggered grid with no-slip walls"),
+                     summary="staggered grid with no-slip walls", fortran_module="fold_stokes_hypre",
+                     constructor="stokes_hypre_new"),
 })
 
 
 @dataclass(frozen=True)
-class Rigidity:
+class Rigidity(_Coded):
     """A rigidity formulation of the Stokes solve (a ``numerics.stokes.rigidity`` word):
     what the rest of the code asks of it instead of testing its name."""
 
+    SETTING: ClassVar[str] = "numerics.stokes.rigidity"
     name: str
     #: the solid is a viscosity kappa eta_f (numerics.stokes.kappa applies, and its
     #: grid-dependent bound, pyfold/scene/kappa_range.py and fold_stokes_trust)
@@ -420,21 +452,27 @@ class Rigidity:
     fft_precisions: tuple[str, ...]
     #: what it is, for messages
     summary: str
+    #: its module (fortran/stokes/<module>.f90) and constructor on an FFT transport,
+    #: ``constructor(fft, set, solver, stat, errmsg)``, which fold_stokes_build calls for
+    #: its code (generated from fortran/stokes/solver_modules.txt)
+    fortran_module: str
+    constructor: str
 
-    @property
-    def code(self) -> int:
-        """Its /setup/resolved/stokes_rigidity code."""
-        return setting("numerics.stokes.rigidity").codes[self.name]
 
-
-#: Rigidity formulations: a new one is an entry here (with its word and code in the
-#: numerics.stokes.rigidity setting), its module in fortran/stokes and its construction
-#: call in fortran/stokes/fold_stokes_build.f90.
+#: Rigidity formulations of the FFT-transport backends. A new one is an entry here (with
+#: its word and code in the numerics.stokes.rigidity setting, and its word in the
+#: rigidities of the backends that offer it) and its module in fortran/stokes;
+#: scripts/generate_settings lists its module and constructor in
+#: fortran/stokes/solver_modules.txt, from which meson compiles the module and writes its
+#: construction call into fold_stokes_build. Nothing else names it
+#: (tests/micro/test_solver_seam.py); docs/architecture.md, "A Stokes solver".
 RIGIDITIES: Mapping[str, Rigidity] = MappingProxyType({
     "penalty": Rigidity("penalty", uses_kappa=True, fft_precisions=("double", "single"),
-                        summary="the seed's penalty: viscosity kappa eta_f in the solid"),
+                        summary="the seed's penalty: viscosity kappa eta_f in the solid",
+                        fortran_module="fold_stokes_fft", constructor="stokes_fft_new"),
     "exact": Rigidity("exact", uses_kappa=False, fft_precisions=("double",),
-                      summary="eps(u) = 0 on the solid voxels by a multiplier"),
+                      summary="eps(u) = 0 on the solid voxels by a multiplier",
+                      fortran_module="fold_stokes_rigid", constructor="stokes_rigid_new"),
 })
 
 

@@ -21,8 +21,9 @@ READER = REPO / "fortran" / "io" / "fold_run_file.f90"
 
 
 def test_generated_fortran_module_and_docs_tables_are_current():
-    """fortran/core/fold_settings.f90 and the marked tables of docs/scenes.md are what
-    scripts/generate_settings makes from the registry now."""
+    """fortran/core/fold_settings.f90, the marked tables of docs/scenes.md and the solver
+    list fortran/stokes/solver_modules.txt (from which meson writes the construction) are
+    what scripts/generate_settings makes from the registry now."""
     proc = subprocess.run([sys.executable, str(REPO / "scripts" / "generate_settings"), "--check"],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
@@ -179,3 +180,20 @@ def test_every_rigidity_word_has_a_formulation_entry_and_the_fortran_table_follo
     flags = ", ".join(".true." if r.uses_kappa else ".false." for r in ordered)
     assert f":: {names}]" in text
     assert f"FOLD_RIGIDITY_USES_KAPPA({ordered[0].code}:{ordered[-1].code}) = [{flags}]" in text
+
+
+def test_the_staleness_check_covers_the_solver_list(tmp_path):
+    """A solver list that differs from the registry is reported stale by --check."""
+    import shutil
+    root = tmp_path / "repo"
+    for rel in ("scripts/generate_settings", "pyfold/scene/registry.py", "pyfold/scene/settings_docs.py",
+                "fortran/core/fold_settings.f90", "docs/scenes.md", "fortran/stokes/solver_modules.txt"):
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(REPO / rel, root / rel)
+    script = [sys.executable, str(root / "scripts" / "generate_settings"), "--check"]
+    assert subprocess.run(script, capture_output=True, text=True).returncode == 0
+    listed = root / "fortran" / "stokes" / "solver_modules.txt"
+    listed.write_text(listed.read_text(encoding="utf-8").replace("stokes_rigid_new", "stokes_rigid_make"),
+                      encoding="utf-8")
+    proc = subprocess.run(script, capture_output=True, text=True)
+    assert proc.returncode == 1 and "solver_modules.txt is stale" in proc.stderr, proc.stderr

@@ -21,7 +21,8 @@ program test_stokes_hypre
    use mpi_f08
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR, FOLD_NOT_CONVERGED
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_STOKES_HYPRE, FOLD_STOKES_FFT
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
+   use fold_settings, only: FOLD_STOKES_HYPRE, FOLD_STOKES_FFT
    use fold_stokes_factory, only: stokes_solver_create
    use fold_cell, only: cell_t, cell_init
    use fold_grid, only: shear_lattice

@@ -14,7 +14,8 @@ program test_stokes_rigid
    use mpi_f08
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
-   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, FOLD_RIGIDITY_EXACT
+   use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
+   use fold_settings, only: FOLD_RIGIDITY_EXACT
    use fold_stokes_rigid, only: stokes_rigid_t
    use stokes_test_check, only: check, ball_chi
    use stokes_test_solver, only: sheared_solver, mpi_test_start, mpi_test_end
