@@ -83,7 +83,7 @@ import numpy as np
 from pyfold._jax import exported_call, jax, jnp
 from pyfold.errors import InputError
 
-__all__ = ["FastFit", "fit_ci_rk4", "padded_size", "admissibility", "contracted_table", "MAX_STEP", "MIN_RECORDS",
+__all__ = ["FastFit", "fit_ci_rk4", "fit_flags", "padded_size", "admissibility", "contracted_table", "MAX_STEP", "MIN_RECORDS",
            "admissible_tol", "ADMISSIBLE_TOL_PER_STEP", "CONTRACTION_DEFECT"]
 
 #: Largest RK4 step [1/γ̇]: pyfold.report.PREDICTION_MAX_STEP, whose a2 error over a
@@ -469,8 +469,12 @@ def _table(t: np.ndarray, a4: np.ndarray, size: int) -> tuple[np.ndarray, np.nda
 
 
 def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: float, *,
-               a4: np.ndarray | None = None, ci_start: float = 1e-3, max_step: float = MAX_STEP) -> FastFit:
+               a4: np.ndarray | None = None, ci_start: float = 1e-3, max_step: float = MAX_STEP,
+               t_end: float | None = None) -> FastFit:
     """Fit Folgar–Tucker's ``C_I`` with ``closure`` to ``a2(t)`` (see the module notes).
+
+    The one trajectory fit of the analysis chain: ``pyfold analyse`` fits every record,
+    ``pyfold report`` and the main job the records up to ``t_end``.
 
     Parameters
     ----------
@@ -492,6 +496,9 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         Starting value of ``C_I`` (>= 0).
     max_step : float
         Largest RK4 step [1/γ̇] before refinement.
+    t_end : float, optional
+        Fit only the records at ``t <= t_end`` [s] (a window from the start of the run);
+        None: every record.
     """
     t = np.asarray(t, dtype=np.float64)
     a2 = np.asarray(a2, dtype=np.float64)
@@ -500,6 +507,16 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         raise InputError(f"time: expected at least 2 strictly increasing finite record times, got shape {t.shape}")
     if a2.shape != (n, d, d) or d not in (2, 3):
         raise InputError(f"a2: expected shape ({n}, d, d) with d in {{2, 3}}, got {a2.shape}")
+    if t_end is not None:
+        # a window from the start: the records up to t_end (one computed from the record
+        # times, t0 + k dt, keeps its last record)
+        keep = t <= float(t_end) + 1e-12 * max(abs(float(t_end)), 1.0)
+        if not (math.isfinite(t_end) and int(np.sum(keep)) >= 2):
+            raise InputError(f"t_end: must be finite and keep at least 2 records (t >= {t[1]:.6g} s), got {t_end!r}")
+        n = int(np.sum(keep))
+        t, a2 = t[:n], a2[:n]
+        if a4 is not None:
+            a4 = np.asarray(a4)[:n]
     if not (ci_start >= 0.0 and math.isfinite(ci_start)):
         raise InputError(f"ci_start: must be finite and >= 0, got {ci_start!r}")
     L = np.asarray(L, dtype=np.float64)[:d, :d]
@@ -590,3 +607,14 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
     return FastFit(closure=closure, ci=ci, stderr=stderr, residual_rms=math.sqrt(rss / n_points) if finite else math.nan,
                    n_points=n_points, success=converged and finite, at_bound=at_bound, message=message,
                    a2=np.asarray(a2_fit)[:n], step=h_used, step_error=step_error, iterations=total_iterations)
+
+
+def fit_flags(fits):
+    """:func:`pyfold.seed_checks.flag_fits` for per-seed :class:`FastFit` results of
+    :func:`fit_ci_rk4`: its steps are projected onto ``C_I >= 0``, so a fit on the bound
+    returns exactly ``C_I = 0`` (any positive value is a measured one); there is no upper
+    bound; a fit that did not succeed (not converged, or left the orientation tensors:
+    ``C_I`` NaN) is flagged failed."""
+    from pyfold.seed_checks import flag_fits
+
+    return flag_fits([f.ci if f.success else math.nan for f in fits], 0.0, math.inf, 0.0, 0.0)

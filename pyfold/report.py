@@ -3,28 +3,30 @@
     run files ─► checks (each run, and one scene apart from the seed)
               ─► per run: stationary part (MSER-5 onset, drift test), C_I by rate
                  regression with the run's own a4 and with each closure's a4,
-                 closure errors a4:D against the run's a4
+                 closure errors a4:D against the run's a4, C_I by trajectory fit
+                 per closure over the first TRAJECTORY_PERIODS Jeffery periods
               ─► over the runs: ensemble means ± standard errors, closure ranking
                  with paired tests, Folgar-Tucker integrated once per closure at
-                 its C_I, the published correlations at the scene's phi beta
+                 its fitted C_I, the published correlations at the scene's phi beta
               ─► figures (PNG), results.nc, summary.txt / summary.md
 
 Why these estimators (docs/physics.md#the-fitted-c_i-depends-on-the-closure): a
 moulding code integrates Folgar-Tucker with *its* closure, so the interaction
-coefficient it needs is the one fitted with that closure. Here it is the rate
-regression :func:`pyfold.ci_estimators.ci_rate_regression` with the closure's
-``a4`` evaluated on the simulated ``a2`` (no ODE, linear in C_I, cheap over a
-long run), over the stationary part of each run. The same regression with the
-run's own ``a4`` needs no closure: it measures what the contacts alone do,
-projected on Folgar-Tucker's isotropic diffusion. Trajectory fits through the ODE
-(:func:`pyfold.fit.fit_parameters`, ``pyfold analyse``) compile per closure and
-integrate the whole run at every iteration, too slow for an ensemble of long runs.
+coefficient it needs is the one fitted with that closure: the trajectory fit
+:func:`pyfold.fast_fit.fit_ci_rk4` (the fit of ``pyfold analyse`` too) over the
+transient, with its standard error. Beside it, the rate regression
+:func:`pyfold.ci_estimators.ci_rate_regression` with the closure's ``a4`` evaluated on
+the simulated ``a2`` (no ODE, linear in C_I, cheap over a long run), over the
+stationary part of each run. The same regression with the run's own ``a4`` needs no
+closure: it measures what the contacts alone do, projected on Folgar-Tucker's
+isotropic diffusion.
 
 Compilations: closures are evaluated on a fixed shape (:data:`CLOSURE_RECORDS`
 records per run, thinned and padded), and Folgar-Tucker is integrated by a
 fixed-step RK4 in ``jax.lax.scan`` onto :data:`PREDICTION_POINTS` times, so each
 closure compiles two programs whatever the runs, both kept by JAX's persistent
-cache (:mod:`pyfold._jax`). (diffrax solves carry host callbacks, which the
+cache (:mod:`pyfold._jax`); the trajectory fit is one exported program per closure and
+size class of the records (:mod:`pyfold.fast_fit`). (diffrax solves carry host callbacks, which the
 persistent cache does not store, so a new process would trace and compile them
 again.)
 """
@@ -65,10 +67,6 @@ PREDICTION_MAX_STEP = 0.5
 #: which Folgar-Tucker's steady states often cannot reach
 #: (studies/interaction_coefficient/ci_concentration.py).
 TRAJECTORY_PERIODS = 2.0
-#: Largest C_I the trajectory fit considers (the published range ends at 3e-2).
-TRAJECTORY_CI_MAX = 0.1
-#: Absolute tolerance of the trajectory fit's search in ``s = sqrt(C_I)``.
-TRAJECTORY_XATOL = 1e-4
 #: Fewest records a stationary window must hold for the estimators (ci_rate_regression
 #: needs 8 interior records; blocking errors need 16 samples).
 MIN_WINDOW_RECORDS = 16
@@ -353,42 +351,6 @@ def predict_ft(closure: str, ci: float, xi: float, a2_0: np.ndarray, L: np.ndarr
     return t, np.asarray(ys)
 
 
-def fit_ci_trajectory(closure: str, xi: float, t: np.ndarray, a2: np.ndarray, L: np.ndarray,
-                      t_end: float) -> tuple[float, float]:
-    """Trajectory fit of Folgar-Tucker's ``C_I`` with ``closure`` to one run's ``a2(t)``.
-
-    Minimises the mean over :data:`PREDICTION_POINTS` equally spaced times in
-    ``[t[0], t_end]`` of ``||a2_FT(t; C_I) - a2_run(t)||_F^2`` (the run's records linearly
-    interpolated), Folgar-Tucker started from the run's first record and integrated by
-    :func:`predict_ft`, over ``C_I = s^2`` with ``s`` in ``[0, sqrt(TRAJECTORY_CI_MAX)]``
-    (bounded Brent search, ``scipy.optimize.minimize_scalar``; ``s^2`` keeps C_I >= 0, the
-    model's admissible set). This is the classical way C_I is fitted to a simulated or
-    measured transient (e.g. Meyer et al. 2020, docs/physics.md#published-c_i-values):
-    the C_I a moulding code running this closure should use. Returns ``(C_I, rms)`` with
-    the RMS a2 error over the tensor's components and the times at the optimum.
-    """
-    from scipy.optimize import minimize_scalar
-
-    t = np.asarray(t, dtype=np.float64)
-    d = a2.shape[-1]
-    a2_0 = 0.5 * (a2[0] + a2[0].T)
-    grid = np.linspace(float(t[0]), float(t_end), PREDICTION_POINTS)
-    target = np.stack([[np.interp(grid, t, a2[:, i, j]) for j in range(d)] for i in range(d)]).transpose(2, 0, 1)
-
-    def cost(s: float) -> float:
-        _, pred = predict_ft(closure, s * s, xi, a2_0, L, float(t_end), float(t[0]))
-        value = float(np.mean((pred - target) ** 2))
-        return value if math.isfinite(value) else math.inf
-
-    hi = math.sqrt(TRAJECTORY_CI_MAX)
-    best = minimize_scalar(cost, bounds=(0.0, hi), method="bounded", options={"xatol": TRAJECTORY_XATOL})
-    s_opt = float(best.x)
-    # the bounded search never evaluates the bound itself: C_I = 0 (Jeffery with the closure) may be better
-    if cost(0.0) <= best.fun:
-        s_opt = 0.0
-    return s_opt * s_opt, math.sqrt(cost(s_opt))
-
-
 # --------------------------------------------------------------------------- the ensemble
 
 
@@ -417,6 +379,7 @@ class Report:
     prediction_ci: dict[str, float]  # the C_I each prediction used (>= 0)
     ci_fit: dict[str, object] = dataclasses.field(default_factory=dict)  # closure -> EnsembleMean (trajectory fit)
     ci_fit_runs: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # closure -> per-run fitted C_I
+    ci_fit_stderr: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # closure -> its standard errors
     fit_rms: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # closure -> per-run a2 RMS at the fit
     fit_window: tuple[float, float] = (math.nan, math.nan)  # times of the trajectory fit [s]
     allow_failed: bool = False
@@ -498,17 +461,6 @@ def _rank_one_run(run: RunAnalysis, judged: Sequence[str]) -> list:
     return rows
 
 
-def fit_flags(values: Sequence[float]):
-    """:func:`pyfold.seed_checks.flag_fits` for :func:`fit_ci_trajectory`: it searches
-    ``s = sqrt(C_I)`` with absolute tolerance ``xatol`` (1e-4), so a value within
-    ``xatol^2`` of C_I = 0, or within ``2 s_max xatol`` of :data:`TRAJECTORY_CI_MAX`, is on
-    its bound to the optimiser's resolution."""
-    from pyfold.seed_checks import flag_fits
-
-    xatol = TRAJECTORY_XATOL
-    return flag_fits(values, 0.0, TRAJECTORY_CI_MAX, xatol**2, 2.0 * math.sqrt(TRAJECTORY_CI_MAX) * xatol)
-
-
 def measure_redistribution(runs: Sequence[RunAnalysis], early_end: float) -> dict[str, object]:
     """How the simulated state changes from the start (strain up to ``early_end`` [s]: the
     trajectory-fit window) to the stationary windows: ``|a2 - I/d|`` (Frobenius) and the
@@ -546,6 +498,8 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
     from pyfold import run_checks
     from pyfold.correlations import correlations_at
     from pyfold.ensemble import EnsembleMean, ensemble_mean, rank_paired
+    from pyfold.fast_fit import fit_ci_rk4, fit_flags
+    from pyfold.seed_checks import FLAG_OK, FLAG_OUTLIER
 
     say = progress or (lambda text: None)
     paths = [Path(p) for p in paths]
@@ -600,17 +554,21 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
     gamma_dot = shear_rate_of(L)
     period = jeffery_period_strain(xi) / gamma_dot
     fit_end = min(t1, t0 + TRAJECTORY_PERIODS * period) if math.isfinite(period) else t1
-    ci_fit, ci_fit_runs, fit_rms, flags, departure = {}, {}, {}, {}, {}
+    ci_fit, ci_fit_runs, ci_fit_stderr, fit_rms, flags, departure = {}, {}, {}, {}, {}, {}
     for c in judged:
         say(f"trajectory fit of C_I with {c} over strain {t0 * gamma_dot:.3g}-{fit_end * gamma_dot:.3g}")
-        fits = [fit_ci_trajectory(c, xi, r.t, r.a2, L, min(fit_end, float(r.t[-1]))) for r in runs]
-        ci_fit_runs[c] = [f[0] for f in fits]
-        fit_rms[c] = [f[1] for f in fits]
-        flags[c] = fit_flags(ci_fit_runs[c])
-        # a fit on its bound is not a measurement: the mean is over the others (all on a bound: NaN)
-        kept = flags[c].kept
-        ci_fit[c] = ensemble_mean(kept) if kept else EnsembleMean(math.nan, math.nan, math.nan, 0)
-        used = ci_fit[c].mean if kept else float(np.mean(ci_fit_runs[c]))
+        fits = [fit_ci_rk4(c, r.t, r.a2, L, xi, t_end=min(fit_end, float(r.t[-1]))) for r in runs]
+        ci_fit_runs[c] = [f.ci for f in fits]
+        ci_fit_stderr[c] = [f.stderr for f in fits]
+        fit_rms[c] = [f.residual_rms for f in fits]
+        flags[c] = fit_flags(fits)
+        # a fit on its bound is not a measurement, a failed one has no value: the mean is
+        # over the others (none left: NaN)
+        kept = [k for k, f in enumerate(flags[c].flags) if f in (FLAG_OK, FLAG_OUTLIER)]
+        ci_fit[c] = (ensemble_mean([ci_fit_runs[c][k] for k in kept], [ci_fit_stderr[c][k] for k in kept]) if kept
+                     else EnsembleMean(math.nan, math.nan, math.nan, 0))
+        finite = [v for v in ci_fit_runs[c] if math.isfinite(v)]
+        used = ci_fit[c].mean if kept else (float(np.mean(finite)) if finite else 0.0)
         say(f"Folgar-Tucker with {c} at the fitted C_I = {used:.3g}")
         pred_t, prediction[c] = predict_ft(c, used, xi, a2_0, L, t1, t0)
         prediction_ci[c] = used
@@ -623,7 +581,8 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
                   scene_title=str(scene.get("title", "")), dim=dim, L=np.asarray(L), xi=xi, beta=beta, n_l3=n_l3,
                   phi_beta=pb, correlations=corr, ci=ci, errors=errors, ranking=ranking, ranking_method=method,
                   prediction_t=pred_t, prediction=prediction, prediction_ci=prediction_ci,
-                  allow_failed=allow_failed, notes=notes, ci_fit=ci_fit, ci_fit_runs=ci_fit_runs, fit_rms=fit_rms,
+                  allow_failed=allow_failed, notes=notes, ci_fit=ci_fit, ci_fit_runs=ci_fit_runs,
+                  ci_fit_stderr=ci_fit_stderr, fit_rms=fit_rms,
                   fit_window=(t0, fit_end), provenance=provenance, fit_flags=flags, equivalence=equivalence,
                   departure=departure, redistribution=measure_redistribution(runs, fit_end), warnings=warnings)
 
@@ -799,7 +758,7 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
     if rep.ci_fit:
         fitted = [c for c in judged if c in rep.ci_fit]
         f0, f1 = rep.fit_window
-        tf = ("C_I of Folgar-Tucker with the closure by trajectory fit to a2(t) (pyfold.report.fit_ci_trajectory) "
+        tf = ("C_I of Folgar-Tucker with the closure by trajectory fit to a2(t) (pyfold.fast_fit.fit_ci_rk4) "
               f"over strain {f0 * rep.gamma_dot:.4g}-{f1 * rep.gamma_dot:.4g}")
         out_ds[RECOMMENDED_CI] = ("judged_closure", [rep.ci_fit[c].mean if c in rep.ci_fit else np.nan for c in judged],
                                   one(tf + ", mean over the seeds not on a bound (the C_I to use with that closure)",
@@ -807,16 +766,22 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
                                       fit_window_periods=rep.fit_periods))
         out_ds[RECOMMENDED_CI + "_error"] = ("judged_closure",
                                              [rep.ci_fit[c].error if c in rep.ci_fit else np.nan for c in judged],
-                                             one("standard error across the seeds used of ci_recommended "
-                                                 "(NaN for one seed)"))
+                                             one("standard error of ci_recommended: the larger of the one "
+                                                 "across the seeds used and their pooled fit standard errors"))
         out_ds[RECOMMENDED_CI + "_n_seeds"] = ("judged_closure",
                                                np.array([rep.ci_fit[c].n if c in rep.ci_fit else 0 for c in judged],
                                                         dtype=np.int32),
-                                               one("seeds averaged in ci_recommended (fits on a bound excluded)"))
+                                               one("seeds averaged in ci_recommended (fits on a bound or failed "
+                                                   "excluded)"))
         out_ds["ci_trajectory_fit_seed"] = (("seed", "judged_closure"),
                                             np.array([[rep.ci_fit_runs[c][k] if c in fitted else np.nan
                                                        for c in judged] for k in range(rep.n)]),
                                             one(tf + ", per run"))
+        out_ds["ci_trajectory_fit_seed_stderr"] = (("seed", "judged_closure"),
+                                                   np.array([[rep.ci_fit_stderr[c][k] if c in fitted else np.nan
+                                                              for c in judged] for k in range(rep.n)]),
+                                                   one("standard error of ci_trajectory_fit_seed (least squares: "
+                                                       "s^2 / (J.J), pyfold.fast_fit)"))
         out_ds["ci_trajectory_fit_seed_flag"] = (("seed", "judged_closure"),
                                                  np.array([[rep.fit_flags[c].flags[k] if c in fitted else -1
                                                             for c in judged] for k in range(rep.n)], dtype=np.int8),
@@ -833,7 +798,7 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
                         phi_beta=rep.phi_beta, scene=json.dumps(rep.scene), recommended_ci=RECOMMENDED_CI,
                         equivalence_margin=EQUIVALENCE_MARGIN,
                         estimator=f"{RECOMMENDED_CI}: trajectory fit over the first {rep.fit_periods:.3g} Jeffery "
-                        "periods (pyfold.report.fit_ci_trajectory), the value a moulding code running that closure "
+                        "periods (pyfold.fast_fit.fit_ci_rk4), the value a moulding code running that closure "
                         "should use; ci_rate_regression: pyfold.ci_estimators.ci_rate_regression over the stationary "
                         "window, 'exact' = the runs' own a4 (closure-free)",
                         warnings=json.dumps(rep.warnings))
@@ -913,7 +878,7 @@ def flagged_fit_lines(rep: Report) -> list[str]:
     seeds = [r.seed for r in rep.runs]
     lines = []
     for c, flags in rep.fit_flags.items():
-        notes = flags.describe(seeds, (0.0, TRAJECTORY_CI_MAX))
+        notes = flags.describe(seeds, (0.0, math.inf))
         if notes:
             values = ", ".join(f"{v:.3g}" for v in flags.values)
             lines.append(f"{c}: per-seed fits {values}; " + "; ".join(notes))
@@ -967,7 +932,7 @@ def summary_lines(rep: Report) -> list[str]:
     f0, f1 = rep.fit_window
     lines += ["", f"Folgar-Tucker C_I per closure. fitted (recommended): trajectory fit to each run's a2(t) over "
               f"strain {f0 * g:.3g}-{f1 * g:.3g} ({rep.fit_periods:.2g} Jeffery periods of the particles' xi; "
-              "pyfold.report.fit_ci_trajectory), mean over the seeds whose fit is not on a bound; "
+              "pyfold.fast_fit.fit_ci_rk4), mean over the seeds whose fit is not on a bound or failed; "
               "rate regr.: regression of da2/dt on the diffusion term over the stationary window "
               "(pyfold.ci_estimators.ci_rate_regression):",
               f"  {'closure':<10} {'fitted C_I':>11} {'± error':>9} {'seeds':>5} {'a2 RMS':>8}   {'rate regr.':>11} "

@@ -9,9 +9,9 @@
 The trajectory fits run in :mod:`pyfold.fast_fit` (fixed-step RK4 on padded record
 counts: one compiled program per closure and size class, kept by JAX's persistent
 cache, so a second process fits a run in seconds). The main job and ``pyfold report``
-use :mod:`pyfold.report` instead (rate regressions over the stationary part of an
-ensemble of long runs, with the closures' a4 or the run's own); both start from the
-checks of :mod:`pyfold.run_checks`.
+use :mod:`pyfold.report` on an ensemble of runs: the same fit over the first Jeffery
+periods of each run, beside rate regressions over the stationary part; both start from
+the checks of :mod:`pyfold.run_checks`.
 
 Why fit with several closures: the fitted ``C_I`` depends on the closure used
 (docs/physics.md#the-fitted-c_i-depends-on-the-closure), so the table reports one value per closure, plus the value

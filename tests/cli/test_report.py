@@ -214,19 +214,24 @@ def test_main_job_on_a_small_scene_reports_its_seeds(tmp_path):
 
 @pytest.mark.parametrize("ci_true", [0.0, 2e-3])
 def test_trajectory_fit_recovers_the_c_i_of_a_folgar_tucker_trajectory(ci_true):
-    """fit_ci_trajectory on an a2(t) made by Folgar-Tucker itself (adaptive solve, IBOF) must
-    return its C_I. The only model error is the RK4 prediction's (bounded by 1e-4 in a2 in
-    the test above); it moves the optimum by at most that error over the RMS sensitivity
-    |d a2/d C_I| of the trajectory, measured here by a central difference."""
+    """The report's trajectory fit (pyfold.fast_fit.fit_ci_rk4 over the window up to t_end)
+    on an a2(t) made by Folgar-Tucker itself (adaptive solve, IBOF) must return its C_I. The
+    only model error is the fixed-step RK4's (bounded by 1e-4 in a2 in the test above); it
+    moves the optimum by at most that error over the RMS sensitivity |d a2/d C_I| of the
+    trajectory, measured here by a central difference. Records past t_end are not fitted."""
+    from pyfold.fast_fit import fit_ci_rk4
     from pyfold.models import FolgarTucker, solve_orientation
 
     L = np.zeros((3, 3))
     L[0, 1] = 1.0
     a0 = np.eye(3) / 3.0
-    t = np.linspace(0.0, 60.0, 301)
-    a2 = np.asarray(solve_orientation(FolgarTucker(ci=ci_true, xi=0.97, closure="ibof"), a0, L, t,
+    t = np.linspace(0.0, 80.0, 401)
+    a2 = np.array(solve_orientation(FolgarTucker(ci=ci_true, xi=0.97, closure="ibof"), a0, L, t,
                                       rtol=1e-9, atol=1e-11).a2)
-    ci, rms = report.fit_ci_trajectory("ibof", 0.97, t, a2, L, 60.0)
+    a2[t > 60.0] = np.eye(3) / 3.0  # not Folgar-Tucker: must lie outside the window
+    fit = fit_ci_rk4("ibof", t, a2, L, 0.97, t_end=60.0)
+    assert fit.success and len(fit.a2) == 301, fit.message
+    ci, rms = fit.ci, fit.residual_rms
     h = 5e-4
     _, up = report.predict_ft("ibof", ci_true + h, 0.97, a0, L, 60.0)
     _, mid = report.predict_ft("ibof", ci_true + h / 2 if ci_true == 0.0 else ci_true - h, 0.97, a0, L, 60.0)
