@@ -34,11 +34,6 @@ from pyfold.run_checks import (DEFAULT_CLOSURES, check_closures, check_described
                                velocity_gradient_of)
 
 
-#: Folgar–Tucker starting guess of C_I for every fit (order of the published
-#: values, docs/physics.md#published-c_i-values); bounds C_I >= 0 come from pyfold.fit.
-CI_START = 1e-3
-
-
 @dataclass
 class ChainResult:
     """What :func:`fit_and_compare` produced."""
@@ -72,7 +67,7 @@ def fit_ci_per_closure(ds: xr.Dataset, L: np.ndarray, closures: Sequence[str], x
     L = np.asarray(L, dtype=np.float64)[:dim, :dim]
 
     def fit(name):
-        return fit_ci_rk4(name, t, a2, L, xi, a4=a4 if name == "exact" else None, ci_start=CI_START)
+        return fit_ci_rk4(name, t, a2, L, xi, a4=a4 if name == "exact" else None)
 
     # The fits are independent: on several cores they run (and, in a first process,
     # compile) side by side; JAX releases the interpreter lock while it compiles and runs.

@@ -31,6 +31,7 @@ from pyfold.commands import run as run_command
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.correlations import PUBLISHED_RANGE
 from pyfold.ensemble import ensemble_mean, paired_difference
+from pyfold.report import closure_a4
 from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 
@@ -71,7 +72,7 @@ def test_closure_free_c_i_is_no_diffusion_and_the_closure_error_raises_it(ensemb
     for r in ensemble:
         window = (T_END / 2, T_END)  # the second Jeffery period: past the fast alignment from isotropy
         own.append(ci_rate_regression(r["t"], r["a2"], r["a4"], r["L"], r["xi"], window=window).ci)
-        a4_ibof = report.closure_a4("ibof", r["a2"])
+        a4_ibof = closure_a4("ibof", r["a2"])
         with_ibof.append(ci_rate_regression(r["t"], r["a2"], a4_ibof, r["L"], r["xi"], window=window).ci)
     m_own = ensemble_mean(own)
     assert m_own.mean < 3.0 * m_own.stderr_across, own  # not a positive diffusion
