@@ -1,4 +1,7 @@
-"""Trajectory fit of Folgar–Tucker's ``C_I`` by fixed-step RK4 on fixed array shapes (``pyfold analyse``).
+"""Trajectory fit of Folgar–Tucker's ``C_I`` by fixed-step RK4 on fixed array shapes.
+
+The one trajectory fit of the analysis chain (``pyfold analyse``, ``pyfold report``, the
+main job, the studies); its integration, at a given ``C_I``, is :func:`predict_ft`.
 
 The problem is the one of :func:`pyfold.fit.fit_parameters` with ``params=("ci",)``
 and unit weights:
@@ -84,11 +87,13 @@ import numpy as np
 from pyfold._jax import exported_call, jax, jnp
 from pyfold.errors import InputError
 
-__all__ = ["FastFit", "fit_ci_rk4", "fit_flags", "CI_STARTS", "padded_size", "admissibility", "contracted_table", "MAX_STEP", "MIN_RECORDS",
+__all__ = ["FastFit", "fit_ci_rk4", "fit_flags", "predict_ft", "CI_STARTS", "padded_size", "admissibility", "contracted_table", "MAX_STEP", "MIN_RECORDS",
            "admissible_tol", "ADMISSIBLE_TOL_PER_STEP", "CONTRACTION_DEFECT"]
 
-#: Largest RK4 step [1/γ̇]: pyfold.report.PREDICTION_MAX_STEP, whose a2 error over a
-#: strain of 400 is 6e-5 (C_I = 0) and 8e-6 (C_I = 1e-3) against the adaptive solve.
+#: Largest RK4 step [1/γ̇] of the fits and of :func:`predict_ft`. Against the adaptive
+#: diffrax solve at rtol 1e-10 over a strain of 400 from isotropy (beta = 10), the largest
+#: a2 error was 6e-5 at C_I = 0 and 8e-6 at C_I = 1e-3 (IBOF and FEC alike; 1e-3 at a step
+#: of 1; tests/cli/test_report.py checks it).
 #: The step error estimate at the optimum decides whether it is small enough for each
 #: fit, and halves it when not. The cost is in the closure evaluations (four per step;
 #: FEC ~0.04 ms each with its derivative), so the step is no smaller than it needs to be.
@@ -278,6 +283,84 @@ def padded_size(n: int) -> int:
 _PROGRAMS: dict[tuple[str, int], object] = {}
 
 
+def _rate(closure: str, dim: int):
+    """Folgar–Tucker's rate with ``closure`` (a table, given as the argument ``table``,
+    replaces it), jitted on its own: the four RK4 stages, the jvp and the two
+    integrations of a fit program trace the closure once."""
+    from pyfold.models import FolgarTucker
+
+    @jax.jit
+    def rate(ci, xi, a, L, t, table):
+        model = FolgarTucker(ci=ci, xi=xi, closure=closure if table is None else table, dim=dim)
+        return model.rate(t, a, L)
+
+    return rate
+
+
+def _integrate(rate, ci, xi, a2_0, L, t, n_sub, table):
+    """Classical RK4 of ``rate`` from ``a2_0`` at ``t[0]`` onto the times ``t``, with
+    ``n_sub[k]`` equal steps over ``[t[k], t[k+1]]`` (0: a padded interval, no step).
+    Returns the states at ``t`` (the first is ``a2_0``)."""
+    def interval(a, k):
+        h = jnp.where(n_sub[k] > 0, (t[k + 1] - t[k]) / jnp.maximum(n_sub[k], 1), 0.0)
+
+        def step(i, a):
+            s = t[k] + i * h
+
+            # The four stages as a loop over _RK4_NODES / _RK4_WEIGHTS: the closure
+            # appears once in the program, not four times (a quarter of the code to
+            # compile and to load from the cache). The arithmetic is that of
+            # k2 = rate(a + h/2 k1), ..., a + h/6 (k1 + 2 k2 + 2 k3 + k4), term by term.
+            def stage(j, carry):
+                k_prev, acc = carry
+                c = jnp.asarray(_RK4_NODES)[j]
+                k_j = rate(ci, xi, a + (h * c) * k_prev, L, s + h * c, table)
+                return k_j, acc + jnp.asarray(_RK4_WEIGHTS)[j] * k_j
+
+            zero = jnp.zeros_like(a)
+            _, acc = jax.lax.fori_loop(0, 4, stage, (zero, zero))
+            return a + h / 6 * acc
+
+        a = jax.lax.fori_loop(0, n_sub[k], step, a)
+        return a, a
+
+    _, ys = jax.lax.scan(interval, a2_0, jnp.arange(t.shape[0] - 1))
+    return jnp.concatenate([a2_0[None], ys])
+
+
+def _substeps(t: np.ndarray, rate: float, h: float) -> np.ndarray:
+    """RK4 steps per record interval: ``ceil(γ̇ Δt_k / h)``, at least one. (1 - 1e-12):
+    an interval that is a whole number of steps up to the round-off of the division
+    (0.5 / 0.5 = 1 + 2e-16) takes that number, not one more."""
+    return np.maximum(1, np.ceil(np.diff(t) * rate / h * (1.0 - 1e-12))).astype(np.int32)
+
+
+_PREDICTIONS: dict[tuple[str, int], object] = {}
+
+
+def predict_ft(closure: str, ci: float, xi: float, a2_0: np.ndarray, L: np.ndarray, t: np.ndarray,
+               max_step: float = MAX_STEP) -> np.ndarray:
+    """Folgar–Tucker ``a2`` with ``closure`` at ``ci`` from ``a2_0`` at ``t[0]``, at the times
+    ``t`` (Folgar & Tucker 1984; Advani & Tucker 1987 for the tensor form): the integration
+    of the fits (classical RK4, every interval cut into steps no longer than ``max_step``
+    / γ̇), at a given C_I. One jitted program per closure, kept by the persistent cache."""
+    from pyfold.models import FolgarTucker
+
+    a2_0 = np.asarray(a2_0, dtype=np.float64)
+    d = a2_0.shape[-1]
+    t = np.asarray(t, dtype=np.float64)
+    L = np.asarray(L, dtype=np.float64)[:d, :d]
+    D = 0.5 * (L + L.T)
+    rate = math.sqrt(2.0 * float(np.sum(D * D))) or 1.0  # pyfold.kinematics.shear_rate, in numpy
+    FolgarTucker(ci=float(ci), xi=float(xi), closure=closure, dim=d)  # checks C_I >= 0, xi and the closure name
+    key = (closure, d)
+    if key not in _PREDICTIONS:
+        f = _rate(closure, d)
+        _PREDICTIONS[key] = jax.jit(lambda ci, xi, a2_0, L, t, n_sub: _integrate(f, ci, xi, a2_0, L, t, n_sub, None))
+    ys = _PREDICTIONS[key](np.float64(ci), np.float64(xi), a2_0, L, t, _substeps(t, rate, max_step))
+    return np.asarray(ys)
+
+
 def _program(closure: str, dim: int):
     """The jitted fit for ``closure`` (a registered name, or ``"exact"``: the table
     given as data, ``(times, a4, slopes)`` of :class:`pyfold.closures.TabulatedA4`) in
@@ -289,16 +372,8 @@ def _program(closure: str, dim: int):
         return _PROGRAMS[key]
     import equinox as eqx
 
-    from pyfold.models import FolgarTucker
-
     iu, ju = np.triu_indices(dim)
-
-    # The rate is its own jitted function: the four RK4 stages, the jvp and the two
-    # integrations of the program trace the closure once.
-    @jax.jit
-    def rate(ci, xi, a, L, t, table):
-        model = FolgarTucker(ci=ci, xi=xi, closure=closure if table is None else table, dim=dim)
-        return model.rate(t, a, L)
+    rate = _rate(closure, dim)
 
     def tabulated(arrays):
         # the run's a4 as a TabulatedA4 whose arrays are the program's inputs
@@ -308,31 +383,7 @@ def _program(closure: str, dim: int):
         return eqx.tree_at(lambda m: (m.times, m.a4_series, m.slopes), template, tuple(arrays))
 
     def integrate(ci, xi, a2_0, L, t, n_sub, table):
-        def interval(a, k):
-            h = jnp.where(n_sub[k] > 0, (t[k + 1] - t[k]) / jnp.maximum(n_sub[k], 1), 0.0)
-
-            def step(i, a):
-                s = t[k] + i * h
-
-                # The four stages as a loop over _RK4_NODES / _RK4_WEIGHTS: the closure
-                # appears once in the program, not four times (a quarter of the code to
-                # compile and to load from the cache). The arithmetic is that of
-                # k2 = rate(a + h/2 k1), ..., a + h/6 (k1 + 2 k2 + 2 k3 + k4), term by term.
-                def stage(j, carry):
-                    k_prev, acc = carry
-                    c = jnp.asarray(_RK4_NODES)[j]
-                    k_j = rate(ci, xi, a + (h * c) * k_prev, L, s + h * c, table)
-                    return k_j, acc + jnp.asarray(_RK4_WEIGHTS)[j] * k_j
-
-                zero = jnp.zeros_like(a)
-                _, acc = jax.lax.fori_loop(0, 4, stage, (zero, zero))
-                return a + h / 6 * acc
-
-            a = jax.lax.fori_loop(0, n_sub[k], step, a)
-            return a, a
-
-        _, ys = jax.lax.scan(interval, a2_0, jnp.arange(t.shape[0] - 1))
-        return jnp.concatenate([a2_0[None], ys])
+        return _integrate(rate, ci, xi, a2_0, L, t, n_sub, table)
 
     @jax.jit
     def fit(ci0, xi, a2_0, L, t, n_sub, target, weight, table_arrays):
@@ -563,9 +614,7 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         while True:
             h = max_step / 2**refinements
             n_sub = np.zeros(size - 1, dtype=np.int32)
-            # (1 - 1e-12): an interval that is a whole number of steps up to the round-off of
-            # the division (0.5 / 0.5 = 1 + 2e-16) takes that number, not one more
-            n_sub[: n - 1] = np.maximum(1, np.ceil(np.diff(t) * rate / h * (1.0 - 1e-12))).astype(np.int32)
+            n_sub[: n - 1] = _substeps(t, rate, h)
             # numpy arguments: jnp.asarray would compile a small program per shape
             args = (np.float64(ci), np.float64(xi), a2_0, L, t_pad, n_sub, target, weight, table)
             out = exported_call(name, lambda: _program(closure, d), args)

@@ -31,7 +31,7 @@ from pyfold.commands import run as run_command
 from pyfold.ci_estimators import ci_rate_regression
 from pyfold.correlations import PUBLISHED_RANGE
 from pyfold.ensemble import ensemble_mean, paired_difference
-from pyfold.report import closure_a4
+from pyfold.run_analysis import closure_a4
 from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
 

@@ -264,7 +264,7 @@ def test_rk4_fit_agrees_with_the_adaptive_fit_on_noisy_data():
     assert abs(res.ci - ref.values["ci"]) <= (fast_fit.STEP_ERROR_SHARE + 2 * fast_fit.OPT_SHARE) * se + res.step_error
     assert res.stderr == pytest.approx(se, rel=1e-2)
     # |rms(r + e) - rms(r)| <= rms(e) (triangle inequality), e the RK4 error of a2: at the
-    # step 0.5 below 6e-5 over a strain of 400 (pyfold.report.PREDICTION_MAX_STEP), a
+    # step 0.5 below 6e-5 over a strain of 400 (pyfold.fast_fit.MAX_STEP), a
     # tenth of the noise here
     assert res.residual_rms == pytest.approx(ref.residual_rms, abs=0.1 * sigma)
 
