@@ -1,4 +1,7 @@
-"""Trajectory fit of Folgar–Tucker's ``C_I`` by fixed-step RK4 on fixed array shapes (``pyfold analyse``).
+"""Trajectory fit of Folgar–Tucker's ``C_I`` by fixed-step RK4 on fixed array shapes.
+
+The one trajectory fit of the analysis chain (``pyfold analyse``, ``pyfold report``, the
+main job, the studies); its integration, at a given ``C_I``, is :func:`predict_ft`.
 
 The problem is the one of :func:`pyfold.fit.fit_parameters` with ``params=("ci",)``
 and unit weights:
@@ -77,23 +80,33 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Sequence
 
 import numpy as np
 
 from pyfold._jax import exported_call, jax, jnp
 from pyfold.errors import InputError
 
-__all__ = ["FastFit", "fit_ci_rk4", "padded_size", "admissibility", "contracted_table", "MAX_STEP", "MIN_RECORDS",
+__all__ = ["FastFit", "fit_ci_rk4", "fit_flags", "predict_ft", "CI_STARTS", "padded_size", "admissibility", "contracted_table", "MAX_STEP", "MIN_RECORDS",
            "admissible_tol", "ADMISSIBLE_TOL_PER_STEP", "CONTRACTION_DEFECT"]
 
-#: Largest RK4 step [1/γ̇]: pyfold.report.PREDICTION_MAX_STEP, whose a2 error over a
-#: strain of 400 is 6e-5 (C_I = 0) and 8e-6 (C_I = 1e-3) against the adaptive solve.
+#: Largest RK4 step [1/γ̇] of the fits and of :func:`predict_ft`. Against the adaptive
+#: diffrax solve at rtol 1e-10 over a strain of 400 from isotropy (beta = 10), the largest
+#: a2 error was 6e-5 at C_I = 0 and 8e-6 at C_I = 1e-3 (IBOF and FEC alike; 1e-3 at a step
+#: of 1; tests/cli/test_report.py checks it).
 #: The step error estimate at the optimum decides whether it is small enough for each
 #: fit, and halves it when not. The cost is in the closure evaluations (four per step;
 #: FEC ~0.04 ms each with its derivative), so the step is no smaller than it needs to be.
 MAX_STEP = 0.5
 #: Smallest padded record count: below it, runs share one size class.
 MIN_RECORDS = 64
+#: Starting values of C_I of a fit: the loss can have two minima in C_I, and Newton's
+#: method finds the one on its side. Measured on the default scene (strain 0-104): with
+#: the quadratic closure minima near 1e-5 and 1.5e-2 (a2 RMS 0.072 and 0.091, the hump
+#: near 1e-3), with the hybrid near 3e-5 and 2e-2 (0.064 and 0.075). One start on
+#: either side of the hump and one at the end of the published range (1e-4 .. 3e-2,
+#: pyfold.correlations.PUBLISHED_RANGE); the fit of least misfit is kept.
+CI_STARTS = (1e-5, 1e-3, 3e-2)
 #: Largest share of the standard error of C_I that the step error may take (see module notes).
 STEP_ERROR_SHARE = 0.1
 #: Halvings of the step at most (step 0.25 -> 0.03125 / γ̇).
@@ -270,6 +283,84 @@ def padded_size(n: int) -> int:
 _PROGRAMS: dict[tuple[str, int], object] = {}
 
 
+def _rate(closure: str, dim: int):
+    """Folgar–Tucker's rate with ``closure`` (a table, given as the argument ``table``,
+    replaces it), jitted on its own: the four RK4 stages, the jvp and the two
+    integrations of a fit program trace the closure once."""
+    from pyfold.models import FolgarTucker
+
+    @jax.jit
+    def rate(ci, xi, a, L, t, table):
+        model = FolgarTucker(ci=ci, xi=xi, closure=closure if table is None else table, dim=dim)
+        return model.rate(t, a, L)
+
+    return rate
+
+
+def _integrate(rate, ci, xi, a2_0, L, t, n_sub, table):
+    """Classical RK4 of ``rate`` from ``a2_0`` at ``t[0]`` onto the times ``t``, with
+    ``n_sub[k]`` equal steps over ``[t[k], t[k+1]]`` (0: a padded interval, no step).
+    Returns the states at ``t`` (the first is ``a2_0``)."""
+    def interval(a, k):
+        h = jnp.where(n_sub[k] > 0, (t[k + 1] - t[k]) / jnp.maximum(n_sub[k], 1), 0.0)
+
+        def step(i, a):
+            s = t[k] + i * h
+
+            # The four stages as a loop over _RK4_NODES / _RK4_WEIGHTS: the closure
+            # appears once in the program, not four times (a quarter of the code to
+            # compile and to load from the cache). The arithmetic is that of
+            # k2 = rate(a + h/2 k1), ..., a + h/6 (k1 + 2 k2 + 2 k3 + k4), term by term.
+            def stage(j, carry):
+                k_prev, acc = carry
+                c = jnp.asarray(_RK4_NODES)[j]
+                k_j = rate(ci, xi, a + (h * c) * k_prev, L, s + h * c, table)
+                return k_j, acc + jnp.asarray(_RK4_WEIGHTS)[j] * k_j
+
+            zero = jnp.zeros_like(a)
+            _, acc = jax.lax.fori_loop(0, 4, stage, (zero, zero))
+            return a + h / 6 * acc
+
+        a = jax.lax.fori_loop(0, n_sub[k], step, a)
+        return a, a
+
+    _, ys = jax.lax.scan(interval, a2_0, jnp.arange(t.shape[0] - 1))
+    return jnp.concatenate([a2_0[None], ys])
+
+
+def _substeps(t: np.ndarray, rate: float, h: float) -> np.ndarray:
+    """RK4 steps per record interval: ``ceil(γ̇ Δt_k / h)``, at least one. (1 - 1e-12):
+    an interval that is a whole number of steps up to the round-off of the division
+    (0.5 / 0.5 = 1 + 2e-16) takes that number, not one more."""
+    return np.maximum(1, np.ceil(np.diff(t) * rate / h * (1.0 - 1e-12))).astype(np.int32)
+
+
+_PREDICTIONS: dict[tuple[str, int], object] = {}
+
+
+def predict_ft(closure: str, ci: float, xi: float, a2_0: np.ndarray, L: np.ndarray, t: np.ndarray,
+               max_step: float = MAX_STEP) -> np.ndarray:
+    """Folgar–Tucker ``a2`` with ``closure`` at ``ci`` from ``a2_0`` at ``t[0]``, at the times
+    ``t`` (Folgar & Tucker 1984; Advani & Tucker 1987 for the tensor form): the integration
+    of the fits (classical RK4, every interval cut into steps no longer than ``max_step``
+    / γ̇), at a given C_I. One jitted program per closure, kept by the persistent cache."""
+    from pyfold.models import FolgarTucker
+
+    a2_0 = np.asarray(a2_0, dtype=np.float64)
+    d = a2_0.shape[-1]
+    t = np.asarray(t, dtype=np.float64)
+    L = np.asarray(L, dtype=np.float64)[:d, :d]
+    D = 0.5 * (L + L.T)
+    rate = math.sqrt(2.0 * float(np.sum(D * D))) or 1.0  # pyfold.kinematics.shear_rate, in numpy
+    FolgarTucker(ci=float(ci), xi=float(xi), closure=closure, dim=d)  # checks C_I >= 0, xi and the closure name
+    key = (closure, d)
+    if key not in _PREDICTIONS:
+        f = _rate(closure, d)
+        _PREDICTIONS[key] = jax.jit(lambda ci, xi, a2_0, L, t, n_sub: _integrate(f, ci, xi, a2_0, L, t, n_sub, None))
+    ys = _PREDICTIONS[key](np.float64(ci), np.float64(xi), a2_0, L, t, _substeps(t, rate, max_step))
+    return np.asarray(ys)
+
+
 def _program(closure: str, dim: int):
     """The jitted fit for ``closure`` (a registered name, or ``"exact"``: the table
     given as data, ``(times, a4, slopes)`` of :class:`pyfold.closures.TabulatedA4`) in
@@ -281,16 +372,8 @@ def _program(closure: str, dim: int):
         return _PROGRAMS[key]
     import equinox as eqx
 
-    from pyfold.models import FolgarTucker
-
     iu, ju = np.triu_indices(dim)
-
-    # The rate is its own jitted function: the four RK4 stages, the jvp and the two
-    # integrations of the program trace the closure once.
-    @jax.jit
-    def rate(ci, xi, a, L, t, table):
-        model = FolgarTucker(ci=ci, xi=xi, closure=closure if table is None else table, dim=dim)
-        return model.rate(t, a, L)
+    rate = _rate(closure, dim)
 
     def tabulated(arrays):
         # the run's a4 as a TabulatedA4 whose arrays are the program's inputs
@@ -300,31 +383,7 @@ def _program(closure: str, dim: int):
         return eqx.tree_at(lambda m: (m.times, m.a4_series, m.slopes), template, tuple(arrays))
 
     def integrate(ci, xi, a2_0, L, t, n_sub, table):
-        def interval(a, k):
-            h = jnp.where(n_sub[k] > 0, (t[k + 1] - t[k]) / jnp.maximum(n_sub[k], 1), 0.0)
-
-            def step(i, a):
-                s = t[k] + i * h
-
-                # The four stages as a loop over _RK4_NODES / _RK4_WEIGHTS: the closure
-                # appears once in the program, not four times (a quarter of the code to
-                # compile and to load from the cache). The arithmetic is that of
-                # k2 = rate(a + h/2 k1), ..., a + h/6 (k1 + 2 k2 + 2 k3 + k4), term by term.
-                def stage(j, carry):
-                    k_prev, acc = carry
-                    c = jnp.asarray(_RK4_NODES)[j]
-                    k_j = rate(ci, xi, a + (h * c) * k_prev, L, s + h * c, table)
-                    return k_j, acc + jnp.asarray(_RK4_WEIGHTS)[j] * k_j
-
-                zero = jnp.zeros_like(a)
-                _, acc = jax.lax.fori_loop(0, 4, stage, (zero, zero))
-                return a + h / 6 * acc
-
-            a = jax.lax.fori_loop(0, n_sub[k], step, a)
-            return a, a
-
-        _, ys = jax.lax.scan(interval, a2_0, jnp.arange(t.shape[0] - 1))
-        return jnp.concatenate([a2_0[None], ys])
+        return _integrate(rate, ci, xi, a2_0, L, t, n_sub, table)
 
     @jax.jit
     def fit(ci0, xi, a2_0, L, t, n_sub, target, weight, table_arrays):
@@ -469,8 +528,13 @@ def _table(t: np.ndarray, a4: np.ndarray, size: int) -> tuple[np.ndarray, np.nda
 
 
 def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: float, *,
-               a4: np.ndarray | None = None, ci_start: float = 1e-3, max_step: float = MAX_STEP) -> FastFit:
+               a4: np.ndarray | None = None, ci_start: float | Sequence[float] = CI_STARTS,
+               max_step: float = MAX_STEP,
+               t_end: float | None = None) -> FastFit:
     """Fit Folgar–Tucker's ``C_I`` with ``closure`` to ``a2(t)`` (see the module notes).
+
+    The one trajectory fit of the analysis chain: ``pyfold analyse`` fits every record,
+    ``pyfold report`` and the main job the records up to ``t_end``.
 
     Parameters
     ----------
@@ -488,10 +552,14 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         Shape factor of the fibres.
     a4 : array (nt, d, d, d, d), optional
         Required for ``closure="exact"``.
-    ci_start : float
-        Starting value of ``C_I`` (>= 0).
+    ci_start : float or sequence of float
+        Starting value(s) of ``C_I`` (>= 0): from each the fit runs to its optimum, and
+        the successful one of least misfit is returned (:data:`CI_STARTS`).
     max_step : float
         Largest RK4 step [1/γ̇] before refinement.
+    t_end : float, optional
+        Fit only the records at ``t <= t_end`` [s] (a window from the start of the run);
+        None: every record.
     """
     t = np.asarray(t, dtype=np.float64)
     a2 = np.asarray(a2, dtype=np.float64)
@@ -500,8 +568,19 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
         raise InputError(f"time: expected at least 2 strictly increasing finite record times, got shape {t.shape}")
     if a2.shape != (n, d, d) or d not in (2, 3):
         raise InputError(f"a2: expected shape ({n}, d, d) with d in {{2, 3}}, got {a2.shape}")
-    if not (ci_start >= 0.0 and math.isfinite(ci_start)):
-        raise InputError(f"ci_start: must be finite and >= 0, got {ci_start!r}")
+    if t_end is not None:
+        # a window from the start: the records up to t_end (one computed from the record
+        # times, t0 + k dt, keeps its last record)
+        keep = t <= float(t_end) + 1e-12 * max(abs(float(t_end)), 1.0)
+        if not (math.isfinite(t_end) and int(np.sum(keep)) >= 2):
+            raise InputError(f"t_end: must be finite and keep at least 2 records (t >= {t[1]:.6g} s), got {t_end!r}")
+        n = int(np.sum(keep))
+        t, a2 = t[:n], a2[:n]
+        if a4 is not None:
+            a4 = np.asarray(a4)[:n]
+    starts = tuple(float(c) for c in np.atleast_1d(np.asarray(ci_start, dtype=np.float64)))
+    if not starts or not all(c >= 0.0 and math.isfinite(c) for c in starts):
+        raise InputError(f"ci_start: must be one or more finite values >= 0, got {ci_start!r}")
     L = np.asarray(L, dtype=np.float64)[:d, :d]
     size = padded_size(n)
     table = ()
@@ -529,64 +608,91 @@ def fit_ci_rk4(closure: str, t: np.ndarray, a2: np.ndarray, L: np.ndarray, xi: f
     weight[: n - 1] = 1.0
     a2_0 = 0.5 * (a2[0] + a2[0].T)
     name = f"fast_fit_{closure}_{d}d"
-    ci, step_error, refinements, total_iterations = float(ci_start), math.nan, 0, 0
-    while True:
-        h = max_step / 2**refinements
-        n_sub = np.zeros(size - 1, dtype=np.int32)
-        # (1 - 1e-12): an interval that is a whole number of steps up to the round-off of
-        # the division (0.5 / 0.5 = 1 + 2e-16) takes that number, not one more
-        n_sub[: n - 1] = np.maximum(1, np.ceil(np.diff(t) * rate / h * (1.0 - 1e-12))).astype(np.int32)
-        # numpy arguments: jnp.asarray would compile a small program per shape
-        args = (np.float64(ci), np.float64(xi), a2_0, L, t_pad, n_sub, target, weight, table)
-        out = exported_call(name, lambda: _program(closure, d), args)
-        ci_j, a2_fit, r, J, loss, iterations, done, a2_half, secant = out
-        total_iterations += int(iterations)
-        ci = float(ci_j)
-        r, J = np.asarray(r).ravel(), np.asarray(J).ravel()
-        rss = float(loss)
-        n_points = (n - 1) * iu.size
-        jj = float(J @ J)
-        stderr = math.sqrt(rss / (n_points - 1) / jj) if n_points > 1 and jj > 0.0 and math.isfinite(rss) else math.nan
-        e = 16.0 / 15.0 * (np.asarray(a2_fit) - np.asarray(a2_half))[1:, iu, ju] * np.asarray(weight)
-        # curvature of the loss / 2 at the optimum: the last secant of its gradient, else J.J
-        curv = float(secant) if math.isfinite(float(secant)) and float(secant) > 0.0 else jj
-        step_error = abs(float(J @ e.ravel()) / curv) if curv > 0.0 else math.nan
-        at_bound = ci == 0.0 and float(J @ r) >= 0.0
-        if at_bound and float(J @ e.ravel()) >= 0.0:
-            step_error = 0.0  # the step error pushes C_I further into the bound: the fit stays on it
-        allowed = max(STEP_ERROR_SHARE * stderr if math.isfinite(stderr) else 0.0, FIT_RTOL * ci + FIT_ATOL)
-        tol = admissible_tol(float(np.sum(n_sub)), xi, math.sqrt(2.0 * float(np.sum(D * D))) * float(t[-1] - t[0]))
-        bad_record, cause = admissibility(np.asarray(a2_fit)[:n], tol)
-        if refinements == MAX_REFINEMENTS:
-            break
-        # a trajectory outside the set: half the step (module notes); else the step error
-        if bad_record < 0 and (not (step_error > allowed) or not math.isfinite(rss)):
-            break
-        refinements += 1
-    h_used = float(np.max(np.diff(t) * rate / np.maximum(n_sub[: n - 1], 1)))
-    converged, finite = bool(done), math.isfinite(rss)
-    if bad_record >= 0:
-        # the loss of every inadmissible trajectory is infinite, so this is the
-        # start's, every trial having left the set too (or the check of the program
-        # and the one here disagree by round-off at the tolerance)
-        step = int(np.sum(n_sub[:bad_record]))
-        message = (f"closure {closure}: a2 leaves the orientation tensors at t = {t[bad_record]:.6g} s "
-                   f"(record {bad_record}, RK4 step {step} of {h_used:.3g}/γ̇): {cause}; "
-                   f"at every C_I tried (C_I = {ci:.3g} last) and down to that step: no C_I reported")
-        return FastFit(closure=closure, ci=math.nan, stderr=math.nan, residual_rms=math.nan, n_points=n_points,
-                       success=False, at_bound=False, message=message, a2=np.asarray(a2_fit)[:n], step=h_used,
-                       step_error=math.nan, iterations=total_iterations, admissible=False,
-                       inadmissible_time=float(t[bad_record]), inadmissible_step=step, inadmissible_cause=cause)
-    if not finite:
-        message = "Folgar-Tucker blew up for every C_I tried (non-finite a2)"
-    elif not converged:
-        message = f"the fit stopped after {total_iterations} iterations without converging"
-    else:
-        message = f"converged in {total_iterations} steps"
-        if at_bound:
-            message += " (C_I held on its bound 0: the loss increases into C_I > 0)"
-    if finite and step_error > allowed:
-        message += f"; RK4 step error of C_I {step_error:.2g} above {allowed:.2g} at the smallest step {h_used:.3g}"
-    return FastFit(closure=closure, ci=ci, stderr=stderr, residual_rms=math.sqrt(rss / n_points) if finite else math.nan,
-                   n_points=n_points, success=converged and finite, at_bound=at_bound, message=message,
-                   a2=np.asarray(a2_fit)[:n], step=h_used, step_error=step_error, iterations=total_iterations)
+
+    def from_start(start: float) -> FastFit:
+        ci, step_error, refinements, total_iterations = start, math.nan, 0, 0
+        while True:
+            h = max_step / 2**refinements
+            n_sub = np.zeros(size - 1, dtype=np.int32)
+            n_sub[: n - 1] = _substeps(t, rate, h)
+            # numpy arguments: jnp.asarray would compile a small program per shape
+            args = (np.float64(ci), np.float64(xi), a2_0, L, t_pad, n_sub, target, weight, table)
+            out = exported_call(name, lambda: _program(closure, d), args)
+            ci_j, a2_fit, r, J, loss, iterations, done, a2_half, secant = out
+            total_iterations += int(iterations)
+            ci = float(ci_j)
+            r, J = np.asarray(r).ravel(), np.asarray(J).ravel()
+            rss = float(loss)
+            n_points = (n - 1) * iu.size
+            jj = float(J @ J)
+            stderr = (math.sqrt(rss / (n_points - 1) / jj) if n_points > 1 and jj > 0.0 and math.isfinite(rss)
+                      else math.nan)
+            e = 16.0 / 15.0 * (np.asarray(a2_fit) - np.asarray(a2_half))[1:, iu, ju] * np.asarray(weight)
+            # curvature of the loss / 2 at the optimum: the last secant of its gradient, else J.J
+            curv = float(secant) if math.isfinite(float(secant)) and float(secant) > 0.0 else jj
+            step_error = abs(float(J @ e.ravel()) / curv) if curv > 0.0 else math.nan
+            at_bound = ci == 0.0 and float(J @ r) >= 0.0
+            if at_bound and float(J @ e.ravel()) >= 0.0:
+                step_error = 0.0  # the step error pushes C_I further into the bound: the fit stays on it
+            allowed = max(STEP_ERROR_SHARE * stderr if math.isfinite(stderr) else 0.0, FIT_RTOL * ci + FIT_ATOL)
+            tol = admissible_tol(float(np.sum(n_sub)), xi, math.sqrt(2.0 * float(np.sum(D * D))) * float(t[-1] - t[0]))
+            bad_record, cause = admissibility(np.asarray(a2_fit)[:n], tol)
+            if refinements == MAX_REFINEMENTS:
+                break
+            # a trajectory outside the set: half the step (module notes); else the step error
+            if bad_record < 0 and (not (step_error > allowed) or not math.isfinite(rss)):
+                break
+            refinements += 1
+        h_used = float(np.max(np.diff(t) * rate / np.maximum(n_sub[: n - 1], 1)))
+        converged, finite = bool(done), math.isfinite(rss)
+        if bad_record >= 0:
+            # the loss of every inadmissible trajectory is infinite, so this is the
+            # start's, every trial having left the set too (or the check of the program
+            # and the one here disagree by round-off at the tolerance)
+            step = int(np.sum(n_sub[:bad_record]))
+            message = (f"closure {closure}: a2 leaves the orientation tensors at t = {t[bad_record]:.6g} s "
+                       f"(record {bad_record}, RK4 step {step} of {h_used:.3g}/γ̇): {cause}; "
+                       f"at every C_I tried (C_I = {ci:.3g} last) and down to that step: no C_I reported")
+            return FastFit(closure=closure, ci=math.nan, stderr=math.nan, residual_rms=math.nan, n_points=n_points,
+                           success=False, at_bound=False, message=message, a2=np.asarray(a2_fit)[:n], step=h_used,
+                           step_error=math.nan, iterations=total_iterations, admissible=False,
+                           inadmissible_time=float(t[bad_record]), inadmissible_step=step, inadmissible_cause=cause)
+        if not finite:
+            message = "Folgar-Tucker blew up for every C_I tried (non-finite a2)"
+        elif not converged:
+            message = f"the fit stopped after {total_iterations} iterations without converging"
+        else:
+            message = f"converged in {total_iterations} steps"
+            if at_bound:
+                message += " (C_I held on its bound 0: the loss increases into C_I > 0)"
+        if finite and step_error > allowed:
+            message += f"; RK4 step error of C_I {step_error:.2g} above {allowed:.2g} at the smallest step {h_used:.3g}"
+        return FastFit(closure=closure, ci=ci, stderr=stderr, residual_rms=math.sqrt(rss / n_points) if finite else math.nan,
+                       n_points=n_points, success=converged and finite, at_bound=at_bound, message=message,
+                       a2=np.asarray(a2_fit)[:n], step=h_used, step_error=step_error, iterations=total_iterations)
+
+
+    fits = [from_start(start) for start in starts]
+    ok = [f for f in fits if f.success]
+    if len(fits) == 1 or not ok:
+        return fits[0]
+    best = min(ok, key=lambda f: f.residual_rms)
+    # other optima: starts that ended elsewhere than the best (beyond 3 standard errors)
+    apart = max(3.0 * best.stderr if math.isfinite(best.stderr) else 0.0, FIT_RTOL * best.ci + FIT_ATOL)
+    others = [f for f in ok if abs(f.ci - best.ci) > apart]
+    if not others:
+        return best
+    text = ", ".join(dict.fromkeys(f"{f.ci:.3g} (a2 RMS {f.residual_rms:.4g})" for f in others))
+    return dataclasses.replace(best, message=f"{best.message}; the least misfit of the starts C_I = "
+                               f"{', '.join(f'{c:g}' for c in starts)}: other optima at {text}")
+
+
+def fit_flags(fits):
+    """:func:`pyfold.seed_checks.flag_fits` for per-seed :class:`FastFit` results of
+    :func:`fit_ci_rk4`: its steps are projected onto ``C_I >= 0``, so a fit on the bound
+    returns exactly ``C_I = 0`` (any positive value is a measured one); there is no upper
+    bound; a fit that did not succeed (not converged, or left the orientation tensors:
+    ``C_I`` NaN) is flagged failed."""
+    from pyfold.seed_checks import flag_fits
+
+    return flag_fits([f.ci if f.success else math.nan for f in fits], 0.0, math.inf, 0.0, 0.0)

@@ -3,30 +3,29 @@
     run files ─► checks (each run, and one scene apart from the seed)
               ─► per run: stationary part (MSER-5 onset, drift test), C_I by rate
                  regression with the run's own a4 and with each closure's a4,
-                 closure errors a4:D against the run's a4
+                 closure errors a4:D against the run's a4, C_I by trajectory fit
+                 per closure over the first TRAJECTORY_PERIODS Jeffery periods
               ─► over the runs: ensemble means ± standard errors, closure ranking
                  with paired tests, Folgar-Tucker integrated once per closure at
-                 its C_I, the published correlations at the scene's phi beta
+                 its fitted C_I, the published correlations at the scene's phi beta
               ─► figures (PNG), results.nc, summary.txt / summary.md
 
 Why these estimators (docs/physics.md#the-fitted-c_i-depends-on-the-closure): a
 moulding code integrates Folgar-Tucker with *its* closure, so the interaction
-coefficient it needs is the one fitted with that closure. Here it is the rate
-regression :func:`pyfold.ci_estimators.ci_rate_regression` with the closure's
-``a4`` evaluated on the simulated ``a2`` (no ODE, linear in C_I, cheap over a
-long run), over the stationary part of each run. The same regression with the
-run's own ``a4`` needs no closure: it measures what the contacts alone do,
-projected on Folgar-Tucker's isotropic diffusion. Trajectory fits through the ODE
-(:func:`pyfold.fit.fit_parameters`, ``pyfold analyse``) compile per closure and
-integrate the whole run at every iteration, too slow for an ensemble of long runs.
+coefficient it needs is the one fitted with that closure: the trajectory fit
+:func:`pyfold.fast_fit.fit_ci_rk4` (the fit of ``pyfold analyse`` too) over the
+transient, with its standard error. Beside it, the rate regression
+:func:`pyfold.ci_estimators.ci_rate_regression` with the closure's ``a4`` evaluated on
+the simulated ``a2`` (no ODE, linear in C_I, cheap over a long run), over the
+stationary part of each run. The same regression with the run's own ``a4`` needs no
+closure: it measures what the contacts alone do, projected on Folgar-Tucker's
+isotropic diffusion.
 
-Compilations: closures are evaluated on a fixed shape (:data:`CLOSURE_RECORDS`
-records per run, thinned and padded), and Folgar-Tucker is integrated by a
-fixed-step RK4 in ``jax.lax.scan`` onto :data:`PREDICTION_POINTS` times, so each
-closure compiles two programs whatever the runs, both kept by JAX's persistent
-cache (:mod:`pyfold._jax`). (diffrax solves carry host callbacks, which the
-persistent cache does not store, so a new process would trace and compile them
-again.)
+The measurements on each run and across the runs are :mod:`pyfold.run_analysis`; the
+trajectory fits and Folgar-Tucker at the fitted C_I (:data:`PREDICTION_POINTS` times over
+the runs) are :mod:`pyfold.fast_fit`; this module composes them (:func:`build_report`)
+and writes the outputs. Every program is compiled once per closure and kept by JAX's
+persistent cache (:mod:`pyfold._jax`).
 """
 from __future__ import annotations
 
@@ -44,20 +43,13 @@ import xarray as xr
 
 from pyfold.errors import InputError, PyfoldError
 from pyfold.files import atomic_output, describe_os_error, regular_file
+from pyfold.run_analysis import (RANK_LEVEL, RunAnalysis, analyse_run, attach_closure_errors,
+                                 check_same_scene, fibre_concentration, ft_departure, measure_redistribution,
+                                 rank_one_run, ranking_equivalence)
 from pyfold.seed_checks import EQUIVALENCE_MARGIN
 
-#: Records per run on which closures are evaluated: a longer run is thinned to every
-#: k-th record (the rate regression gives the same C_I at record spacings 0.1 to 0.5,
-#: tests/cross/test_ci_methods.py), a shorter one padded; one compiled shape.
-CLOSURE_RECORDS = 1024
 #: Output times of the Folgar-Tucker prediction (fixed: one compiled shape).
 PREDICTION_POINTS = 256
-#: Largest RK4 step of the prediction [1/gamma_dot]. Against the adaptive diffrax
-#: solve at rtol 1e-10 over a strain of 400 from isotropy (beta = 10), the largest a2
-#: error was 6e-5 at C_I = 0 and 8e-6 at C_I = 1e-3 (IBOF and FEC alike; 1e-3 at a
-#: step of 1): far below what a figure shows. The step sets the cost: the FEC closure
-#: costs ~0.5 ms per evaluation, four per step. tests/cli/test_report.py checks it.
-PREDICTION_MAX_STEP = 0.5
 #: Span of the trajectory fit of C_I, in Jeffery periods ``T = 2 pi (beta_e + 1/beta_e) / gamma_dot``
 #: from the start of the runs: the transient in which the contacts damp the ensemble's
 #: Jeffery oscillation (MSER onsets at 2-4 periods in the default scene), the strains of a
@@ -65,328 +57,9 @@ PREDICTION_MAX_STEP = 0.5
 #: which Folgar-Tucker's steady states often cannot reach
 #: (studies/interaction_coefficient/ci_concentration.py).
 TRAJECTORY_PERIODS = 2.0
-#: Largest C_I the trajectory fit considers (the published range ends at 3e-2).
-TRAJECTORY_CI_MAX = 0.1
-#: Absolute tolerance of the trajectory fit's search in ``s = sqrt(C_I)``.
-TRAJECTORY_XATOL = 1e-4
-#: Fewest records a stationary window must hold for the estimators (ci_rate_regression
-#: needs 8 interior records; blocking errors need 16 samples).
-MIN_WINDOW_RECORDS = 16
-#: Significance level of the closure ranking (Holm-adjusted neighbour tests).
-RANK_LEVEL = 0.05
 #: Files a report writes (``--out`` rules refer to these).
 REPORT_FILES = ("results.nc", "summary.txt", "summary.md", "a2_dns_vs_fitted_ft.png", "closures_vs_dns.png",
                 "ci_vs_correlations.png")
-#: Scene keys that may differ between the runs of one ensemble: the seed, and the
-#: free texts (``title``/``description`` often name the seed).
-SEED_KEYS = ("numerics.seed", "title", "description", "resolved/seed")
-
-
-# --------------------------------------------------------------------------- one scene
-
-
-def scene_fingerprint(run_path: Path) -> dict[str, object]:
-    """What makes the scene of a run: the normalised scene stored in ``/setup/scene_json``
-    and every resolved value in ``/setup/resolved`` (``resolved/<name>``), without the
-    seed and the free texts (:data:`SEED_KEYS`). The verbatim TOML is not compared
-    (comments and layout may differ)."""
-    from pyfold.fingerprint import setup_keys
-    from pyfold.run_input import read_setup
-
-    setup = read_setup(run_path)
-    keys = setup_keys(setup.scene, setup.resolved)
-    return {k: v for k, v in keys.items() if k not in SEED_KEYS}
-
-
-def _same(a, b) -> bool:
-    if isinstance(a, float) or isinstance(b, float) or isinstance(a, list) or isinstance(b, list):
-        try:
-            x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-            return x.shape == y.shape and bool(np.all((x == y) | (np.isnan(x) & np.isnan(y))))
-        except (TypeError, ValueError):
-            return a == b
-    return a == b
-
-
-def check_same_scene(paths: Sequence[Path]) -> list[int]:
-    """Refuse runs of different scenes; returns the seed of each run.
-
-    Raises
-    ------
-    InputError
-        Naming the first run that differs from the first one, the differing key
-        (e.g. ``particles[0].count``) and both values; or two runs with the same seed
-        (the same realisation twice would shrink the error bars falsely).
-    """
-    from pyfold.run_input import read_setup
-
-    reference = scene_fingerprint(paths[0])
-    for path in paths[1:]:
-        other = scene_fingerprint(path)
-        for key in sorted(set(reference) | set(other)):
-            if key not in reference or key not in other or not _same(reference[key], other[key]):
-                raise InputError(
-                    f"{path}: a different scene than {paths[0]}: key {key!r} is "
-                    f"{other.get(key, '<missing>')!r} there and {reference.get(key, '<missing>')!r} in {paths[0]} "
-                    "(an ensemble must be one scene, only the seed may differ)")
-    seeds = [int(read_setup(p).resolved["seed"]) for p in paths]
-    for k, seed in enumerate(seeds):
-        if seed in seeds[:k]:
-            raise InputError(f"{paths[k]}: the same seed {seed} as {paths[seeds.index(seed)]}: the same realisation "
-                             "twice is not an independent sample")
-    return seeds
-
-
-# --------------------------------------------------------------------------- per run
-
-
-@dataclasses.dataclass
-class RunAnalysis:
-    """What the report measures on one run."""
-
-    path: Path
-    seed: int
-    t: np.ndarray  # record times [s]
-    a2: np.ndarray  # (nt, d, d)
-    onset_time: float  # start of the stationary part (MSER-5, not inside the first Jeffery period; NaN: none) [s]
-    stationary: bool
-    steady_message: str
-    window: tuple[float, float]  # times used by the estimators [s]
-    ci: dict[str, float]  # closure name ("exact": the run's own a4) -> C_I
-    ci_stderr: dict[str, float]
-    error_t: np.ndarray  # closure errors' times (thinned records) [s]
-    error_contracted: dict[str, np.ndarray]  # judged closure -> a4:D error at error_t
-    error_mean: dict[str, float]  # time mean over the window
-    error_stderr: dict[str, float]  # blocking s.e. of that mean
-    drift: dict[str, tuple[float, float]]  # diagonal of a2: slope and s.e. over the last half of the window [1/s]
-    thinned: tuple | None = None  # (a2, a4) at error_t, until the closure errors are computed
-
-
-def _thin_pad(n: int) -> tuple[np.ndarray, int]:
-    """Indices of at most CLOSURE_RECORDS records (every k-th, the last kept), and k."""
-    k = max(1, math.ceil(n / CLOSURE_RECORDS))
-    idx = np.arange(0, n, k)
-    return idx, k
-
-
-def _padded(x: np.ndarray) -> np.ndarray:
-    """``x`` (n, ...) padded to CLOSURE_RECORDS rows by repeating its last row."""
-    if len(x) == CLOSURE_RECORDS:
-        return x
-    return np.concatenate([x, np.repeat(x[-1:], CLOSURE_RECORDS - len(x), axis=0)])
-
-
-_CLOSURE_JIT: dict[tuple[str, int], object] = {}
-
-
-def closure_a4(name: str, a2: np.ndarray) -> np.ndarray:
-    """``closure(a2)`` for (n <= CLOSURE_RECORDS) records, on the fixed padded shape."""
-    from pyfold._jax import jax, jnp
-    from pyfold.closures import get_closure
-
-    d = a2.shape[-1]
-    key = (name, d)
-    if key not in _CLOSURE_JIT:
-        _CLOSURE_JIT[key] = jax.jit(jax.vmap(get_closure(name, d)))
-    return np.asarray(_CLOSURE_JIT[key](jnp.asarray(_padded(a2))))[: len(a2)]
-
-
-def stationary_window(t: np.ndarray, a2: np.ndarray, earliest: float = -math.inf):
-    """The steady-state verdict of a run and the window the estimators use.
-
-    The window starts at the MSER-5 onset (:func:`pyfold.steady_state.detect_steady_state`),
-    but not before ``earliest`` [s] (one Jeffery period from the start: before the first
-    flip of the orbits no state is steady, whatever MSER finds in a short record), when at
-    least :data:`MIN_WINDOW_RECORDS` records follow it, else at the middle of the run; the
-    verdict (``stationary``, ``message``) is reported either way. Returns
-    ``(steady, window, onset_time)`` with the onset after that bound.
-    """
-    from pyfold.steady_state import detect_steady_state
-
-    steady = detect_steady_state(t, a2)
-    start = steady.onset_index
-    onset = float(steady.onset_time)
-    if onset < earliest:
-        start = min(int(np.searchsorted(t, earliest)), len(t) - 1)
-        onset = float(t[start])
-    if len(t) - start < MIN_WINDOW_RECORDS:
-        start = len(t) // 2
-    return steady, (float(t[start]), float(t[-1])), onset
-
-
-def analyse_run(path: Path, ds: xr.Dataset, seed: int, closures: Sequence[str], L: np.ndarray,
-                xi: float) -> RunAnalysis:
-    """Steady state and C_I per closure of one checked run (closure errors: :func:`attach_closure_errors`)."""
-    from pyfold.ci_estimators import ci_rate_regression
-
-    t_all = np.asarray(ds["time"].values, dtype=np.float64)
-    a2_all = np.asarray(ds["a2"].values, dtype=np.float64)
-    a4_all = np.asarray(ds["a4"].values, dtype=np.float64)
-    if len(t_all) < 4 * MIN_WINDOW_RECORDS // 2:
-        raise InputError(f"{path}: {len(t_all)} records; the report needs at least {4 * MIN_WINDOW_RECORDS // 2} "
-                         "(steady-state detection and a rate regression over its window)")
-    from pyfold.provenance import jeffery_period_strain, shear_rate_of
-
-    t_period = jeffery_period_strain(xi) / shear_rate_of(L)
-    steady, window, onset = stationary_window(t_all, a2_all, float(t_all[0]) + t_period)
-    message = steady.message
-    stationary = bool(steady.stationary)
-    if float(t_all[0]) + t_period > float(t_all[-1]):
-        message = (f"the run ends inside the first Jeffery period ({t_period:.4g} s), before the orbits have flipped "
-                   f"once: no steady state can be judged (MSER-5 alone would put an onset at t = "
-                   f"{steady.onset_time:.4g} s); the estimators use its second half. " + message)
-        onset, stationary = math.nan, False
-    elif onset > float(steady.onset_time):
-        message = (f"MSER-5 onset at t = {steady.onset_time:.4g} s lies inside the first Jeffery period "
-                   f"({t_period:.4g} s), before the orbits have flipped once: moved to t = {onset:.4g} s. " + message)
-    idx, _ = _thin_pad(len(t_all))
-    t, a2, a4 = t_all[idx], a2_all[idx], a4_all[idx]
-    d = a2.shape[-1]
-    L = np.asarray(L, dtype=np.float64)[:d, :d]
-    ci, ci_se = {}, {}
-    judged = [c for c in closures if c != "exact"]
-    a4_closure = {name: closure_a4(name, a2) for name in judged}
-    if len(t) - np.searchsorted(t, window[0]) < MIN_WINDOW_RECORDS:
-        window = (float(t[len(t) // 2]), float(t[-1]))
-    for name in closures:
-        r = ci_rate_regression(t, a2, a4 if name == "exact" else a4_closure[name], L, xi, window=window)
-        ci[name], ci_se[name] = r.ci, r.stderr
-    labels = ("x", "y", "z")[:d]
-    slope, slope_se = np.asarray(steady.drift_slope), np.asarray(steady.drift_stderr)
-    drift = {f"a_{labels[i]}{labels[i]}": (float(slope[i, i]), float(slope_se[i, i])) for i in range(d)}
-    return RunAnalysis(path=path, seed=seed, t=t_all, a2=a2_all, onset_time=onset,
-                       stationary=stationary, steady_message=message, window=window, ci=ci,
-                       ci_stderr=ci_se, error_t=t, error_contracted={}, error_mean={}, error_stderr={}, drift=drift,
-                       thinned=(a2, a4))
-
-
-def attach_closure_errors(runs: Sequence[RunAnalysis], judged: Sequence[str], L: np.ndarray) -> None:
-    """The a4:D error of every judged closure against each run's own a4
-    (:func:`pyfold.closure_check.closure_errors`, one call for all runs: each closure is
-    compiled and traced once), and its time mean and blocking s.e. over the run's window."""
-    from pyfold.closure_check import closure_errors
-    from pyfold.steady_state import blocking_stderr
-
-    if judged:
-        a2 = np.concatenate([_padded(r.thinned[0]) for r in runs])
-        a4 = np.concatenate([_padded(r.thinned[1]) for r in runs])
-        data = xr.Dataset({"a2": (("time", "i", "j"), a2), "a4": (("time", "i", "j", "k", "l"), a4)},
-                          coords={"time": np.arange(len(a2), dtype=float)})
-        errs = np.asarray(closure_errors(data, list(judged), velocity_gradient=L)["error_contracted"]
-                          .sel(closure=list(judged)).values)
-        for k, r in enumerate(runs):
-            inside = (r.error_t >= r.window[0]) & (r.error_t <= r.window[1])
-            for c, name in enumerate(judged):
-                e = errs[c, k * CLOSURE_RECORDS: k * CLOSURE_RECORDS + len(r.error_t)]
-                r.error_contracted[name] = e
-                r.error_mean[name] = float(np.mean(e[inside]))
-                r.error_stderr[name] = float(blocking_stderr(e[inside])[0])
-    for r in runs:
-        r.thinned = None
-
-
-# --------------------------------------------------------------------------- Folgar-Tucker prediction
-
-_PREDICT_JIT: dict[tuple[str, int], object] = {}
-
-
-def _rk4_program(closure: str, dim: int):
-    """The jitted RK4 integrator of Folgar-Tucker with ``closure`` (one per closure).
-
-    The rate is its own jitted function, so tracing the four RK4 stages traces the
-    closure once (tracing the FEC closure costs about half a second)."""
-    key = (closure, dim)
-    if key not in _PREDICT_JIT:
-        from pyfold._jax import jax, jnp
-        from pyfold.models import FolgarTucker
-
-        @jax.jit
-        def rate(ci, xi, a, L):
-            # Folgar-Tucker is autonomous for a constant L: t = 0
-            return FolgarTucker(ci=ci, xi=xi, closure=closure, dim=dim).rate(0.0, a, L)
-
-        @jax.jit
-        def integrate(ci, xi, a2_0, L, t, n_sub):
-            def interval(a, k):
-                h = (t[k + 1] - t[k]) / n_sub
-
-                def step(i, a):
-                    k1 = rate(ci, xi, a, L)
-                    k2 = rate(ci, xi, a + h / 2 * k1, L)
-                    k3 = rate(ci, xi, a + h / 2 * k2, L)
-                    k4 = rate(ci, xi, a + h * k3, L)
-                    return a + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-                a = jax.lax.fori_loop(0, n_sub, step, a)
-                return a, a
-
-            _, ys = jax.lax.scan(interval, a2_0, jnp.arange(t.shape[0] - 1))
-            return jnp.concatenate([a2_0[None], ys])
-
-        _PREDICT_JIT[key] = integrate
-    return _PREDICT_JIT[key]
-
-
-def predict_ft(closure: str, ci: float, xi: float, a2_0: np.ndarray, L: np.ndarray, t_end: float,
-               t_start: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Folgar-Tucker ``a2(t)`` with ``closure`` at ``ci`` from ``a2_0``, on
-    :data:`PREDICTION_POINTS` equally spaced times over ``[t_start, t_end]``.
-
-    Classical RK4 with a fixed step no longer than :data:`PREDICTION_MAX_STEP` /
-    gamma_dot (Folgar & Tucker 1984; Advani & Tucker 1987 for the tensor form).
-    Returns ``(t, a2)``.
-    """
-    from pyfold._jax import jnp
-    from pyfold.models import FolgarTucker
-
-    a2_0 = np.asarray(a2_0, dtype=np.float64)
-    d = a2_0.shape[-1]
-    L = np.asarray(L, dtype=np.float64)[:d, :d]
-    D = 0.5 * (L + L.T)
-    rate = math.sqrt(2.0 * float(np.sum(D * D))) or 1.0
-    t = np.linspace(t_start, t_end, PREDICTION_POINTS)
-    n_sub = max(1, math.ceil((t[1] - t[0]) * rate / PREDICTION_MAX_STEP))
-    FolgarTucker(ci=float(ci), xi=float(xi), closure=closure, dim=d)  # checks C_I >= 0, xi and the closure name
-    f64 = jnp.float64
-    ys = _rk4_program(closure, d)(jnp.asarray(ci, f64), jnp.asarray(xi, f64), jnp.asarray(a2_0), jnp.asarray(L),
-                                  jnp.asarray(t), jnp.asarray(n_sub))
-    return t, np.asarray(ys)
-
-
-def fit_ci_trajectory(closure: str, xi: float, t: np.ndarray, a2: np.ndarray, L: np.ndarray,
-                      t_end: float) -> tuple[float, float]:
-    """Trajectory fit of Folgar-Tucker's ``C_I`` with ``closure`` to one run's ``a2(t)``.
-
-    Minimises the mean over :data:`PREDICTION_POINTS` equally spaced times in
-    ``[t[0], t_end]`` of ``||a2_FT(t; C_I) - a2_run(t)||_F^2`` (the run's records linearly
-    interpolated), Folgar-Tucker started from the run's first record and integrated by
-    :func:`predict_ft`, over ``C_I = s^2`` with ``s`` in ``[0, sqrt(TRAJECTORY_CI_MAX)]``
-    (bounded Brent search, ``scipy.optimize.minimize_scalar``; ``s^2`` keeps C_I >= 0, the
-    model's admissible set). This is the classical way C_I is fitted to a simulated or
-    measured transient (e.g. Meyer et al. 2020, docs/physics.md#published-c_i-values):
-    the C_I a moulding code running this closure should use. Returns ``(C_I, rms)`` with
-    the RMS a2 error over the tensor's components and the times at the optimum.
-    """
-    from scipy.optimize import minimize_scalar
-
-    t = np.asarray(t, dtype=np.float64)
-    d = a2.shape[-1]
-    a2_0 = 0.5 * (a2[0] + a2[0].T)
-    grid = np.linspace(float(t[0]), float(t_end), PREDICTION_POINTS)
-    target = np.stack([[np.interp(grid, t, a2[:, i, j]) for j in range(d)] for i in range(d)]).transpose(2, 0, 1)
-
-    def cost(s: float) -> float:
-        _, pred = predict_ft(closure, s * s, xi, a2_0, L, float(t_end), float(t[0]))
-        value = float(np.mean((pred - target) ** 2))
-        return value if math.isfinite(value) else math.inf
-
-    hi = math.sqrt(TRAJECTORY_CI_MAX)
-    best = minimize_scalar(cost, bounds=(0.0, hi), method="bounded", options={"xatol": TRAJECTORY_XATOL})
-    s_opt = float(best.x)
-    # the bounded search never evaluates the bound itself: C_I = 0 (Jeffery with the closure) may be better
-    if cost(0.0) <= best.fun:
-        s_opt = 0.0
-    return s_opt * s_opt, math.sqrt(cost(s_opt))
 
 
 # --------------------------------------------------------------------------- the ensemble
@@ -417,6 +90,7 @@ class Report:
     prediction_ci: dict[str, float]  # the C_I each prediction used (>= 0)
     ci_fit: dict[str, object] = dataclasses.field(default_factory=dict)  # closure -> EnsembleMean (trajectory fit)
     ci_fit_runs: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # closure -> per-run fitted C_I
+    ci_fit_stderr: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # closure -> its standard errors
     fit_rms: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # closure -> per-run a2 RMS at the fit
     fit_window: tuple[float, float] = (math.nan, math.nan)  # times of the trajectory fit [s]
     allow_failed: bool = False
@@ -454,80 +128,6 @@ class Report:
         return math.sqrt(2.0 * float(np.sum(D * D))) or 1.0
 
 
-def _fibre_concentration(ds: xr.Dataset, run_path: Path, dim: int) -> tuple[float, float, float]:
-    """``(beta, n L^3, phi beta)`` of the run's single fibre family (NaN where undefined:
-    2-D, or not one family of fibres); ``phi beta`` by :func:`pyfold.correlations.phi_beta`."""
-    from pyfold.correlations import phi_beta
-    from pyfold.run_input import read_setup
-
-    res = read_setup(run_path).resolved
-    shapes = np.atleast_1d(res["family_shape"])
-    if dim != 3 or shapes.size != 1 or int(shapes[0]) != 1:
-        return math.nan, math.nan, math.nan
-    length = float(np.atleast_1d(res["family_length"])[0])
-    beta = float(np.atleast_1d(res["family_aspect_ratio"])[0])
-    count = float(np.atleast_1d(res["family_count"])[0])
-    volume = float(np.prod(np.asarray(res["cell_lengths"], dtype=float)[:3]))
-    n_l3 = count * length**3 / volume
-    return beta, n_l3, phi_beta(n_l3, beta)
-
-
-def _rank_one_run(run: RunAnalysis, judged: Sequence[str]) -> list:
-    """Ranking of closures on a single run: neighbours compared by the blocking standard
-    error of the time mean of their paired error difference over the window (normal
-    approximation), Holm-adjusted like :func:`pyfold.ensemble.rank_paired`."""
-    from scipy import stats
-
-    from pyfold.ensemble import RankedEntry, holm
-    from pyfold.steady_state import blocking_stderr
-
-    inside = (run.error_t >= run.window[0]) & (run.error_t <= run.window[1])
-    order = sorted(judged, key=lambda c: run.error_mean[c])
-    raw = []
-    for a, b in zip(order[:-1], order[1:]):
-        diff = run.error_contracted[b][inside] - run.error_contracted[a][inside]
-        se = blocking_stderr(diff)[0]
-        mean = float(np.mean(diff))
-        raw.append(0.0 if se == 0.0 and mean != 0.0 else (1.0 if se == 0.0 else float(2 * stats.norm.sf(abs(mean / se)))))
-    adjusted = holm(raw)
-    rows = []
-    for i, name in enumerate(order):
-        p = adjusted[i] if i < len(adjusted) else math.nan
-        rows.append(RankedEntry(rank=i + 1, name=name, mean=run.error_mean[name], error=run.error_stderr[name], n=1,
-                                p_next=p, better_than_next=bool(math.isfinite(p) and p < RANK_LEVEL)))
-    return rows
-
-
-def fit_flags(values: Sequence[float]):
-    """:func:`pyfold.seed_checks.flag_fits` for :func:`fit_ci_trajectory`: it searches
-    ``s = sqrt(C_I)`` with absolute tolerance ``xatol`` (1e-4), so a value within
-    ``xatol^2`` of C_I = 0, or within ``2 s_max xatol`` of :data:`TRAJECTORY_CI_MAX`, is on
-    its bound to the optimiser's resolution."""
-    from pyfold.seed_checks import flag_fits
-
-    xatol = TRAJECTORY_XATOL
-    return flag_fits(values, 0.0, TRAJECTORY_CI_MAX, xatol**2, 2.0 * math.sqrt(TRAJECTORY_CI_MAX) * xatol)
-
-
-def measure_redistribution(runs: Sequence[RunAnalysis], early_end: float) -> dict[str, object]:
-    """How the simulated state changes from the start (strain up to ``early_end`` [s]: the
-    trajectory-fit window) to the stationary windows: ``|a2 - I/d|`` (Frobenius) and the
-    diagonal of a2, means over the runs. Words in the summary follow these numbers."""
-    def mean_over(select):
-        values = []
-        for r in runs:
-            inside = select(r)
-            values.append(np.mean(r.a2[inside], axis=0))
-        return np.mean(values, axis=0)
-
-    early = mean_over(lambda r: r.t <= early_end)
-    late = mean_over(lambda r: (r.t >= r.window[0]) & (r.t <= r.window[1]))
-    d = early.shape[-1]
-    spread = lambda a: float(np.linalg.norm(a - np.eye(d) / d))  # noqa: E731
-    return {"early_end": early_end, "early": early, "late": late, "anisotropy_early": spread(early),
-            "anisotropy_late": spread(late)}
-
-
 def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, allow_failed: bool = False,
                  progress=None, force: bool = False) -> Report:
     """Check the runs (each by :func:`pyfold.run_checks.open_checked_run`, and that they are
@@ -546,6 +146,8 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
     from pyfold import run_checks
     from pyfold.correlations import correlations_at
     from pyfold.ensemble import EnsembleMean, ensemble_mean, rank_paired
+    from pyfold.fast_fit import fit_ci_rk4, fit_flags, predict_ft
+    from pyfold.seed_checks import FLAG_OK, FLAG_OUTLIER
 
     say = progress or (lambda text: None)
     paths = [Path(p) for p in paths]
@@ -575,21 +177,21 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
         runs.append(analyse_run(p, ds, seed, closures, L, xi))
     say("closure errors a4:D against the runs' own a4")
     attach_closure_errors(runs, judged, L)
-    beta, n_l3, pb = _fibre_concentration(datasets[0], paths[0], dim)
+    beta, n_l3, pb = fibre_concentration(datasets[0], paths[0], dim)
     corr = correlations_at(pb) if math.isfinite(pb) else {}
     ci = {c: ensemble_mean([r.ci[c] for r in runs], [r.ci_stderr[c] for r in runs]) for c in closures}
     errors = {c: ensemble_mean([r.error_mean[c] for r in runs], [r.error_stderr[c] for r in runs]) for c in judged}
     if not judged:
         ranking, method = [], "no closure judged"
     elif len(runs) == 1:
-        ranking = _rank_one_run(runs[0], judged)
+        ranking = rank_one_run(runs[0], judged)
         method = ("one run: neighbours compared by the blocking standard error of the time mean of their paired "
                   "error difference, Holm-adjusted")
     else:
         ranking = rank_paired({c: [r.error_mean[c] for r in runs] for c in judged}, level=RANK_LEVEL)
         method = (f"paired t-tests over the {len(runs)} seeds between neighbours in the ranking, Holm-adjusted "
                   "(pyfold.ensemble.rank_paired)")
-    equivalence = _ranking_equivalence(runs, ranking)
+    equivalence = ranking_equivalence(runs, ranking)
     # prediction from the ensemble-mean initial state over the span of the runs
     a2_0 = np.mean([r.a2[0] for r in runs], axis=0)
     a2_0 = 0.5 * (a2_0 + a2_0.T)
@@ -600,21 +202,25 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
     gamma_dot = shear_rate_of(L)
     period = jeffery_period_strain(xi) / gamma_dot
     fit_end = min(t1, t0 + TRAJECTORY_PERIODS * period) if math.isfinite(period) else t1
-    ci_fit, ci_fit_runs, fit_rms, flags, departure = {}, {}, {}, {}, {}
+    ci_fit, ci_fit_runs, ci_fit_stderr, fit_rms, flags, departure = {}, {}, {}, {}, {}, {}
     for c in judged:
         say(f"trajectory fit of C_I with {c} over strain {t0 * gamma_dot:.3g}-{fit_end * gamma_dot:.3g}")
-        fits = [fit_ci_trajectory(c, xi, r.t, r.a2, L, min(fit_end, float(r.t[-1]))) for r in runs]
-        ci_fit_runs[c] = [f[0] for f in fits]
-        fit_rms[c] = [f[1] for f in fits]
-        flags[c] = fit_flags(ci_fit_runs[c])
-        # a fit on its bound is not a measurement: the mean is over the others (all on a bound: NaN)
-        kept = flags[c].kept
-        ci_fit[c] = ensemble_mean(kept) if kept else EnsembleMean(math.nan, math.nan, math.nan, 0)
-        used = ci_fit[c].mean if kept else float(np.mean(ci_fit_runs[c]))
+        fits = [fit_ci_rk4(c, r.t, r.a2, L, xi, t_end=min(fit_end, float(r.t[-1]))) for r in runs]
+        ci_fit_runs[c] = [f.ci for f in fits]
+        ci_fit_stderr[c] = [f.stderr for f in fits]
+        fit_rms[c] = [f.residual_rms for f in fits]
+        flags[c] = fit_flags(fits)
+        # a fit on its bound is not a measurement, a failed one has no value: the mean is
+        # over the others (none left: NaN)
+        kept = [k for k, f in enumerate(flags[c].flags) if f in (FLAG_OK, FLAG_OUTLIER)]
+        ci_fit[c] = (ensemble_mean([ci_fit_runs[c][k] for k in kept], [ci_fit_stderr[c][k] for k in kept]) if kept
+                     else EnsembleMean(math.nan, math.nan, math.nan, 0))
+        finite = [v for v in ci_fit_runs[c] if math.isfinite(v)]
+        used = ci_fit[c].mean if kept else (float(np.mean(finite)) if finite else 0.0)
         say(f"Folgar-Tucker with {c} at the fitted C_I = {used:.3g}")
-        pred_t, prediction[c] = predict_ft(c, used, xi, a2_0, L, t1, t0)
+        prediction[c] = predict_ft(c, used, xi, a2_0, L, pred_t)
         prediction_ci[c] = used
-        departure[c] = _departure(runs, pred_t, prediction[c], fit_end, gamma_dot)
+        departure[c] = ft_departure(runs, pred_t, prediction[c], fit_end, gamma_dot)
     for ds in datasets:
         ds.close()
     scene = json.loads(datasets[0].attrs.get("scene", "{}"))
@@ -623,45 +229,10 @@ def build_report(paths: Sequence[str | Path], closures: Sequence[str] | None, al
                   scene_title=str(scene.get("title", "")), dim=dim, L=np.asarray(L), xi=xi, beta=beta, n_l3=n_l3,
                   phi_beta=pb, correlations=corr, ci=ci, errors=errors, ranking=ranking, ranking_method=method,
                   prediction_t=pred_t, prediction=prediction, prediction_ci=prediction_ci,
-                  allow_failed=allow_failed, notes=notes, ci_fit=ci_fit, ci_fit_runs=ci_fit_runs, fit_rms=fit_rms,
+                  allow_failed=allow_failed, notes=notes, ci_fit=ci_fit, ci_fit_runs=ci_fit_runs,
+                  ci_fit_stderr=ci_fit_stderr, fit_rms=fit_rms,
                   fit_window=(t0, fit_end), provenance=provenance, fit_flags=flags, equivalence=equivalence,
                   departure=departure, redistribution=measure_redistribution(runs, fit_end), warnings=warnings)
-
-
-def _departure(runs: Sequence[RunAnalysis], pred_t: np.ndarray, pred: np.ndarray, fit_end: float,
-               gamma_dot: float) -> tuple[float, float, float]:
-    """Largest component-wise |a2_FT - a2_simulation| (simulation: mean over the runs,
-    interpolated onto the prediction times) inside the fit window and after it, and the
-    strain of the latter (NaN when the runs end with the window)."""
-    d = pred.shape[-1]
-    sim = np.mean([np.stack([[np.interp(pred_t, r.t, r.a2[:, i, j]) for j in range(d)] for i in range(d)])
-                   .transpose(2, 0, 1) for r in runs], axis=0)
-    gap = np.max(np.abs(pred - sim).reshape(len(pred_t), -1), axis=1)
-    inside = pred_t <= fit_end * (1.0 + 1e-12)
-    within = float(np.max(gap[inside])) if np.any(inside) else math.nan
-    if np.all(inside):
-        return within, math.nan, math.nan
-    k = int(np.argmax(np.where(inside, -np.inf, gap)))
-    return within, float(gap[k]), float(pred_t[k] * gamma_dot)
-
-
-def _ranking_equivalence(runs: Sequence[RunAnalysis], ranking) -> dict[str, object]:
-    """Effect size and equivalence verdict (:func:`pyfold.seed_checks.equivalence`) of
-    every closure in the ranking against the next one."""
-    from pyfold.seed_checks import equivalence
-    from pyfold.steady_state import blocking_stderr
-
-    out = {}
-    for a, b in zip(ranking[:-1], ranking[1:]):
-        if len(runs) > 1:
-            out[a.name] = equivalence(a.mean, [r.error_mean[b.name] - r.error_mean[a.name] for r in runs])
-        else:
-            r = runs[0]
-            inside = (r.error_t >= r.window[0]) & (r.error_t <= r.window[1])
-            diff = r.error_contracted[b.name][inside] - r.error_contracted[a.name][inside]
-            out[a.name] = equivalence(a.mean, mean_difference=float(np.mean(diff)),
-                                      stderr=float(blocking_stderr(diff)[0]))
-    return out
 
 
 # --------------------------------------------------------------------------- outputs
@@ -799,7 +370,7 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
     if rep.ci_fit:
         fitted = [c for c in judged if c in rep.ci_fit]
         f0, f1 = rep.fit_window
-        tf = ("C_I of Folgar-Tucker with the closure by trajectory fit to a2(t) (pyfold.report.fit_ci_trajectory) "
+        tf = ("C_I of Folgar-Tucker with the closure by trajectory fit to a2(t) (pyfold.fast_fit.fit_ci_rk4) "
               f"over strain {f0 * rep.gamma_dot:.4g}-{f1 * rep.gamma_dot:.4g}")
         out_ds[RECOMMENDED_CI] = ("judged_closure", [rep.ci_fit[c].mean if c in rep.ci_fit else np.nan for c in judged],
                                   one(tf + ", mean over the seeds not on a bound (the C_I to use with that closure)",
@@ -807,16 +378,22 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
                                       fit_window_periods=rep.fit_periods))
         out_ds[RECOMMENDED_CI + "_error"] = ("judged_closure",
                                              [rep.ci_fit[c].error if c in rep.ci_fit else np.nan for c in judged],
-                                             one("standard error across the seeds used of ci_recommended "
-                                                 "(NaN for one seed)"))
+                                             one("standard error of ci_recommended: the larger of the one "
+                                                 "across the seeds used and their pooled fit standard errors"))
         out_ds[RECOMMENDED_CI + "_n_seeds"] = ("judged_closure",
                                                np.array([rep.ci_fit[c].n if c in rep.ci_fit else 0 for c in judged],
                                                         dtype=np.int32),
-                                               one("seeds averaged in ci_recommended (fits on a bound excluded)"))
+                                               one("seeds averaged in ci_recommended (fits on a bound or failed "
+                                                   "excluded)"))
         out_ds["ci_trajectory_fit_seed"] = (("seed", "judged_closure"),
                                             np.array([[rep.ci_fit_runs[c][k] if c in fitted else np.nan
                                                        for c in judged] for k in range(rep.n)]),
                                             one(tf + ", per run"))
+        out_ds["ci_trajectory_fit_seed_stderr"] = (("seed", "judged_closure"),
+                                                   np.array([[rep.ci_fit_stderr[c][k] if c in fitted else np.nan
+                                                              for c in judged] for k in range(rep.n)]),
+                                                   one("standard error of ci_trajectory_fit_seed (least squares: "
+                                                       "s^2 / (J.J), pyfold.fast_fit)"))
         out_ds["ci_trajectory_fit_seed_flag"] = (("seed", "judged_closure"),
                                                  np.array([[rep.fit_flags[c].flags[k] if c in fitted else -1
                                                             for c in judged] for k in range(rep.n)], dtype=np.int8),
@@ -833,7 +410,7 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
                         phi_beta=rep.phi_beta, scene=json.dumps(rep.scene), recommended_ci=RECOMMENDED_CI,
                         equivalence_margin=EQUIVALENCE_MARGIN,
                         estimator=f"{RECOMMENDED_CI}: trajectory fit over the first {rep.fit_periods:.3g} Jeffery "
-                        "periods (pyfold.report.fit_ci_trajectory), the value a moulding code running that closure "
+                        "periods (pyfold.fast_fit.fit_ci_rk4), the value a moulding code running that closure "
                         "should use; ci_rate_regression: pyfold.ci_estimators.ci_rate_regression over the stationary "
                         "window, 'exact' = the runs' own a4 (closure-free)",
                         warnings=json.dumps(rep.warnings))
@@ -913,7 +490,7 @@ def flagged_fit_lines(rep: Report) -> list[str]:
     seeds = [r.seed for r in rep.runs]
     lines = []
     for c, flags in rep.fit_flags.items():
-        notes = flags.describe(seeds, (0.0, TRAJECTORY_CI_MAX))
+        notes = flags.describe(seeds, (0.0, math.inf))
         if notes:
             values = ", ".join(f"{v:.3g}" for v in flags.values)
             lines.append(f"{c}: per-seed fits {values}; " + "; ".join(notes))
@@ -967,7 +544,7 @@ def summary_lines(rep: Report) -> list[str]:
     f0, f1 = rep.fit_window
     lines += ["", f"Folgar-Tucker C_I per closure. fitted (recommended): trajectory fit to each run's a2(t) over "
               f"strain {f0 * g:.3g}-{f1 * g:.3g} ({rep.fit_periods:.2g} Jeffery periods of the particles' xi; "
-              "pyfold.report.fit_ci_trajectory), mean over the seeds whose fit is not on a bound; "
+              "pyfold.fast_fit.fit_ci_rk4), mean over the seeds whose fit is not on a bound or failed; "
               "rate regr.: regression of da2/dt on the diffusion term over the stationary window "
               "(pyfold.ci_estimators.ci_rate_regression):",
               f"  {'closure':<10} {'fitted C_I':>11} {'± error':>9} {'seeds':>5} {'a2 RMS':>8}   {'rate regr.':>11} "

@@ -29,9 +29,9 @@ import numpy as np
 EQUIVALENCE_MARGIN = 0.01
 
 #: Flag values of :func:`flag_fits` (also the ``..._flag`` variables of results.nc).
-FLAG_OK, FLAG_LOWER_BOUND, FLAG_UPPER_BOUND, FLAG_OUTLIER = 0, 1, 2, 3
+FLAG_OK, FLAG_LOWER_BOUND, FLAG_UPPER_BOUND, FLAG_OUTLIER, FLAG_FAILED = 0, 1, 2, 3, 4
 FLAG_MEANINGS = "0 kept, 1 on the lower bound (excluded), 2 on the upper bound (excluded), 3 outside the other seeds' " \
-                "95 % prediction interval (kept, listed)"
+                "95 % prediction interval (kept, listed), 4 no value: the fit failed (excluded)"
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,8 @@ class SeedFlags:
         """One text per flagged seed."""
         words = {FLAG_LOWER_BOUND: f"on the bound C_I = {bounds[0]:g} (excluded from the mean)",
                  FLAG_UPPER_BOUND: f"on the bound C_I = {bounds[1]:g} (excluded from the mean)",
-                 FLAG_OUTLIER: "outside the other seeds' 95 % prediction interval (kept)"}
+                 FLAG_OUTLIER: "outside the other seeds' 95 % prediction interval (kept)",
+                 FLAG_FAILED: "the fit failed (excluded from the mean)"}
         return [f"seed {s}: {v:.3g} {words[f]}" for s, v, f in zip(seeds, self.values, self.flags) if f != FLAG_OK]
 
 
@@ -58,13 +59,15 @@ def flag_fits(values: Sequence[float], lower: float, upper: float, lower_tol: fl
     """Flag per-seed fitted values: within ``lower_tol`` of ``lower`` or ``upper_tol`` of
     ``upper`` (the optimiser's resolution there), and, among the others when at least
     three remain, a value outside the ``1 - level`` prediction interval of the remaining
-    ones, ``mean +- t_{m-2} s sqrt(1 + 1/(m-1))`` (m values, leave-one-out)."""
+    ones, ``mean +- t_{m-2} s sqrt(1 + 1/(m-1))`` (m values, leave-one-out). A
+    non-finite value (a failed fit reports NaN) is flagged failed."""
     from scipy import stats
 
     v = np.asarray(values, dtype=float)
     flags = np.full(v.size, FLAG_OK, dtype=int)
     flags[v <= lower + lower_tol] = FLAG_LOWER_BOUND
     flags[v >= upper - upper_tol] = FLAG_UPPER_BOUND
+    flags[~np.isfinite(v)] = FLAG_FAILED
     inside = np.flatnonzero(flags == FLAG_OK)
     m = inside.size
     if m >= 3:

@@ -9,9 +9,9 @@
 The trajectory fits run in :mod:`pyfold.fast_fit` (fixed-step RK4 on padded record
 counts: one compiled program per closure and size class, kept by JAX's persistent
 cache, so a second process fits a run in seconds). The main job and ``pyfold report``
-use :mod:`pyfold.report` instead (rate regressions over the stationary part of an
-ensemble of long runs, with the closures' a4 or the run's own); both start from the
-checks of :mod:`pyfold.run_checks`.
+use :mod:`pyfold.report` on an ensemble of runs: the same fit over the first Jeffery
+periods of each run, beside rate regressions over the stationary part; both start from
+the checks of :mod:`pyfold.run_checks`.
 
 Why fit with several closures: the fitted ``C_I`` depends on the closure used
 (docs/physics.md#the-fitted-c_i-depends-on-the-closure), so the table reports one value per closure, plus the value
@@ -32,11 +32,6 @@ import xarray as xr
 from pyfold.files import atomic_output
 from pyfold.run_checks import (DEFAULT_CLOSURES, check_closures, check_described, open_checked_run, shape_factor_of,
                                velocity_gradient_of)
-
-
-#: Folgar–Tucker starting guess of C_I for every fit (order of the published
-#: values, docs/physics.md#published-c_i-values); bounds C_I >= 0 come from pyfold.fit.
-CI_START = 1e-3
 
 
 @dataclass
@@ -72,7 +67,7 @@ def fit_ci_per_closure(ds: xr.Dataset, L: np.ndarray, closures: Sequence[str], x
     L = np.asarray(L, dtype=np.float64)[:dim, :dim]
 
     def fit(name):
-        return fit_ci_rk4(name, t, a2, L, xi, a4=a4 if name == "exact" else None, ci_start=CI_START)
+        return fit_ci_rk4(name, t, a2, L, xi, a4=a4 if name == "exact" else None)
 
     # The fits are independent: on several cores they run (and, in a first process,
     # compile) side by side; JAX releases the interpreter lock while it compiles and runs.

@@ -10,7 +10,7 @@ C_I(stokes) - C_I(jeffery) averaged over the seeds with its standard error and t
 p from the paired t-test (pyfold.ensemble.paired_difference). "Changes C_I by more than
 its statistical error" means p < SIGNIFICANCE_LEVEL, the level the studies use. Each row
 also carries the same paired difference of the C_I fitted to a2(t) with Folgar-Tucker +
-IBOF (pyfold.report.fit_ci_trajectory), because the two estimators measure different
+IBOF (pyfold.fast_fit.fit_ci_rk4), because the two estimators measure different
 things (docs/physics.md#what-contacts-alone-do) and need not agree.
 
 The rows are the single source of truth: the studies that produced them recompute them
@@ -56,7 +56,7 @@ class CIEvidence:
     command: str           # its exact command
     output: str            # its analysed output (NetCDF), relative to the repository
     # The same runs, C_I by a trajectory fit of Folgar-Tucker + IBOF to a2(t)
-    # (pyfold.report.fit_ci_trajectory: the C_I a moulding code running IBOF needs):
+    # (pyfold.fast_fit.fit_ci_rk4: the C_I a moulding code running IBOF needs):
     traj_delta_ci: float = math.nan  # paired mean of C_I(stokes) - C_I(jeffery)
     traj_delta_ci_stderr: float = math.nan
     traj_p: float = math.nan

@@ -29,7 +29,7 @@ Scene (pyfold.scene.sheared_fibres, contacts only)
 
 Estimators (per run)
     ci_traj    C_I of Folgar–Tucker with the IBOF closure fitted to the run's a2(t)
-               (pyfold.report.fit_ci_trajectory, the fit of `pyfold report`) over the
+               (pyfold.fast_fit.fit_ci_rk4, the fit of `pyfold report`) over the
                report's window: from the start over 2 Jeffery periods (103 strain at
                β_e = 8.17), cut at the run's end (the whole run in the small form).
     ci_own     closure-free rate regression (pyfold.ci_estimators.ci_rate_regression
@@ -196,7 +196,8 @@ def sweep_stokes_scene(alpha_over_d: float, seed: int, t_end: float):
 
 
 def analyse_run(path: Path) -> dict:
-    from pyfold.report import TRAJECTORY_PERIODS, fit_ci_trajectory
+    from pyfold.fast_fit import fit_ci_rk4
+    from pyfold.report import TRAJECTORY_PERIODS
 
     ds = open_run(path)
     t = np.asarray(ds["time"].values, dtype=np.float64)
@@ -214,8 +215,8 @@ def analyse_run(path: Path) -> dict:
         out["eta_eff_se"] = float(np.std(ds["effective_viscosity"].values[1:], ddof=1)
                                   / math.sqrt(max(1, ds.sizes["time"] - 1)))
     else:
-        ci, rms = fit_ci_trajectory(CLOSURE, xi, t, a2, L, fit_end)
-        out.update(ci_traj=ci, ci_traj_rms=rms, fit_end=fit_end)
+        fit = fit_ci_rk4(CLOSURE, t, a2, L, xi, t_end=fit_end)
+        out.update(ci_traj=fit.ci, ci_traj_se=fit.stderr, ci_traj_rms=fit.residual_rms, fit_end=fit_end)
         own = ci_rate_regression(t, a2, a4, L, xi)
         out.update(ci_own=own.ci, ci_own_se=own.stderr)
         a4c = _closure(CLOSURE)(a2)

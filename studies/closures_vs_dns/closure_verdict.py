@@ -25,7 +25,7 @@ Question
        closure gets wrong, and in which direction, beyond the noise of the population.
     2. a2_rms: the a2(t) the closure predicts. C_I per closure by a trajectory fit of
        Folgar–Tucker with that closure to the run's whole a2(t)
-       (pyfold.report.fit_ci_trajectory: fixed-step RK4, C_I >= 0; the closure error is
+       (pyfold.fast_fit.fit_ci_rk4: fixed-step RK4, C_I >= 0; the closure error is
        absorbed into C_I as in docs/physics.md#the-fitted-c_i-depends-on-the-closure);
        --ci regression uses the rate regression with the closure's a4 on the run's a2
        instead (no ODE, clipped at C_I = 0 where negative, which leaves Folgar–Tucker
@@ -158,8 +158,8 @@ from pyfold.closure_check import (
 from pyfold.command_line import check_single_line, job_line, write_job_file
 from pyfold.ensemble import ensemble_mean, holm, paired_difference, rank_paired
 from pyfold.errors import InadmissibleOrientationWarning, InputError
+from pyfold.fast_fit import fit_ci_rk4
 from pyfold.fit import fit_parameters
-from pyfold.report import fit_ci_trajectory
 from pyfold.models import FolgarTucker, solve_batch
 from pyfold.run_results import open_run
 from pyfold.scene.sheared_fibres import sheared_fibres
@@ -311,9 +311,10 @@ def judge_run(info: dict, closures: tuple[str, ...], ci_method: str = "trajector
     for name in closures:
         if ci_method == "trajectory":
             # Folgar-Tucker with the closure fitted to the run's whole a2(t) by the fixed-step
-            # RK4 of pyfold.report (C_I >= 0; the C_I a moulding code running it would use)
-            ci.append(fit_ci_trajectory(name, xi, t, a2, L, float(t[-1]))[0])
-            ci_se.append(math.nan)
+            # RK4 of pyfold.fast_fit (C_I >= 0; the C_I a moulding code running it would use)
+            fit = fit_ci_rk4(name, t, a2, L, xi)
+            ci.append(fit.ci)
+            ci_se.append(fit.stderr)
             continue
         if ci_method == "fit":
             ci.append(0.0)

@@ -24,7 +24,7 @@ Estimators (per point; pyfold.ci_estimators, docs/physics.md#folgar-tucker-model
                in Tucker's fitCI, with the mismatch of the other components). Error propagated from the across-seed
                s.e. of the stationary a2.
     a_<clo>    trajectory fit of Folgar–Tucker to the run's whole a2(t), per seed
-               (pyfold.report.fit_ci_trajectory, fixed-step RK4, C_I >= 0): the C_I a
+               (pyfold.fast_fit.fit_ci_rk4, fixed-step RK4, C_I >= 0): the C_I a
                moulding code would use with that closure (small form: IBOF and ORW3 on
                every point; large form: also FEC; --no-trajectory-fit skips it).
     rsc_<clo>  RSC (C_I, kappa) trajectory fit (IBOF) on the seed-averaged a2(t) of
@@ -277,14 +277,15 @@ def _with_xi(model, xi: float):
 
 def trajectory_fits(run: dict, closures: tuple) -> dict:
     """(a): Folgar–Tucker C_I fitted to the run's whole a2(t), one per closure
-    (pyfold.report.fit_ci_trajectory: fixed-step RK4, C_I >= 0; the error bar is the
-    scatter across seeds)."""
-    from pyfold.report import fit_ci_trajectory
+    (pyfold.fast_fit.fit_ci_rk4: fixed-step RK4, C_I >= 0), each with its least-squares
+    standard error (the ensemble's error bar is the larger of the scatter across seeds and
+    the pooled standard errors, pyfold.ensemble.ensemble_mean)."""
+    from pyfold.fast_fit import fit_ci_rk4
 
     out = {}
     for name in closures:
-        ci, _ = fit_ci_trajectory(name, run["xi"], run["t"], run["a2"], run["L"], float(run["t"][-1]))
-        out[f"a_{name}"] = (ci, math.nan)
+        fit = fit_ci_rk4(name, run["t"], run["a2"], run["L"], run["xi"])
+        out[f"a_{name}"] = (fit.ci, fit.stderr)
     return out
 
 

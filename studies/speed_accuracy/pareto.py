@@ -89,8 +89,8 @@ import sphere_viscosity as sv  # noqa: E402
 from pyfold.cli import main as cli_main  # noqa: E402
 from pyfold.command_line import command_line  # noqa: E402
 from pyfold.ensemble import ensemble_mean, paired_difference  # noqa: E402
+from pyfold.fast_fit import fit_ci_rk4  # noqa: E402
 from pyfold.native.stokes import StokesSettings, solve_particles  # noqa: E402
-from pyfold.report import fit_ci_trajectory  # noqa: E402
 from pyfold.run_input import creator  # noqa: E402
 from pyfold.scene import hydrodynamics_evidence as he  # noqa: E402
 from pyfold.scene.sheared_fibres import sheared_fibres  # noqa: E402
@@ -368,10 +368,9 @@ def evidence_check(extra: dict) -> tuple[list[str], list[str], dict]:
                 bad.append(f"{regime}.{key}: module {stored:.3g}, run files {value:.4g}")
         if row.seeds != len(seeds):
             bad.append(f"{regime}.seeds: module {row.seeds}, run files {len(seeds)}")
-        # Trajectory fit of Folgar-Tucker + IBOF to a2(t) (pyfold.report.fit_ci_trajectory): the C_I a
+        # Trajectory fit of Folgar-Tucker + IBOF to a2(t) (pyfold.fast_fit.fit_ci_rk4): the C_I a
         # moulding code running IBOF needs; stated beside the closure-free headline.
-        fits = {m: np.array([fit_ci_trajectory("ibof", r[s]["xi"], r[s]["t"], r[s]["a2"], r[s]["L"],
-                                               float(r[s]["t"][-1]))[0] for s in seeds])
+        fits = {m: np.array([fit_ci_rk4("ibof", r[s]["t"], r[s]["a2"], r[s]["L"], r[s]["xi"]).ci for s in seeds])
                 for m, r in (("stokes", stokes), ("jeffery", jeff))}
         dt_ = paired_difference(fits["stokes"], fits["jeffery"])
         traj[regime] = dict(stokes=float(fits["stokes"].mean()), jeffery=float(fits["jeffery"].mean()),
@@ -479,7 +478,7 @@ def report(rows: list[Row], info: dict, ev_lines: list[str], bad: list[str], tra
               "## Evidence for `hydrodynamics = \"auto\"` recomputed from the run files", "",
               "| regime | quantity | pyfold/scene/hydrodynamics_evidence.py | run files | |", "|---|---|---|---|---|",
               *ev_lines, "",
-              "Trajectory fit of Folgar–Tucker + IBOF to a2(t) (pyfold.report.fit_ci_trajectory), same runs:", "",
+              "Trajectory fit of Folgar–Tucker + IBOF to a2(t) (pyfold.fast_fit.fit_ci_rk4), same runs:", "",
               "| regime | C_I Stokes | C_I contacts only | paired difference ± s.e. | p |", "|---|---|---|---|---|"]
     for regime, t in traj.items():
         lines.append(f"| {regime} | {t['stokes']:.2e} | {t['jeffery']:.2e} | {t['delta']:+.2e} ± {t['stderr']:.1e} | "

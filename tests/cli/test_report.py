@@ -170,18 +170,20 @@ def test_default_out_folder_is_beside_the_first_run(runs, tmp_path):
 
 @pytest.mark.parametrize("closure, t_end", [("ibof", 127.5), ("fec", 30.0)])
 def test_rk4_prediction_matches_the_adaptive_folgar_tucker_solve(closure, t_end):
-    """The figure's Folgar-Tucker a2(t) (fixed-step RK4, pyfold.report.predict_ft) against
-    pyfold.models.solve_orientation at tight tolerances; RK4's global error is O(h^4):
-    measured 8e-6 over a strain of 400 at C_I = 1e-3 and the largest step. A span of
-    127.5 = 255 x 0.5 puts the 256 output times PREDICTION_MAX_STEP apart: one step each,
+    """The figure's Folgar-Tucker a2(t) (the fits' fixed-step RK4, pyfold.fast_fit.predict_ft)
+    against pyfold.models.solve_orientation at tight tolerances; RK4's global error is
+    O(h^4): measured 8e-6 over a strain of 400 at C_I = 1e-3 and the largest step. A span of
+    127.5 = 255 x 0.5 puts the report's 256 output times MAX_STEP apart: one step each,
     the largest the prediction takes."""
+    from pyfold.fast_fit import MAX_STEP, predict_ft
     from pyfold.models import FolgarTucker, solve_orientation
 
-    assert report.PREDICTION_MAX_STEP == 0.5
+    assert MAX_STEP == 0.5
     L = np.zeros((3, 3))
     L[0, 1] = 1.0
     a0 = np.diag([0.34, 0.33, 0.33])
-    t, a2 = report.predict_ft(closure, 1e-3, 0.97, a0, L, t_end)
+    t = np.linspace(0.0, t_end, report.PREDICTION_POINTS)
+    a2 = predict_ft(closure, 1e-3, 0.97, a0, L, t)
     ref = solve_orientation(FolgarTucker(ci=1e-3, xi=0.97, closure=closure), a0, L, t, rtol=1e-9, atol=1e-11).a2
     assert np.max(np.abs(a2 - np.asarray(ref))) < 1e-4
 
@@ -214,22 +216,28 @@ def test_main_job_on_a_small_scene_reports_its_seeds(tmp_path):
 
 @pytest.mark.parametrize("ci_true", [0.0, 2e-3])
 def test_trajectory_fit_recovers_the_c_i_of_a_folgar_tucker_trajectory(ci_true):
-    """fit_ci_trajectory on an a2(t) made by Folgar-Tucker itself (adaptive solve, IBOF) must
-    return its C_I. The only model error is the RK4 prediction's (bounded by 1e-4 in a2 in
-    the test above); it moves the optimum by at most that error over the RMS sensitivity
-    |d a2/d C_I| of the trajectory, measured here by a central difference."""
+    """The report's trajectory fit (pyfold.fast_fit.fit_ci_rk4 over the window up to t_end)
+    on an a2(t) made by Folgar-Tucker itself (adaptive solve, IBOF) must return its C_I. The
+    only model error is the fixed-step RK4's (bounded by 1e-4 in a2 in the test above); it
+    moves the optimum by at most that error over the RMS sensitivity |d a2/d C_I| of the
+    trajectory, measured here by a central difference. Records past t_end are not fitted."""
+    from pyfold.fast_fit import fit_ci_rk4, predict_ft
     from pyfold.models import FolgarTucker, solve_orientation
 
     L = np.zeros((3, 3))
     L[0, 1] = 1.0
     a0 = np.eye(3) / 3.0
-    t = np.linspace(0.0, 60.0, 301)
-    a2 = np.asarray(solve_orientation(FolgarTucker(ci=ci_true, xi=0.97, closure="ibof"), a0, L, t,
+    t = np.linspace(0.0, 80.0, 401)
+    a2 = np.array(solve_orientation(FolgarTucker(ci=ci_true, xi=0.97, closure="ibof"), a0, L, t,
                                       rtol=1e-9, atol=1e-11).a2)
-    ci, rms = report.fit_ci_trajectory("ibof", 0.97, t, a2, L, 60.0)
+    a2[t > 60.0] = np.eye(3) / 3.0  # not Folgar-Tucker: must lie outside the window
+    fit = fit_ci_rk4("ibof", t, a2, L, 0.97, t_end=60.0)
+    assert fit.success and len(fit.a2) == 301, fit.message
+    ci, rms = fit.ci, fit.residual_rms
     h = 5e-4
-    _, up = report.predict_ft("ibof", ci_true + h, 0.97, a0, L, 60.0)
-    _, mid = report.predict_ft("ibof", ci_true + h / 2 if ci_true == 0.0 else ci_true - h, 0.97, a0, L, 60.0)
+    grid = np.linspace(0.0, 60.0, report.PREDICTION_POINTS)
+    up = predict_ft("ibof", ci_true + h, 0.97, a0, L, grid)
+    mid = predict_ft("ibof", ci_true + h / 2 if ci_true == 0.0 else ci_true - h, 0.97, a0, L, grid)
     step = h / 2 if ci_true == 0.0 else 2 * h
     sensitivity = math.sqrt(float(np.mean(((up - mid) / step) ** 2)))
     assert abs(ci - ci_true) <= 2 * 1e-4 / sensitivity, (ci, sensitivity)

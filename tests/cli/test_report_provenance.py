@@ -126,15 +126,15 @@ def test_analyse_results_are_described_and_name_the_model(folder, tmp_path):
 def test_a_run_ending_inside_the_first_period_has_no_onset(folder):
     """The first 25 strain of the run (period 32): no steady state can be judged, so no
     onset is reported (NaN), whatever MSER-5 finds in the record."""
-    from pyfold import report, run_checks
+    from pyfold import run_analysis, run_checks
 
     run = folder / "run.h5"
     ds = run_checks.open_checked_run(run)
     L = run_checks.velocity_gradient_of(run)
     xi = run_checks.shape_factor_of(ds)
     short = ds.isel(time=np.flatnonzero(ds["time"].values <= 25.0))
-    r = report.analyse_run(run, short, 7, ("exact", "ibof"), L, xi)
+    r = run_analysis.analyse_run(run, short, 7, ("exact", "ibof"), L, xi)
     assert math.isnan(r.onset_time) and not r.stationary
     assert "ends inside the first Jeffery period" in r.steady_message
-    whole = report.analyse_run(run, ds, 7, ("exact", "ibof"), L, xi)
+    whole = run_analysis.analyse_run(run, ds, 7, ("exact", "ibof"), L, xi)
     assert whole.onset_time >= _period(run) - 1e-9

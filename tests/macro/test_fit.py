@@ -264,9 +264,28 @@ def test_rk4_fit_agrees_with_the_adaptive_fit_on_noisy_data():
     assert abs(res.ci - ref.values["ci"]) <= (fast_fit.STEP_ERROR_SHARE + 2 * fast_fit.OPT_SHARE) * se + res.step_error
     assert res.stderr == pytest.approx(se, rel=1e-2)
     # |rms(r + e) - rms(r)| <= rms(e) (triangle inequality), e the RK4 error of a2: at the
-    # step 0.5 below 6e-5 over a strain of 400 (pyfold.report.PREDICTION_MAX_STEP), a
+    # step 0.5 below 6e-5 over a strain of 400 (pyfold.fast_fit.MAX_STEP), a
     # tenth of the noise here
     assert res.residual_rms == pytest.approx(ref.residual_rms, abs=0.1 * sigma)
+
+
+def test_rk4_fit_from_several_starts_keeps_the_least_misfit():
+    """fit_ci_rk4 runs from every start (the loss in C_I can have two minima) and returns
+    the successful fit of least misfit: the same fit as the best single start, here the
+    noisy data's own optimum, reached from both sides of it."""
+    from pyfold import fast_fit
+
+    model = FolgarTucker(ci=CI_TRUE, xi=XI, closure=CLOSURE)
+    data = synthetic_dataset(model, isotropic_a2(3), SHEAR, TIMES, noise=1e-3, seed=20240611)
+    a2 = data["a2"].values
+    single = [fast_fit.fit_ci_rk4(CLOSURE, TIMES, a2, SHEAR, XI, ci_start=c) for c in fast_fit.CI_STARTS]
+    best = min((f for f in single if f.success), key=lambda f: f.residual_rms)
+    res = fast_fit.fit_ci_rk4(CLOSURE, TIMES, a2, SHEAR, XI)
+    assert res.success, res.message
+    assert res.ci == best.ci and res.residual_rms == best.residual_rms
+    assert abs(res.ci - CI_TRUE) <= 4.0 * res.stderr
+    with pytest.raises(InputError, match="ci_start"):
+        fast_fit.fit_ci_rk4(CLOSURE, TIMES, a2, SHEAR, XI, ci_start=(1e-3, -1.0))
 
 
 def test_rk4_fit_with_the_populations_own_a4_holds_ci_zero_on_its_bound():

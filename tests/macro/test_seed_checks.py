@@ -3,34 +3,43 @@ and the equivalence verdict of a paired difference follows two one-sided t tests
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy import stats
 
-from pyfold import report
-from pyfold.seed_checks import (EQUIVALENCE_MARGIN, FLAG_LOWER_BOUND, FLAG_OK, FLAG_OUTLIER, FLAG_UPPER_BOUND,
-                                equivalence, flag_fits)
+from pyfold.fast_fit import fit_flags
+from pyfold.seed_checks import (EQUIVALENCE_MARGIN, FLAG_FAILED, FLAG_LOWER_BOUND, FLAG_OK, FLAG_OUTLIER,
+                                FLAG_UPPER_BOUND, equivalence, flag_fits)
+
+
+def _fits(values, success=None):
+    """Stand-ins for pyfold.fast_fit.FastFit: the fields fit_flags reads."""
+    success = success or [True] * len(values)
+    return [SimpleNamespace(ci=v, success=s) for v, s in zip(values, success)]
 
 
 def test_a_fit_on_its_bound_is_excluded_and_named():
     """The hybrid closure of the default scene: 0.019, 0.025, 0.021 and one fit at C_I = 0."""
-    flags = report.fit_flags([0.019, 0.025, 0.021, 0.0])
+    flags = fit_flags(_fits([0.019, 0.025, 0.021, 0.0]))
     assert flags.flags == (FLAG_OK, FLAG_OK, FLAG_OK, FLAG_LOWER_BOUND)
     assert flags.kept == [0.019, 0.025, 0.021]
-    text = flags.describe([1, 2, 3, 4], (0.0, report.TRAJECTORY_CI_MAX))
+    text = flags.describe([1, 2, 3, 4], (0.0, math.inf))
     assert text == ["seed 4: 0 on the bound C_I = 0 (excluded from the mean)"]
 
 
-def test_the_bound_tolerance_is_the_optimisers_resolution():
-    """fit_ci_trajectory searches s = sqrt(C_I) to xatol: C_I within xatol^2 of 0 is on the
-    bound, twice that is not; near the upper bound the resolution is 2 s_max xatol."""
-    x = report.TRAJECTORY_XATOL
-    top = report.TRAJECTORY_CI_MAX
-    res = 2.0 * math.sqrt(top) * x
-    flags = report.fit_flags([0.5 * x * x, 2.0 * x * x, top - 0.5 * res, top - 2.0 * res])
-    assert flags.flags[0] == FLAG_LOWER_BOUND and flags.flags[2] == FLAG_UPPER_BOUND
-    assert flags.flags[1] != FLAG_LOWER_BOUND and flags.flags[3] != FLAG_UPPER_BOUND
+def test_only_the_projected_bound_is_a_bound_and_a_failed_fit_is_excluded():
+    """fit_ci_rk4 projects its steps onto C_I >= 0, so on the bound it returns exactly 0: any
+    positive value, however small, is a measurement; there is no upper bound. A fit that did
+    not succeed (NaN, or not converged) is flagged failed and excluded."""
+    flags = fit_flags(_fits([0.0, 1e-12, 1e3, math.nan, 2e-3], success=[True, True, True, False, False]))
+    assert flags.flags[:3] == (FLAG_LOWER_BOUND, FLAG_OK, FLAG_OK)
+    assert flags.flags[3:] == (FLAG_FAILED, FLAG_FAILED)
+    assert flags.kept == [1e-12, 1e3]
+    assert flags.describe([1, 2, 3, 4, 5], (0.0, math.inf))[1:] == [
+        "seed 4: nan the fit failed (excluded from the mean)", "seed 5: nan the fit failed (excluded from the mean)"]
+    assert FLAG_UPPER_BOUND not in flags.flags
 
 
 def test_a_seed_outside_the_others_prediction_interval_is_flagged_and_kept():
