@@ -155,6 +155,143 @@ def _codes(**table: int) -> Mapping[str, int]:
 _STOKES = "stokes"
 _CONTACTS = "contacts"
 
+#: The backend choice that has no code: :func:`backend_for` resolves it from the cell.
+AUTO_BACKEND = "auto"
+
+
+class _Coded:
+    """A registry entry named by a word of an enumerated setting (``SETTING``). The
+    setting's words, codes, legend and help are made from its entries (:func:`_words`,
+    :func:`_legend`, :func:`_help`), so an entry is the only place that names it."""
+
+    #: TOML path of the setting whose words name the entries
+    SETTING: ClassVar[str] = ""
+
+    @property
+    def fortran_code(self) -> str:
+        """Name of its generated Fortran code constant (``FOLD_STOKES_HYPRE``, ``FOLD_RIGIDITY_EXACT``)."""
+        return f"{setting(self.SETTING).fortran_codes}{self.name.upper()}"  # type: ignore[attr-defined]
+
+
+@dataclass(frozen=True)
+class Rigidity(_Coded):
+    """A rigidity formulation of the Stokes solve (a ``numerics.stokes.rigidity`` word):
+    what the rest of the code asks of it instead of testing its name."""
+
+    SETTING: ClassVar[str] = "numerics.stokes.rigidity"
+    name: str
+    #: its /setup/resolved/stokes_rigidity code
+    code: int
+    #: the solid is a viscosity kappa eta_f (numerics.stokes.kappa applies, and its
+    #: grid-dependent bound, pyfold/scene/kappa_range.py and fold_stokes_trust)
+    uses_kappa: bool
+    #: FFT precisions it can run with
+    fft_precisions: tuple[str, ...]
+    #: what it is, for messages
+    summary: str
+    #: what it is in the setting's /setup/resolved legend and in its help text
+    legend: str
+    help: str
+    #: its module (fortran/stokes/<module>.f90) and constructor on an FFT transport,
+    #: ``constructor(fft, set, solver, stat, errmsg)``, which fold_stokes_build calls for
+    #: its code (generated from fortran/stokes/solver_modules.txt)
+    fortran_module: str
+    constructor: str
+
+
+#: Rigidity formulations of the FFT-transport backends. A new one is an entry here and
+#: its module in fortran/stokes: the numerics.stokes.rigidity setting takes its word, code,
+#: legend and help from the entries, every FFT-transport backend offers it, and
+#: scripts/generate_settings lists its module and constructor in
+#: fortran/stokes/solver_modules.txt, from which meson compiles the module and writes its
+#: construction call into fold_stokes_build. Nothing else names it
+#: (tests/micro/test_solver_seam.py); docs/architecture.md, "A Stokes solver".
+RIGIDITIES: Mapping[str, Rigidity] = MappingProxyType({
+    "penalty": Rigidity("penalty", code=0, uses_kappa=True, fft_precisions=("double", "single"),
+                        summary="the seed's penalty: viscosity kappa eta_f in the solid",
+                        legend="kappa", help="viscosity kappa eta_f in the solid",
+                        fortran_module="fold_stokes_fft", constructor="stokes_fft_new"),
+    "exact": Rigidity("exact", code=1, uses_kappa=False, fft_precisions=("double",),
+                      summary="eps(u) = 0 on the solid voxels by a multiplier",
+                      legend="multiplier on the solid voxels", help="eps(u) = 0 by a multiplier",
+                      fortran_module="fold_stokes_rigid", constructor="stokes_rigid_new"),
+})
+
+
+@dataclass(frozen=True)
+class Backend(_Coded):
+    """A Stokes backend of fortran/stokes and its capabilities."""
+
+    SETTING: ClassVar[str] = "numerics.stokes.backend"
+    name: str
+    #: its /setup/resolved/stokes_backend code
+    code: int
+    #: solves a cell with no-slip walls at y = 0, Ly
+    walls: bool
+    #: follows the sheared (Lees-Edwards) lattice of a periodic cell in shear
+    lees_edwards: bool
+    #: follows a deforming (elongational) lattice
+    deforming_lattice: bool
+    #: precisions of its FFTs (empty: it has none, numerics.stokes.fft_precision does not apply)
+    fft_precisions: tuple[str, ...]
+    #: runs on several MPI ranks
+    mpi: bool
+    #: rigidity formulations (numerics.stokes.rigidity words): every one of RIGIDITIES on
+    #: an FFT transport, which the formulations construct
+    rigidities: tuple[str, ...]
+    #: built on an FFT transport (fortran/stokes/fold_fft_transport.f90: serial FFTW or FFTW-MPI slabs)
+    fft_transport: bool
+    #: runs in one process without MPI (the Python extensions, pyfold.native.stokes)
+    serial: bool
+    #: what it is, for messages
+    summary: str
+    #: what it is in the setting's /setup/resolved legend and in its help text
+    legend: str
+    help: str
+    #: a backend not on an FFT transport: its module (fortran/stokes/<module>.f90) and
+    #: constructor, ``constructor(set, dim, n, comm, solver, stat, errmsg)``, which
+    #: fold_stokes_factory calls for its code (generated from solver_modules.txt). None for
+    #: an FFT-transport backend: the rigidity formulation (:class:`Rigidity`) makes it.
+    fortran_module: str | None = None
+    constructor: str | None = None
+
+
+#: Stokes backends. A new one is an entry here and its module in fortran/stokes (the
+#: numerics.stokes.backend setting takes its word, code, legend and help from the
+#: entries): a backend on an FFT transport is made by the rigidity formulations
+#: (RIGIDITIES); any other names its fortran_module and constructor, which
+#: scripts/generate_settings lists in fortran/stokes/solver_modules.txt: meson compiles the
+#: module and writes its construction call into fold_stokes_factory. Nothing else names it
+#: (tests/micro/test_solver_seam.py); docs/architecture.md, "A Stokes solver".
+BACKENDS: Mapping[str, Backend] = MappingProxyType({
+    "fft": Backend("fft", code=1, walls=False, lees_edwards=True, deforming_lattice=False,
+                   fft_precisions=("double", "single"), mpi=True, rigidities=tuple(RIGIDITIES), fft_transport=True,
+                   serial=True, summary="FFT-preconditioned CG on the periodic, Lees-Edwards cell",
+                   legend="periodic cell", help="periodic, Lees-Edwards cell"),
+    "hypre": Backend("hypre", code=2, walls=True, lees_edwards=False, deforming_lattice=False, fft_precisions=(),
+                     mpi=True, rigidities=("penalty",), fft_transport=False, serial=False,
+                     summary="staggered grid with no-slip walls", legend="cell with walls", help="cell with walls",
+                     fortran_module="fold_stokes_hypre", constructor="stokes_hypre_new"),
+})
+
+
+def _words(entries: Mapping[str, _Coded], *first: str) -> tuple[tuple[str, ...], Mapping[str, int]]:
+    """The words (``first``, which have no code, then the entries') and codes of the
+    setting whose words name ``entries``."""
+    return (*first, *entries), _codes(**{name: e.code for name, e in entries.items()})  # type: ignore[attr-defined]
+
+
+def _legend(head: str, entries: Mapping[str, _Coded]) -> str:
+    """``"head: 0 word (legend), 1 word (legend)"``, the /setup/resolved legend."""
+    return f"{head}: " + ", ".join(f"{e.code} {name} ({e.legend})" for name, e in entries.items())  # type: ignore[attr-defined]
+
+
+def _help(entries: Mapping[str, _Coded], *more: tuple[str, str]) -> str:
+    """``'"word" (help), ... or "word" (help)'`` over the entries and ``more`` (word, help)."""
+    items = [f'"{name}" ({e.help})' for name, e in entries.items()] + [f'"{w}" ({h})' for w, h in more]  # type: ignore[attr-defined]
+    return ", ".join(items[:-1]) + " or " + items[-1] if len(items) > 1 else items[0]
+
+
 SETTINGS: tuple[Setting, ...] = (
     # ---- top level
     Setting("title", "text", "", size=(None, 200), help="short title of the scene"),
@@ -248,11 +385,10 @@ SETTINGS: tuple[Setting, ...] = (
             legend="time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2",
             fortran="TIME_SCHEME", help='"ab2" (Adams-Bashforth 2, first step Euler) or "euler" (explicit Euler)'),
     # ---- [numerics.stokes]
-    Setting("numerics.stokes.backend", "choice", "auto", ("auto", "fft", "hypre"), _codes(fft=1, hypre=2),
-            physics=_STOKES, resolved="stokes_backend",
-            legend="Stokes backend: 1 fft (periodic cell), 2 hypre (cell with walls)", fortran="STOKES_BACKEND",
-            fortran_codes="FOLD_STOKES_",
-            help='"fft" (periodic, Lees-Edwards cell), "hypre" (cell with walls) or "auto" (the backend of the cell)'),
+    Setting("numerics.stokes.backend", "choice", "auto", *_words(BACKENDS, AUTO_BACKEND),
+            physics=_STOKES, resolved="stokes_backend", legend=_legend("Stokes backend", BACKENDS),
+            fortran="STOKES_BACKEND", fortran_codes="FOLD_STOKES_",
+            help=_help(BACKENDS, (AUTO_BACKEND, "the backend of the cell"))),
     Setting("numerics.stokes.tolerance", "real", 1.0e-6, lo=0.0, hi=1.0, lo_open=True, hi_open=True,
             physics=_STOKES, resolved="stokes_tolerance",
             legend="relative preconditioned CG residual of a Stokes solve", fortran="STOKES_TOLERANCE",
@@ -294,11 +430,10 @@ SETTINGS: tuple[Setting, ...] = (
             physics=_STOKES, resolved="stokes_fft_precision", optional=True,
             legend="precision of the CG operator's FFTs: 0 double, 1 single", fortran="STOKES_FFT_PRECISION",
             fortran_codes="FOLD_FFT_", help="precision of the FFTs of the CG operator"),
-    Setting("numerics.stokes.rigidity", "choice", "penalty", ("penalty", "exact"), _codes(penalty=0, exact=1),
+    Setting("numerics.stokes.rigidity", "choice", "penalty", *_words(RIGIDITIES),
             physics=_STOKES, resolved="stokes_rigidity", optional=True,
-            legend="rigidity of the particles: 0 penalty (kappa), 1 exact (multiplier on the solid voxels)",
-            fortran="STOKES_RIGIDITY", fortran_codes="FOLD_RIGIDITY_",
-            help='"penalty" (viscosity kappa eta_f in the solid) or "exact" (eps(u) = 0 by a multiplier)'),
+            legend=_legend("rigidity of the particles", RIGIDITIES), fortran="STOKES_RIGIDITY",
+            fortran_codes="FOLD_RIGIDITY_", help=_help(RIGIDITIES)),
     Setting("numerics.stokes.initial_guess", "choice", "previous", ("previous", "extrapolate"),
             _codes(previous=1, extrapolate=2), physics=_STOKES, resolved="stokes_initial_guess", optional=True,
             legend="CG initial guess: 1 previous solution, 2 extrapolated from the last two",
@@ -366,115 +501,6 @@ def in_range(path: str, value: float) -> bool:
 
 # ---------------------------------------------------------------------------------------
 # Stokes backends and what each can do
-
-#: The backend choice that has no code: :func:`backend_for` resolves it from the cell.
-AUTO_BACKEND = "auto"
-
-
-class _Coded:
-    """A registry entry named by a word of an enumerated setting (``SETTING``)."""
-
-    #: TOML path of the setting whose words name the entries
-    SETTING: ClassVar[str] = ""
-
-    @property
-    def code(self) -> int:
-        """Its integer code in /setup/resolved."""
-        return setting(self.SETTING).codes[self.name]  # type: ignore[attr-defined]
-
-    @property
-    def fortran_code(self) -> str:
-        """Name of its generated Fortran code constant (``FOLD_STOKES_HYPRE``, ``FOLD_RIGIDITY_EXACT``)."""
-        return f"{setting(self.SETTING).fortran_codes}{self.name.upper()}"  # type: ignore[attr-defined]
-
-
-@dataclass(frozen=True)
-class Backend(_Coded):
-    """A Stokes backend of fortran/stokes and its capabilities."""
-
-    SETTING: ClassVar[str] = "numerics.stokes.backend"
-    name: str
-    #: solves a cell with no-slip walls at y = 0, Ly
-    walls: bool
-    #: follows the sheared (Lees-Edwards) lattice of a periodic cell in shear
-    lees_edwards: bool
-    #: follows a deforming (elongational) lattice
-    deforming_lattice: bool
-    #: precisions of its FFTs (empty: it has none, numerics.stokes.fft_precision does not apply)
-    fft_precisions: tuple[str, ...]
-    #: runs on several MPI ranks
-    mpi: bool
-    #: rigidity formulations (numerics.stokes.rigidity words)
-    rigidities: tuple[str, ...]
-    #: built on an FFT transport (fortran/stokes/fold_fft_transport.f90: serial FFTW or FFTW-MPI slabs)
-    fft_transport: bool
-    #: runs in one process without MPI (the Python extensions, pyfold.native.stokes)
-    serial: bool
-    #: what it is, for messages
-    summary: str
-    #: a backend not on an FFT transport: its module (fortran/stokes/<module>.f90) and
-    #: constructor, ``constructor(set, dim, n, comm, solver, stat, errmsg)``, which
-    #: fold_stokes_factory calls for its code (generated from solver_modules.txt). None for
-    #: an FFT-transport backend: the rigidity formulation (:class:`Rigidity`) makes it.
-    fortran_module: str | None = None
-    constructor: str | None = None
-
-
-#: Stokes backends. A new one is an entry here (with its word and code in the
-#: numerics.stokes.backend setting) and its module in fortran/stokes: a backend on an FFT
-#: transport is made by the rigidity formulations (RIGIDITIES); any other names its
-#: fortran_module and constructor, which scripts/generate_settings lists in
-#: fortran/stokes/solver_modules.txt: meson compiles the module and writes its construction
-#: call into fold_stokes_factory. Nothing else names it (tests/micro/test_solver_seam.py);
-#: docs/architecture.md, "A Stokes solver".
-BACKENDS: Mapping[str, Backend] = MappingProxyType({
-    "fft": Backend("fft", walls=False, lees_edwards=True, deforming_lattice=False, fft_precisions=("double", "single"),
-                   mpi=True, rigidities=("penalty", "exact"), fft_transport=True, serial=True,
-                   summary="FFT-preconditioned CG on the periodic, Lees-Edwards cell"),
-    "hypre": Backend("hypre", walls=True, lees_edwards=False, deforming_lattice=False, fft_precisions=(),
-                     mpi=True, rigidities=("penalty",), fft_transport=False, serial=False,
-                     summary="staggered grid with no-slip walls", fortran_module="fold_stokes_hypre",
-                     constructor="stokes_hypre_new"),
-})
-
-
-@dataclass(frozen=True)
-class Rigidity(_Coded):
-    """A rigidity formulation of the Stokes solve (a ``numerics.stokes.rigidity`` word):
-    what the rest of the code asks of it instead of testing its name."""
-
-    SETTING: ClassVar[str] = "numerics.stokes.rigidity"
-    name: str
-    #: the solid is a viscosity kappa eta_f (numerics.stokes.kappa applies, and its
-    #: grid-dependent bound, pyfold/scene/kappa_range.py and fold_stokes_trust)
-    uses_kappa: bool
-    #: FFT precisions it can run with
-    fft_precisions: tuple[str, ...]
-    #: what it is, for messages
-    summary: str
-    #: its module (fortran/stokes/<module>.f90) and constructor on an FFT transport,
-    #: ``constructor(fft, set, solver, stat, errmsg)``, which fold_stokes_build calls for
-    #: its code (generated from fortran/stokes/solver_modules.txt)
-    fortran_module: str
-    constructor: str
-
-
-#: Rigidity formulations of the FFT-transport backends. A new one is an entry here (with
-#: its word and code in the numerics.stokes.rigidity setting, and its word in the
-#: rigidities of the backends that offer it) and its module in fortran/stokes;
-#: scripts/generate_settings lists its module and constructor in
-#: fortran/stokes/solver_modules.txt, from which meson compiles the module and writes its
-#: construction call into fold_stokes_build. Nothing else names it
-#: (tests/micro/test_solver_seam.py); docs/architecture.md, "A Stokes solver".
-RIGIDITIES: Mapping[str, Rigidity] = MappingProxyType({
-    "penalty": Rigidity("penalty", uses_kappa=True, fft_precisions=("double", "single"),
-                        summary="the seed's penalty: viscosity kappa eta_f in the solid",
-                        fortran_module="fold_stokes_fft", constructor="stokes_fft_new"),
-    "exact": Rigidity("exact", uses_kappa=False, fft_precisions=("double",),
-                      summary="eps(u) = 0 on the solid voxels by a multiplier",
-                      fortran_module="fold_stokes_rigid", constructor="stokes_rigid_new"),
-})
-
 
 def backend_for(walls: bool) -> str:
     """The backend ``"auto"`` stands for: the one that imposes walls in a cell with walls,
