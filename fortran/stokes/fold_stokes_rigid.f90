@@ -54,7 +54,8 @@
 !> independent stress components forward and strain components back, 10 FFTs (4 in 2-D). The velocity of
 !> the solution accumulates in Fourier space along the iterations (x += alpha q), so no
 !> transform is spent on it. Warm start: the multiplier of the previous solve at the
-!> voxels that are still solid (a real-space field, unaffected by the change of lattice).
+!> voxels that were and are solid (a real-space field, unaffected by the change of
+!> lattice); zero on the partly covered ones, whose compliance moves with the coverage.
 !> Works serially and over FFTW-MPI slabs (every operation is local to the slab except
 !> the transforms and the dot products).
 module fold_stokes_rigid
@@ -171,9 +172,13 @@ contains
          return
       end if
 
-      ! guess: the previous multiplier where the voxel is still solid
+      ! guess: the previous multiplier where the voxel is still solid (lam_field holds the
+      ! solid voxels' only). A partly covered voxel starts from zero: its compliance changes
+      ! with the coverage, (1 - chi) / (2 eta_f chi) -> infinity as chi -> 0, so a
+      ! multiplier carried over onto it leaves a residual C lambda without bound (10^9 times
+      ! ||E|| seen on dense fibres, where the zero start has 1).
       do v = 1, s%nsol
-         if (s%set%warm_start .and. s%have_guess) then
+         if (s%set%warm_start .and. s%have_guess .and. s%comp(v) == 0.0_dp) then
             s%lam(:, v) = s%lam_field(:, s%sol(1, v), s%sol(2, v), s%sol(3, v))
          else
             s%lam(:, v) = 0.0_dp
@@ -232,10 +237,10 @@ contains
       s%have_guess = .true.
       if (s%stencil) call to_staggered(s, s%x)
 
-      ! the multiplier as fields (next guess) and its mean, the particles' stress
+      ! the solid voxels' multiplier as fields (next guess) and its mean, the particles' stress
       s%lam_field = 0.0_dp
       do v = 1, s%nsol
-         s%lam_field(:, s%sol(1, v), s%sol(2, v), s%sol(3, v)) = s%lam(:, v)
+         if (s%comp(v) == 0.0_dp) s%lam_field(:, s%sol(1, v), s%sol(2, v), s%sol(3, v)) = s%lam(:, v)
       end do
       call multiplier_mean(s)
       call solve_verdict(s%set, "stokes_rigid_solve", "CG", it, s%residual, stat, errmsg)
