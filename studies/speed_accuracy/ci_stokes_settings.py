@@ -1,0 +1,247 @@
+"""What each numerical setting of the Stokes-coupled simulation costs, and what it does to C_I.
+
+Question
+    A user of the fluid-coupled simulation pays for a C_I at a stated accuracy, not for a
+    Stokes step. For the Folgar–Tucker C_I of a semi-dilute and a concentrated fibre
+    suspension (closure-free rate regression with the run's own a4, and the trajectory fit
+    of Folgar–Tucker + IBOF to a2(t)) and for a2(t) itself: how far does each cheaper
+    setting of the Stokes numerics (CG tolerance, single-precision transforms, a solve every
+    k-th step, the time step, exact rigidity instead of the penalty, the grid) move the
+    answer from the reference setting, in units of the answer's statistical error over 4
+    seeds, and what does it save in CPU time? Which settings keep their change below half
+    that statistical error (the rule of ``numerics.preset = "study"``)?
+
+Method
+    Each scene (pyfold.scene.sheared_fibres: β = 5 fibres, simple shear γ̇ = 1, security
+    zone α = 0.1 d, Δt = α/(γ̇L) = 0.02 unless a setting changes it, AB2, records every
+    0.2 strain, strain 30) is run with every setting on the same seeds: a seed fixes the
+    initial state, so each setting is compared with the reference seed by seed
+    (pyfold.ensemble.paired_difference). Reference: κ = 10³, CG tolerance 10⁻⁴, 3 voxels
+    per diameter requested (the numerics of ci_hydrodynamics.py and of the evidence behind
+    ``hydrodynamics = "auto"``). Per setting: the ensemble C_I (mean over seeds, error the
+    larger of the scatter and the pooled run errors, pyfold.ensemble.ensemble_mean), the
+    paired change against the reference ± its standard error, the change in units of the
+    reference's ensemble error, the RMS change of a2(t) over the run (paired mean), and the
+    mean CPU time per run with its ratio to the reference's.
+    The penalty's tolerance stops at 10⁻³: at 10⁻² ``pyfold validate`` refuses κ = 10³ on
+    these grids (the bound on the particles' stress error,
+    docs/physics.md#how-large-a-penalty-the-solver-can-carry); exact rigidity has no κ.
+    Scenes: semi-dilute n L³ = 5 (98 fibres, cell 2.7 L, 42³ at 3 voxels per diameter) and
+    concentrated n L³ = 10 (196 fibres); the settings are listed in SETTINGS, the points in
+    studies/sweeps/ci_stokes_settings.toml.
+
+Command
+    .venv/bin/python studies/speed_accuracy/ci_stokes_settings.py [--executor slurm] [--seeds 1 2]
+    (the sweep runs two serial simulations at a time; finished runs are re-used, a killed
+    one is resumed from its checkpoint; --analyse-only analyses what is there)
+
+Cost (2 cores)
+    The sweep is about 5 CPU-hours (the reference run of the semi-dilute scene alone about
+    8 CPU-min, 4 seeds; the 4-voxel grid about 3 times that); the analysis about 2 CPU-min.
+    The measured CPU time of every run is in the outputs.
+
+Outputs (under out/speed_accuracy/ci_stokes_settings/, ``--out``)
+    sweep/                       the runs (pyfold sweep folder)
+    ci_stokes_settings.nc        per scene, setting and seed: C_I (both estimators), a2 RMS
+                                 change, CPU s; per scene and setting the ensemble and paired values
+    ci_stokes_settings.md        the tables
+    ci_stokes_settings.png       change of C_I in units of its statistical error against CPU
+                                 time per run, one panel per scene and estimator
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from pyfold import run_checks
+from pyfold.ci_estimators import ci_rate_regression
+from pyfold.ensemble import ensemble_mean, paired_difference
+from pyfold.fast_fit import fit_ci_rk4
+from pyfold.run_results import open_run
+from pyfold.scene.sheared_fibres import sheared_fibres
+from pyfold.sweep import store as sweep_store
+
+ALPHA_OVER_D = 0.1
+BETA = 5.0
+#: scene name -> n L^3
+SCENES = {"semi-dilute": 5.0, "concentrated": 10.0}
+REFERENCE = "tol1e-4"
+#: setting -> ([numerics.stokes] keys, time step or None (alpha / (gamma_dot L)), what it is)
+SETTINGS: dict[str, tuple[dict, float | None, str]] = {
+    "tol1e-4": ({"tolerance": 1e-4}, None, "κ 10³, tolerance 10⁻⁴ (reference)"),
+    "tol1e-3": ({"tolerance": 1e-3}, None, "tolerance 10⁻³"),
+    "tol1e-3_single": ({"tolerance": 9.9e-4, "fft_precision": "single"}, None,
+                       "tolerance 9.9·10⁻⁴, single-precision transforms"),
+    "tol1e-3_every2": ({"tolerance": 1e-3, "solve_every": 2}, None, "tolerance 10⁻³, a solve every 2nd step"),
+    "tol1e-3_every4": ({"tolerance": 1e-3, "solve_every": 4}, None, "tolerance 10⁻³, a solve every 4th step"),
+    "tol1e-3_dt0.04": ({"tolerance": 1e-3}, 0.04, "tolerance 10⁻³, Δt 0.04 (twice the reference)"),
+    "exact1e-2": ({"rigidity": "exact", "tolerance": 1e-2}, None, "exact rigidity, tolerance 10⁻²"),
+    "tol1e-4_cpd4": ({"tolerance": 1e-4, "cells_per_diameter": 4}, None, "4 voxels per diameter, tolerance 10⁻⁴"),
+}
+ESTIMATORS = {"closure_free": "rate regression with the run's own a4",
+              "ibof_trajectory": "Folgar–Tucker + IBOF fitted to a2(t)"}
+#: The preset's rule: a setting is admissible where its change of C_I stays below this
+#: fraction of the reference's ensemble error.
+ADMISSIBLE_FRACTION = 0.5
+
+
+def scene_of(scene: str, setting: str, seed: int, t_end: float):
+    """The sweep's builder: the scene ``scene`` with the numerics ``setting``, seed ``seed``."""
+    stokes = {"cells_per_diameter": 3, "kappa": 1e3, **SETTINGS[setting][0]}
+    return sheared_fibres(BETA, SCENES[scene], seed, t_end, alpha_over_d=ALPHA_OVER_D, dt=SETTINGS[setting][1],
+                          hydrodynamics="stokes", stokes=stokes, time_scheme="ab2")
+
+
+def analyse_run(path: Path) -> dict:
+    """C_I of one run by both estimators, its a2(t) and its CPU time."""
+    ds = open_run(path)
+    L = run_checks.velocity_gradient_of(path)
+    xi = run_checks.shape_factor_of(ds)
+    t, a2, a4 = ds["time"].values, ds["a2"].values, ds["a4"].values
+    reg = ci_rate_regression(t, a2, a4, L, xi)
+    fit = fit_ci_rk4("ibof", t, a2, L, xi)
+    attempts = sweep_store.attempts(path.parent)
+    return {"t": t, "a2": a2, "cpu_s": float(sum(a.get("cpu_s", math.nan) for a in attempts)) if attempts else math.nan,
+            "closure_free": (reg.ci, reg.stderr), "ibof_trajectory": (fit.ci, fit.stderr),
+            "iterations": float(ds["stokes_iterations"].values.mean()) if "stokes_iterations" in ds else math.nan}
+
+
+def compare(runs: dict, scene: str, settings: list[str], seeds: list[int]) -> list[dict]:
+    """Per setting: ensemble C_I, paired change against the reference, a2 change, cost."""
+    ref = {s: runs[scene, REFERENCE, s] for s in seeds}
+    rows = []
+    for name in settings:
+        have = [s for s in seeds if (scene, name, s) in runs]
+        row = {"setting": name, "seeds": have, "cpu_s": float(np.mean([runs[scene, name, s]["cpu_s"] for s in have])),
+               "iterations": float(np.mean([runs[scene, name, s]["iterations"] for s in have]))}
+        row["cpu_ratio"] = row["cpu_s"] / float(np.mean([ref[s]["cpu_s"] for s in have]))
+        for est in ESTIMATORS:
+            v = [runs[scene, name, s][est][0] for s in have]
+            e = [runs[scene, name, s][est][1] for s in have]
+            ens = ensemble_mean(v, e)
+            ref_ens = ensemble_mean([ref[s][est][0] for s in have], [ref[s][est][1] for s in have])
+            d = paired_difference(v, [ref[s][est][0] for s in have])
+            row[est] = {"mean": ens.mean, "error": ens.error, "change": d.mean, "change_stderr": d.stderr,
+                        "p": d.p, "in_stat_errors": abs(d.mean) / ref_ens.error,
+                        "stderr_in_stat_errors": d.stderr / ref_ens.error,
+                        "bound_in_stat_errors": (abs(d.mean) + d.stderr) / ref_ens.error
+                        if math.isfinite(d.stderr) else math.nan}
+        a2c = []
+        for s in have:
+            a, r = runs[scene, name, s], ref[s]
+            a2_on_ref = np.stack([np.interp(r["t"], a["t"], a["a2"][:, i, j]) for i in range(3) for j in range(3)], 1)
+            a2c.append(float(np.sqrt(np.mean((a2_on_ref - r["a2"].reshape(len(r["t"]), 9)) ** 2))))
+        row["a2_rms_change"] = float(np.mean(a2c))
+        rows.append(row)
+    return rows
+
+
+def table(scene: str, rows: list[dict]) -> str:
+    head = (f"### {scene}\n\n| setting | seeds | CPU s/run | × reference | CG it/solve | "
+            + " | ".join(f"C_I {k} ± err | change ± s.e. | in stat. errors" for k in ESTIMATORS)
+            + " | a2 RMS change |\n|" + "---|" * (6 + 3 * len(ESTIMATORS)) + "\n")
+    lines = []
+    for r in rows:
+        cells = [SETTINGS[r["setting"]][2], str(len(r["seeds"])), f"{r['cpu_s']:.0f}", f"{1 / r['cpu_ratio']:.2f}",
+                 f"{r['iterations']:.1f}"]
+        for est in ESTIMATORS:
+            c = r[est]
+            cells += [f"{c['mean']:.2e} ± {c['error']:.1e}", f"{c['change']:+.1e} ± {c['change_stderr']:.1e}",
+                      f"{c['in_stat_errors']:.2f}"]
+        cells.append(f"{r['a2_rms_change']:.1e}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return head + "\n".join(lines) + "\n"
+
+
+def figure(all_rows: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(all_rows), len(ESTIMATORS), figsize=(10, 3.8 * len(all_rows)), squeeze=False)
+    for i, (scene, rows) in enumerate(all_rows.items()):
+        for j, est in enumerate(ESTIMATORS):
+            ax = axes[i, j]
+            for r in rows:
+                c = r[est]
+                ax.errorbar(r["cpu_s"], c["in_stat_errors"], yerr=np.nan_to_num(c["stderr_in_stat_errors"]),
+                            fmt="o", color="C3" if r["setting"] == REFERENCE else "C0")
+                ax.annotate(r["setting"], (r["cpu_s"], c["in_stat_errors"]), fontsize=7, xytext=(3, 3),
+                            textcoords="offset points")
+            ax.axhline(ADMISSIBLE_FRACTION, color="k", ls="--", lw=0.8)
+            ax.set_xscale("log")
+            ax.set_xlabel("CPU s per run (strain 30)")
+            ax.set_ylabel("|ΔC_I| / statistical error (4 seeds)")
+            ax.set_title(f"{scene}: {ESTIMATORS[est]}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def dataset(runs: dict, all_rows: dict, seeds: list[int]) -> xr.Dataset:
+    scenes, settings = list(all_rows), list(SETTINGS)
+    shape = (len(scenes), len(settings), len(seeds))
+    data = {f"ci_{est}": np.full(shape, np.nan) for est in ESTIMATORS}
+    data.update({f"ci_{est}_stderr": np.full(shape, np.nan) for est in ESTIMATORS})
+    data["cpu_s"] = np.full(shape, np.nan)
+    for (sc, st, sd), r in runs.items():
+        if sc in scenes and sd in seeds:
+            k = (scenes.index(sc), settings.index(st), seeds.index(sd))
+            for est in ESTIMATORS:
+                data[f"ci_{est}"][k], data[f"ci_{est}_stderr"][k] = r[est]
+            data["cpu_s"][k] = r["cpu_s"]
+    dims = ("scene", "setting", "seed")
+    ds = xr.Dataset({k: (dims, v, {"units": "s" if k == "cpu_s" else "1",
+                                   "long_name": "CPU time of the run" if k == "cpu_s" else k.replace("_", " ")})
+                     for k, v in data.items()},
+                    coords={"scene": scenes, "setting": settings, "seed": seeds})
+    for est in ESTIMATORS:
+        for field, units in (("change", "1"), ("change_stderr", "1"), ("in_stat_errors", "1")):
+            v = np.full((len(scenes), len(settings)), np.nan)
+            for i, sc in enumerate(scenes):
+                for r in all_rows[sc]:
+                    v[i, settings.index(r["setting"])] = r[est][field]
+            ds[f"ci_{est}_{field}"] = (("scene", "setting"), v,
+                                       {"units": units, "long_name": f"paired {field.replace('_', ' ')} of C_I "
+                                                                     f"({ESTIMATORS[est]}) against {REFERENCE}"})
+    ds.attrs.update(reference=REFERENCE, beta=BETA, alpha_over_d=ALPHA_OVER_D,
+                    admissible_fraction=ADMISSIBLE_FRACTION)
+    return ds
+
+
+def main() -> None:
+    from pyfold.sweep import study as sweep_study
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
+    ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
+    ap.add_argument("--np", type=int, default=None, help="MPI ranks per run (default: the sweep file's)")
+    ap.add_argument("--out", type=Path, default=Path("out/speed_accuracy/ci_stokes_settings"))
+    sweep_study.add_arguments(ap)
+    args = ap.parse_args()
+    spec = sweep_study.load_form(Path(__file__).resolve().parents[1] / "sweeps", "ci_stokes_settings", False,
+                                 seeds=tuple(args.seeds) if args.seeds else None)
+    done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor, args.np,
+                                 analyse_only=args.analyse_only)
+    runs = {(scene, setting, seed): analyse_run(path) for ((scene, setting), seed), path in done.items()}
+    seeds = list(spec.seeds)
+    all_rows = {}
+    for scene in SCENES:
+        settings = [st for st in SETTINGS if any((scene, st, s) in runs for s in seeds)]
+        ref_seeds = [s for s in seeds if (scene, REFERENCE, s) in runs]
+        if REFERENCE in settings and ref_seeds:
+            all_rows[scene] = compare(runs, scene, settings, ref_seeds)
+    args.out.mkdir(parents=True, exist_ok=True)
+    md = "\n".join(table(sc, rows) for sc, rows in all_rows.items())
+    (args.out / "ci_stokes_settings.md").write_text(md)
+    dataset(runs, all_rows, seeds).to_netcdf(args.out / "ci_stokes_settings.nc", engine="h5netcdf")
+    figure(all_rows, args.out / "ci_stokes_settings.png")
+    print(md)
+
+
+if __name__ == "__main__":
+    main()
