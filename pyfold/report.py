@@ -462,19 +462,21 @@ def interpretation(rep: Report) -> list[str]:
                      "with that closure follows the simulation best without any diffusion.")
     if "exact" in rep.ci:
         e = rep.ci["exact"]
+        coupled = rep.provenance is not None and rep.provenance.hydrodynamics == "stokes"
+        agent = "the hydrodynamic interactions and contacts" if coupled else "the contacts"
         significant = math.isfinite(e.error) and abs(e.mean) > 2.0 * e.error
         moved = redistribution_words(rep)
         if not significant:
             sign = "not distinguishable from 0"
         elif e.mean < 0:
-            sign = ("negative: the contacts do not act as isotropic diffusion; they redistribute orientation "
+            sign = (f"negative: {agent} do not act as isotropic diffusion; they redistribute orientation "
                     "anisotropically" + (f" ({moved})" if moved else "") + ", and that redistribution projected on "
                     "isotropic diffusion has a negative coefficient")
         else:
-            sign = "positive: projected on isotropic diffusion the contacts spread orientations" + (
+            sign = f"positive: projected on isotropic diffusion {agent} spread orientations" + (
                 f" ({moved})" if moved else "")
         lines.append(f"The closure-free C_I (rate regression with the runs' own a4) = {e.mean:+.2e} ± "
-                     f"{_fmt(e.error, '.1e')} is what the contacts alone do, projected on Folgar-Tucker's isotropic "
+                     f"{_fmt(e.error, '.1e')} is what {agent if coupled else 'the contacts alone'} do, projected on Folgar-Tucker's isotropic "
                      "diffusion; " + sign + ". The difference from "
                      "the fitted values is the closure's error plus the memory of the initial orbits that "
                      "Folgar-Tucker's diffusion stands in for (docs/physics.md#what-contacts-alone-do).")

@@ -45,6 +45,9 @@ def _bundled_scenes() -> Path:
 SCENES = _bundled_scenes()
 DEFAULT_SCENE = SCENES / "default.toml"
 STOKES_SCENE = SCENES / "stokes_small.toml"
+#: The scene of ``--fluid-coupled``: fibres coupled through the Stokes solver, numerics by the
+#: study preset (docs/speed_accuracy.md)
+FLUID_SCENE = SCENES / "fluid_coupled.toml"
 #: Seeds of the ensemble by default: enough for a standard error across seeds and a
 #: paired test (3 degrees of freedom), and two rounds of two processes on 2 cores.
 DEFAULT_SEEDS = 4
@@ -61,6 +64,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              f"(default {DEFAULT_PROCESSES})")
     parser.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, metavar="K",
                         help=f"seeds of the ensemble: the scene's seed, seed + 1, ... (default {DEFAULT_SEEDS})")
+    parser.add_argument("--fluid-coupled", action="store_true",
+                        help=f"the fluid-coupled answer: the bundled {FLUID_SCENE.name} (fibres coupled through the "
+                             "Stokes solver; or --scene, which must resolve to Stokes hydrodynamics) for each seed, "
+                             "its contacts-only twin on the same seeds beside it; the report's C_I is the "
+                             "fluid-coupled one")
     parser.add_argument("--closures", default=None,
                         help="comma-separated closures to estimate C_I with and to judge: 'exact' (the runs' own "
                              "a4) or names of pyfold.closures.available(dim) "
@@ -75,9 +83,17 @@ def _scene_dim(scene: Path) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    scene = Path(args.scene) if args.scene else DEFAULT_SCENE
+    fluid = bool(getattr(args, "fluid_coupled", False))
+    scene = Path(args.scene) if args.scene else (FLUID_SCENE if fluid else DEFAULT_SCENE)
     if not scene.is_file():
         raise InputError(f"--scene: no such scene file: {scene}")
+    if fluid:
+        from pyfold.scene import load_scene
+
+        chosen = load_scene(scene).hydrodynamics
+        if chosen != "stokes":
+            raise InputError(f"--fluid-coupled: the scene {scene} resolves to hydrodynamics = {chosen!r}; the "
+                             "fluid-coupled job needs a scene the Stokes solver runs (model.hydrodynamics = 'stokes')")
     from pyfold.commands.run import check_ranks
 
     check_ranks(args.np)
@@ -101,10 +117,11 @@ def run(args: argparse.Namespace) -> int:
 
     make_parent(parent, "--out")  # where its lock file goes
     with acquire(parent, "--out", command=f"pyfold main --out {parent}"):
-        return _run_locked(parent, scene, args.np, args.seeds, closures)
+        return _run_locked(parent, scene, args.np, args.seeds, closures, fluid)
 
 
-def _run_locked(parent: Path, scene: Path, processes: int, n_seeds: int, closures: tuple[str, ...]) -> int:
+def _run_locked(parent: Path, scene: Path, processes: int, n_seeds: int, closures: tuple[str, ...],
+                fluid: bool = False) -> int:
     """The job, with its results folder ``parent`` locked."""
     try:
         parent.mkdir(exist_ok=True)
@@ -118,7 +135,7 @@ def _run_locked(parent: Path, scene: Path, processes: int, n_seeds: int, closure
         final = parent / f"{stamp}-{suffix}"
     work = Path(tempfile.mkdtemp(prefix=".partial-", dir=parent))
     try:
-        _job(work, scene, processes, n_seeds, closures)
+        _job(work, scene, processes, n_seeds, closures, fluid)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
@@ -238,8 +255,50 @@ class _Jobs:
         self.running.clear()
 
 
-def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tuple[str, ...]) -> None:
-    """Simulate the seeds, report on them (and run the Stokes scene meanwhile)."""
+def contacts_only_twin(text: str, dt: float) -> str:
+    """The scene text with the contacts-only model (``model.hydrodynamics = "jeffery"``) at the
+    time step ``dt`` of its fluid-coupled run: the same particles, seed and outputs, no Stokes
+    settings and no preset."""
+    import tomllib
+
+    import tomli_w
+
+    data = tomllib.loads(text)
+    data.setdefault("model", {})["hydrodynamics"] = "jeffery"
+    num = data.setdefault("numerics", {})
+    for key in ("stokes", "preset", "time_scheme"):
+        num.pop(key, None)
+    num["dt"] = float(dt)
+    if "title" in data:
+        data["title"] = f"{data['title']} (contacts-only twin)"
+    return tomli_w.dumps(data)
+
+
+def twin_lines(fluid, twin) -> list[str]:
+    """The fluid-coupled C_I against the contacts-only twins' (two pyfold.report.Report of the
+    same seeds): closure-free rate regression and every trajectory fit, with the difference."""
+    import math
+
+    lines = ["", "Fluid-coupled against contacts only (the same seeds and time step; contacts-only twins in "
+             "contacts_only/):", f"  {'C_I':<28} {'fluid-coupled':>22} {'contacts only':>22} {'difference':>22}"]
+
+    def row(label, a, b):
+        if a is None or b is None:
+            return
+        err = math.hypot(a.error, b.error) if math.isfinite(a.error) and math.isfinite(b.error) else math.nan
+        lines.append(f"  {label:<28} {a.mean:+11.3e} ± {a.error:8.1e} {b.mean:+11.3e} ± {b.error:8.1e} "
+                     f"{a.mean - b.mean:+11.3e} ± {err:8.1e}")
+
+    row("closure-free (rate regr.)", fluid.ci.get("exact"), twin.ci.get("exact"))
+    for c in fluid.ci_fit:
+        row(f"{c} (trajectory fit)", fluid.ci_fit.get(c), twin.ci_fit.get(c))
+    return lines
+
+
+def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tuple[str, ...],
+         fluid: bool = False) -> None:
+    """Simulate the seeds, report on them (and run the Stokes scene meanwhile; with ``fluid``
+    the contacts-only twins instead, reported beside the fluid-coupled C_I)."""
     from pyfold import report
     from pyfold.scene import load_scene
 
@@ -263,10 +322,19 @@ def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tupl
                     raise PyfoldError(f"{scene}: could not set numerics.seed = {seed} in a copy of the scene")
             runs.append(outdir / f"run_seed{seed}.h5")
             pending.append((f"seed {seed}", seed_scene, runs[-1]))
+        twins = []
+        if fluid:
+            (outdir / "contacts_only").mkdir()
+            for seed, (_, seed_scene, _) in zip(seeds, list(pending)):
+                twin = scratch / f"twin_{seed}.toml"
+                twin.write_text(contacts_only_twin(seed_scene.read_text(encoding="utf-8"),
+                                                   load_scene(seed_scene).dt), encoding="utf-8")
+                twins.append(outdir / "contacts_only" / f"run_seed{seed}.h5")
+                pending.insert(len(twins) - 1, (f"contacts-only twin of seed {seed}", twin, twins[-1]))
         say(f"1/3 direct simulation of {scene.name}, seeds {', '.join(map(str, seeds))} "
-            f"({jobs.slots} at a time)")
+            + ("with their contacts-only twins " if fluid else "") + f"({jobs.slots} at a time)")
         jobs.run_all(pending, say)
-        stokes = STOKES_SCENE.is_file() and scene.resolve() == DEFAULT_SCENE.resolve()
+        stokes = not fluid and STOKES_SCENE.is_file() and scene.resolve() == DEFAULT_SCENE.resolve()
         if stokes:
             say(f"2/3 small Stokes scene {STOKES_SCENE.name} (fibres coupled through the fluid), beside step 3")
             jobs.start("Stokes scene", STOKES_SCENE, outdir / "stokes_run.h5")
@@ -279,6 +347,9 @@ def _job(outdir: Path, scene: Path, processes: int, n_seeds: int, closures: tupl
             while jobs.running:
                 jobs.wait_one()
             extra = [report.stokes_summary(outdir / "stokes_run.h5")]
+        elif fluid:
+            say("  the contacts-only twins")
+            extra = twin_lines(rep, report.build_report(twins, closures, force=True))
         else:
             extra = ["Stokes scene: skipped (it runs with the bundled default scene only)"]
         extra.append(f"main job: {n_seeds} seeds, {jobs.slots} processes at a time; "

@@ -6,6 +6,7 @@ run file's ``/setup/resolved`` group is a plain table of numbers with units.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -142,6 +143,7 @@ class ResolvedScene:
     warnings: tuple[str, ...] = field(default=())
     stokes_grid: tuple[int, int, int] | None = None  # voxel counts (n3 = 1 in 2-D), stokes only
     toml: str = ""  # the scene file verbatim, when read from TOML
+    preset_reason: str = ""  # numerics.preset = "study": what it chose, and the evidence
 
     @property
     def n_particles(self) -> int:
@@ -168,6 +170,8 @@ class ResolvedScene:
             "seed": _dataset("seed", self.seed),
             "hydrodynamics": _dataset("hydrodynamics", self.hydrodynamics),
             "hydrodynamics_reason": (self.reason, "", "what was chosen for hydrodynamics and collisions, and why"),
+            **({"numerics_preset_reason": (self.preset_reason, "", "numerics.preset: the numerical settings it "
+                                           "chose, and the measured evidence")} if self.preset_reason else {}),
             "scene_warnings": ("\n".join(self.warnings), "", "what pyfold validate warned about (one per line)"),
             "collisions": _dataset("collisions", self.collisions),
             "alpha": _dataset("alpha", self.alpha),
@@ -211,6 +215,7 @@ class ResolvedScene:
             if self.regime != "spheres" else
             f"regime: spheres, total volume fraction {sum(f.volume_fraction for f in self.families):.4g}",
             self.reason,
+            *([self.preset_reason] if self.preset_reason else []),
             f"cell: {self.dim}-D {' x '.join(f'{v:g}' for v in self.cell_lengths[:self.dim])}, "
             f"{'Couette walls' if self.walls else 'periodic'}; {self.n_steps} steps of {self.dt:g} to t = {self.t_end:g}",
         ]
@@ -712,6 +717,11 @@ def _axes(vectors, path: str, dim: int, problems: Problems) -> np.ndarray | None
 def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None = None) -> ResolvedScene:
     """Check every rule that ties keys together and resolve the scene.
 
+    With ``numerics.preset = "study"`` the scene is resolved once to learn its regime,
+    model, security zone and rates, the preset fills the numerical keys the scene leaves
+    unset (pyfold/scene/study_preset.py), and the filled scene is resolved; its
+    ``preset_reason`` says what was chosen and on what evidence.
+
     Parameters
     ----------
     scene : Scene
@@ -731,6 +741,17 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
     InputError
         Listing every problem found, each under its key path with the allowed range.
     """
+    if scene.numerics.preset is None:
+        return _normalise(scene, source, base_dir)
+    from pyfold.scene import study_preset
+
+    probe = _normalise(study_preset.probe_scene(scene), source, base_dir)
+    filled, reason = study_preset.fill(scene, probe)
+    return dataclasses.replace(_normalise(filled, source, base_dir), preset_reason=reason)
+
+
+def _normalise(scene: Scene, source: str, base_dir: str | Path | None) -> ResolvedScene:
+    """:func:`normalise` of a scene whose numerical keys are final."""
     problems = Problems()
     cell, dim = scene.cell, scene.cell.dim
     if len(cell.size) != dim:
@@ -907,6 +928,10 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
                      f"of the most packable family")
 
     num = scene.numerics
+    if num.dt is None:
+        problems.add("numerics.dt", 'required (a time step > 0), or numerics.preset = "study" to have it chosen '
+                     "for the scene (pyfold/scene/study_preset.py)")
+        problems.raise_if_any(source)
     n_steps = None
     scale = float(np.max(np.abs(G))) if G is not None else 0.0  # flow time scale 1/max|G_ij|
     dt_min = max(num.t_end / MAX_STEPS, MIN_STRAIN_PER_STEP / scale if scale > 0 else 0.0)

@@ -375,11 +375,18 @@ SETTINGS: tuple[Setting, ...] = (
             help="sphere-sphere lubrication force; spheres only"),
     # ---- [numerics]
     Setting("numerics.dt", "real", None, lo=0, lo_open=True, units="s", resolved="dt", legend="time step",
-            fortran="DT", help="time step"),
+            fortran="DT", default_text='required, unless numerics.preset = "study" chooses it',
+            help="time step"),
     Setting("numerics.t_end", "real", None, lo=0, lo_open=True, units="s", resolved="t_end", legend="end time",
             fortran="T_END", help="end time; a multiple of dt"),
     Setting("numerics.seed", "integer", 0, lo=0, hi=INT32_MAX, resolved="seed", legend="random seed",
             help="seed of every random draw (placement, orientations)"),
+    Setting("numerics.preset", "choice", None, ("study",),
+            default_text="none: each key keeps its own default",
+            help='"study": every numerical setting the scene leaves '
+                 'unset (dt and the Stokes tolerance, precision, rigidity, reuse and resolution) chosen, '
+                 'for the scene\'s regime, as the cheapest measured to move C_I by less than half its '
+                 'statistical error over 4 seeds (pyfold/scene/study_preset.py, docs/speed_accuracy.md)'),
     Setting("numerics.time_scheme", "choice", "ab2", ("ab2", "euler"), _codes(euler=1, ab2=2), physics=_STOKES,
             resolved="time_scheme",
             legend="time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2",

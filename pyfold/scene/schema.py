@@ -263,8 +263,8 @@ class StokesSettings(_Table):
 class Numerics(_Table):
     """Time stepping and solver settings."""
 
-    #: time step [s]
-    dt: _registered("numerics.dt")
+    #: time step [s]; required unless preset = "study" chooses it
+    dt: _registered("numerics.dt") | None = None
     #: end time; a multiple of dt [s]
     t_end: _registered("numerics.t_end")
     #: seed of every random draw (placement, orientations)
@@ -273,6 +273,12 @@ class Numerics(_Table):
     #: Euler; second order) or "euler" (explicit Euler, the seed's). Rotations are exact
     #: either way. Jeffery hydrodynamics ignores it (exact propagator for constant G).
     time_scheme: _registered("numerics.time_scheme") = _default("numerics.time_scheme")
+    #: "study": the numerical settings the scene leaves unset (dt, and for a Stokes-coupled
+    #: run the solver's tolerance, precision, rigidity, reuse and resolution) chosen by their
+    #: measured effect on C_I (pyfold/scene/study_preset.py); absent: each key's own default
+    #: (absent rather than a word, so the normalised scene, and a sweep run's identity, of a
+    #: scene without a preset are what they were before the key existed)
+    preset: _registered("numerics.preset") | None = None
     stokes: StokesSettings = StokesSettings()
 
 

@@ -166,9 +166,14 @@ LARGE = Study(beta=10.0, n_l3=10.0, t_end=50.0, seeds=sweep_spec(True).seeds, ce
               tolerance=1e-6, kappa=1e3, max_grid_points=1_000_000, check_refinements=(1,))
 
 
+#: The dilute twin of SMALL (18 fibres, n L^3 = 0.91): studies/speed_accuracy/ci_dilute.py.
+DILUTE = dataclasses.replace(SMALL, n_l3=0.9)
+FORMS = {"small": SMALL, "large": LARGE, "dilute": DILUTE}
+
+
 def sweep_scene(model: str, seed: int, form: str):
-    """The scene of ``model`` and ``seed`` in the form ``form`` ("small", "large"): the sweep files' builder."""
-    return {"small": SMALL, "large": LARGE}[form].scene(model, seed)
+    """The scene of ``model`` and ``seed`` in the form ``form`` (a key of FORMS): the sweep files' builder."""
+    return FORMS[form].scene(model, seed)
 CHECK_ORIENTATIONS = 24  # omega(theta) carries voxelisation wiggles: ~0.3 % on T at 24 (jeffery_period.py)
 
 
@@ -303,21 +308,26 @@ def main() -> None:
     # the sweep (pyfold.sweep), locally or on Slurm: each run once, resumed when interrupted
     done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor, args.np,
                                  analyse_only=args.analyse_only)
-    paths = {(model, seed): p for ((model,), seed), p in done.items()}
+    analyse_and_write(study, {(model, seed): p for ((model,), seed), p in done.items()}, args.out,
+                      args.sweep_dir or args.out / "sweep")
+    print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
 
+
+def analyse_and_write(study: Study, paths: dict, out: Path, sweep_dir: Path) -> Path:
+    """Analyse the runs ``paths`` ((model, seed) -> run file) and write ci_hydrodynamics.{nc,png,md}
+    into ``out``; returns the .nc path."""
     rows: dict[tuple[str, int], dict] = {}
     for key, path in paths.items():
         rows[key] = analyse_run(path)
     seeds = [s for s in study.seeds if all((m, s) in rows for m in MODELS)]
     missing = sorted(set(study.seeds) - set(seeds))
     if not seeds:
-        raise SystemExit(f"no finished pair of runs under {args.sweep_dir or args.out / 'sweep'}; run without "
-                         "--analyse-only first")
+        raise SystemExit(f"no finished pair of runs under {sweep_dir}; run without --analyse-only first")
     if missing:
         print(f"seeds without a finished pair of runs (left out): {missing}")
     grid = rows["stokes", seeds[0]]["grid"]
     side = study.scene("stokes", seeds[0]).side
-    check = single_fibre_check(study, grid, side, args.out / "single_fibre_check.nc")
+    check = single_fibre_check(study, grid, side, out / "single_fibre_check.nc")
     # Sensitivity: the Stokes runs regressed with the xi of the rotation the solver gives one
     # cylinder on this grid, instead of Cox's (the Jeffery runs rotate with Cox's xi exactly).
     be = float(check["beta_e_measured"].sel(shape="fibre").values[0])
@@ -330,13 +340,14 @@ def main() -> None:
                                                   run_checks.velocity_gradient_of(path), xi_measured)
 
     # Save
+    out.mkdir(parents=True, exist_ok=True)
     result = _dataset(study, rows, seeds, check, xi_measured)
-    result.to_netcdf(args.out / "ci_hydrodynamics.nc", engine="h5netcdf")
-    _figure(result, args.out / "ci_hydrodynamics.png")
+    result.to_netcdf(out / "ci_hydrodynamics.nc", engine="h5netcdf")
+    _figure(result, out / "ci_hydrodynamics.png")
     report = _report(result)
-    (args.out / "ci_hydrodynamics.md").write_text(report)
+    (out / "ci_hydrodynamics.md").write_text(report)
     print(report)
-    print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
+    return out / "ci_hydrodynamics.nc"
 
 
 def _dataset(study: Study, rows: dict, seeds: list[int], check: xr.Dataset, xi_measured: float) -> xr.Dataset:

@@ -17,7 +17,7 @@ Question
 
 Command
     nice -n 10 .venv/bin/python studies/speed_accuracy/ci_dilute.py [--seeds 1 2 3 4] [--analyse-only]
-    (--large: 8 seeds, strain 50.)
+    [--executor slurm]   (the sweep studies/sweeps/ci_hydrodynamics.toml with form = "dilute")
 
 Cost on 2 cores
     Measured (nice 10, load average 2-4): 331-343 CPU-s per Stokes run (0.22 CPU-s per step,
@@ -25,13 +25,12 @@ Cost on 2 cores
     the small form (4 pairs, the single-fibre check and the analysis).
 
 Outputs (out/speed_accuracy/ci_dilute/)
-    runs/ (scenes, run files, cost), ci_hydrodynamics.{nc,md,png} in the format of
+    sweep/ (the runs, pyfold sweep folder), ci_hydrodynamics.{nc,md,png} in the format of
     ci_hydrodynamics.py.
 """
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -42,59 +41,50 @@ sys.path.insert(0, str(ROOT / "studies" / "interaction_coefficient"))
 import ci_hydrodynamics as ch  # noqa: E402
 
 # Parameters
-DILUTE = dataclasses.replace(ch.SMALL, n_l3=0.9)
-DILUTE_LARGE = dataclasses.replace(DILUTE, t_end=50.0, seeds=tuple(range(1, 9)))
+DILUTE = ch.DILUTE
 OUT = ROOT / "out" / "speed_accuracy" / "ci_dilute"
 
 
-def run(study: ch.Study, out: Path, simulate: bool = True) -> Path:
-    """Simulate (unless finished) and analyse as ci_hydrodynamics.main does; returns the .nc path."""
-    runs = out / "runs"
-    runs.mkdir(parents=True, exist_ok=True)
-    if simulate:
-        ch.simulate(study, runs, 1)
-    rows = {}
-    for seed in study.seeds:
-        for model in ch.MODELS:
-            _, h5, cost = ch.run_paths(runs, model, seed)
-            if ch.reusable(h5, study.scene(model, seed).toml):
-                rows[model, seed] = ch.analyse_run(h5, cost)
-    seeds = [s for s in study.seeds if all((m, s) in rows for m in ch.MODELS)]
-    if len(seeds) < 2:
-        raise SystemExit(f"fewer than two finished pairs of runs under {runs}")
-    grid = rows["stokes", seeds[0]]["grid"]
-    side = study.scene("stokes", seeds[0]).side
-    check = ch.single_fibre_check(study, grid, side, out / "single_fibre_check.nc")
-    be = float(check["beta_e_measured"].sel(shape="fibre").values[0])
-    xi_measured = (be * be - 1.0) / (be * be + 1.0)
-    for seed in seeds:
-        r = rows["stokes", seed]
-        path = ch.run_paths(runs, "stokes", seed)[1]
-        r["reg_xi_measured"] = ch.ci_rate_regression(r["t"], r["a2"], ch.open_run(path)["a4"].values,
-                                                     ch.run_checks.velocity_gradient_of(path), xi_measured)
-    ds = ch._dataset(study, rows, seeds, check, xi_measured)
+def sweep_spec(seeds=None):
+    """The dilute form of ci_hydrodynamics' sweep, narrowed to ``seeds`` when given."""
+    from pyfold.sweep.study import load_form
+
+    return load_form(ch.SWEEPS, "ci_hydrodynamics", False, seeds=tuple(seeds) if seeds else None,
+                     arguments={"form": "dilute"})
+
+
+def run(out: Path, seeds=None, simulate: bool = True, executor: str = "local", sweep_dir: Path | None = None) -> Path:
+    """Simulate (what is not finished, unless ``simulate`` is False) and analyse as
+    ci_hydrodynamics does; returns the .nc path."""
+    import dataclasses
+
+    from pyfold.sweep import study as sweep_study
+
+    spec = sweep_spec(seeds)
+    root = sweep_dir or out / "sweep"
+    done = sweep_study.run_sweep(spec, root, executor, None, analyse_only=not simulate)
+    study = dataclasses.replace(DILUTE, seeds=tuple(spec.seeds))
+    nc = ch.analyse_and_write(study, {(model, seed): p for ((model,), seed), p in done.items()}, out, root)
+    import xarray as xr
+
+    with xr.open_dataset(nc, engine="h5netcdf") as ds:
+        ds.load()
     ds.attrs["question"] = "C_I with Stokes hydrodynamics + contacts vs contacts only, dilute scene, same seeds"
-    nc = out / "ci_hydrodynamics.nc"
     ds.to_netcdf(nc, engine="h5netcdf")
-    ch._figure(ds, out / "ci_hydrodynamics.png")
-    report = ch._report(ds)
-    (out / "ci_hydrodynamics.md").write_text(report)
-    print(report)
     return nc
 
 
 def main() -> None:
+    from pyfold.sweep import study as sweep_study
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--large", action="store_true")
     ap.add_argument("--analyse-only", action="store_true")
     ap.add_argument("--seeds", type=int, nargs="+")
     ap.add_argument("--out", type=Path, default=OUT)
+    sweep_study.add_arguments(ap)
     args = ap.parse_args()
-    study = DILUTE_LARGE if args.large else DILUTE
-    if args.seeds:
-        study = dataclasses.replace(study, seeds=tuple(args.seeds))
     t0 = time.perf_counter()
-    run(study, args.out, simulate=not args.analyse_only)
+    run(args.out, args.seeds, simulate=not args.analyse_only, executor=args.executor, sweep_dir=args.sweep_dir)
     print(f"written: {args.out} ({time.perf_counter() - t0:.0f} s)")
 
 

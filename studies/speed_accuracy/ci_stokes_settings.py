@@ -6,7 +6,7 @@ Question
     suspension (closure-free rate regression with the run's own a4, and the trajectory fit
     of Folgar–Tucker + IBOF to a2(t)) and for a2(t) itself: how far does each cheaper
     setting of the Stokes numerics (CG tolerance, single-precision transforms, a solve every
-    k-th step, the time step, exact rigidity instead of the penalty, the grid) move the
+    k-th step, the time step) move the
     answer from the reference setting, in units of the answer's statistical error over 4
     seeds, and what does it save in CPU time? Which settings keep their change below half
     that statistical error (the rule of ``numerics.preset = "study"``)?
@@ -25,9 +25,15 @@ Method
     mean CPU time per run with its ratio to the reference's.
     The penalty's tolerance stops at 10⁻³: at 10⁻² ``pyfold validate`` refuses κ = 10³ on
     these grids (the bound on the particles' stress error,
-    docs/physics.md#how-large-a-penalty-the-solver-can-carry); exact rigidity has no κ.
+    docs/physics.md#how-large-a-penalty-the-solver-can-carry). Exact rigidity
+    (``rigidity = "exact"``) is not a point: at tolerance 10⁻² on the semi-dilute scene it
+    ran at about 4 times the reference's CPU time per step and stopped at step 183 (1000 CG
+    iterations, rigidity error 1.3·10⁻²), docs/speed_accuracy.md. The grid is
+    not varied: the C_I is that of 3 voxels per diameter (a β = 5 spheroid's period is 16 %
+    short there; a 4-voxel repeat costs about 3 times the reference).
     Scenes: semi-dilute n L³ = 5 (98 fibres, cell 2.7 L, 42³ at 3 voxels per diameter) and
-    concentrated n L³ = 10 (196 fibres); the settings are listed in SETTINGS, the points in
+    concentrated n L³ = 8 (157 fibres, volume fraction 0.25; at n L³ = 10, φ = 0.31, the
+    random placement jams); the settings are listed in SETTINGS, the points in
     studies/sweeps/ci_stokes_settings.toml.
 
 Command
@@ -36,8 +42,8 @@ Command
     one is resumed from its checkpoint; --analyse-only analyses what is there)
 
 Cost (2 cores)
-    The sweep is about 5 CPU-hours (the reference run of the semi-dilute scene alone about
-    8 CPU-min, 4 seeds; the 4-voxel grid about 3 times that); the analysis about 2 CPU-min.
+    The sweep is about 3 CPU-hours (per run, semi-dilute: the reference 9 CPU-min, the
+    cheapest setting 2; concentrated: about 12 and 3); the analysis about 2 CPU-min.
     The measured CPU time of every run is in the outputs.
 
 Outputs (under out/speed_accuracy/ci_stokes_settings/, ``--out``)
@@ -68,8 +74,12 @@ from pyfold.sweep import store as sweep_store
 ALPHA_OVER_D = 0.1
 BETA = 5.0
 #: scene name -> n L^3
-SCENES = {"semi-dilute": 5.0, "concentrated": 10.0}
+SCENES = {"semi-dilute": 5.0, "concentrated": 8.0}
 REFERENCE = "tol1e-4"
+#: the reference's [numerics.stokes] keys that every setting shares unless it changes them
+REFERENCE_STOKES = {"cells_per_diameter": 3, "kappa": 1e3}
+#: the reference time step: alpha / (gamma_dot L) with alpha = 0.1 d, d = L / BETA, L = 1, gamma_dot = 1
+DT_REFERENCE = ALPHA_OVER_D / BETA
 #: setting -> ([numerics.stokes] keys, time step or None (alpha / (gamma_dot L)), what it is)
 SETTINGS: dict[str, tuple[dict, float | None, str]] = {
     "tol1e-4": ({"tolerance": 1e-4}, None, "κ 10³, tolerance 10⁻⁴ (reference)"),
@@ -79,8 +89,6 @@ SETTINGS: dict[str, tuple[dict, float | None, str]] = {
     "tol1e-3_every2": ({"tolerance": 1e-3, "solve_every": 2}, None, "tolerance 10⁻³, a solve every 2nd step"),
     "tol1e-3_every4": ({"tolerance": 1e-3, "solve_every": 4}, None, "tolerance 10⁻³, a solve every 4th step"),
     "tol1e-3_dt0.04": ({"tolerance": 1e-3}, 0.04, "tolerance 10⁻³, Δt 0.04 (twice the reference)"),
-    "exact1e-2": ({"rigidity": "exact", "tolerance": 1e-2}, None, "exact rigidity, tolerance 10⁻²"),
-    "tol1e-4_cpd4": ({"tolerance": 1e-4, "cells_per_diameter": 4}, None, "4 voxels per diameter, tolerance 10⁻⁴"),
 }
 ESTIMATORS = {"closure_free": "rate regression with the run's own a4",
               "ibof_trajectory": "Folgar–Tucker + IBOF fitted to a2(t)"}
@@ -91,7 +99,7 @@ ADMISSIBLE_FRACTION = 0.5
 
 def scene_of(scene: str, setting: str, seed: int, t_end: float):
     """The sweep's builder: the scene ``scene`` with the numerics ``setting``, seed ``seed``."""
-    stokes = {"cells_per_diameter": 3, "kappa": 1e3, **SETTINGS[setting][0]}
+    stokes = {**REFERENCE_STOKES, **SETTINGS[setting][0]}
     return sheared_fibres(BETA, SCENES[scene], seed, t_end, alpha_over_d=ALPHA_OVER_D, dt=SETTINGS[setting][1],
                           hydrodynamics="stokes", stokes=stokes, time_scheme="ab2")
 
@@ -213,6 +221,56 @@ def dataset(runs: dict, all_rows: dict, seeds: list[int]) -> xr.Dataset:
     return ds
 
 
+def measured(rows: list[dict]) -> dict[str, "Measured"]:
+    """The rows as pyfold.scene.study_preset.Measured (changes in statistical errors, 2 digits)."""
+    from pyfold.scene.study_preset import Measured
+
+    out = {}
+    for r in rows:
+        stokes = {**REFERENCE_STOKES, **SETTINGS[r["setting"]][0]}
+        cf, tr = r["closure_free"], r["ibof_trajectory"]
+        out[r["setting"]] = Measured(
+            name=r["setting"], stokes=stokes, dt_factor=(SETTINGS[r["setting"]][1] or DT_REFERENCE) / DT_REFERENCE,
+            closure_free=round(cf["in_stat_errors"], 2), closure_free_stderr=round(cf["stderr_in_stat_errors"], 2),
+            trajectory=round(tr["in_stat_errors"], 2), trajectory_stderr=round(tr["stderr_in_stat_errors"], 2),
+            cpu_ratio=round(r["cpu_ratio"], 2))
+    return out
+
+
+def evidence_check(all_rows: dict) -> tuple[list[str], list[str]]:
+    """These runs against pyfold.scene.study_preset.EVIDENCE (the preset's copy): (notes, disagreements).
+
+    Identical rows are expected from the same runs. Runs remade on another machine are other
+    realisations of a chaotic suspension (the transforms' round-off differs with the CPU's
+    vector units, and trajectories decorrelate within a strain of a few units): a change then
+    agrees when it differs from the stored one by at most twice their combined standard
+    error; CPU ratios are the machine's and are only noted."""
+    from pyfold.scene.study_preset import EVIDENCE
+
+    notes, bad = [], []
+    for scene, rows in all_rows.items():
+        ev = EVIDENCE.get(scene)
+        if ev is None:
+            bad.append(f"{scene}: no row in pyfold/scene/study_preset.py")
+            continue
+        stored = {m.name: m for m in (ev.reference, *ev.settings)}
+        for name, m in measured(rows).items():
+            old = stored.get(name)
+            if old is None:
+                bad.append(f"{scene}/{name}: not in pyfold/scene/study_preset.py")
+                continue
+            if old == m:
+                continue
+            for est in ("closure_free", "trajectory"):
+                a, b = getattr(old, est), getattr(m, est)
+                width = 2.0 * math.hypot(getattr(old, f"{est}_stderr"), getattr(m, f"{est}_stderr"))
+                line = f"{scene}/{name}/{est}: stored {a:.2f}, recomputed {b:.2f} (2 combined s.e. {width:.2f})"
+                (bad if abs(a - b) > width else notes).append(line)
+            if old.cpu_ratio != m.cpu_ratio:
+                notes.append(f"{scene}/{name}: CPU ratio stored {old.cpu_ratio:.2f}, this machine {m.cpu_ratio:.2f}")
+    return notes, bad
+
+
 def main() -> None:
     from pyfold.sweep import study as sweep_study
 
@@ -241,6 +299,16 @@ def main() -> None:
     dataset(runs, all_rows, seeds).to_netcdf(args.out / "ci_stokes_settings.nc", engine="h5netcdf")
     figure(all_rows, args.out / "ci_stokes_settings.png")
     print(md)
+    for scene, rows in all_rows.items():
+        print(f"{scene}: as pyfold.scene.study_preset.Measured rows:")
+        for m in measured(rows).values():
+            print(f"    {m!r},")
+    notes, bad = evidence_check(all_rows)
+    print("evidence check against pyfold/scene/study_preset.py: "
+          + ("agrees" if not bad else "DISAGREES:\n  " + "\n  ".join(bad))
+          + "".join(f"\n  note: {n}" for n in notes))
+    if bad:
+        raise SystemExit(1)
 
 
 if __name__ == "__main__":

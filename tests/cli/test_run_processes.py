@@ -229,3 +229,37 @@ def test_hopeless_placement_gives_up_early_naming_the_key(tmp_path, fake_fold_ru
     assert "Hint" in err and "lower the volume fraction" in err
     assert took < 20.0, took
     assert not out.exists() and not out.with_name("hopeless.h5.partial").exists()
+
+
+# --fluid-coupled ---------------------------------------------------------------------
+
+def test_fluid_coupled_refuses_a_scene_without_the_stokes_solver(tmp_path, no_simulation, capsys):
+    """The fluid-coupled job on a contacts-only scene would report contacts-only C_I under
+    the fluid-coupled name: refused, naming the option and the key."""
+    out = tmp_path / "m"
+    scene = ROOT / "data" / "scenes" / "default.toml"
+    assert main(["main", "--fluid-coupled", "--scene", str(scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--fluid-coupled" in err and "model.hydrodynamics" in err and "'jeffery'" in err
+    assert not out.exists()
+
+
+def test_the_contacts_only_twin_differs_from_its_fluid_coupled_run_in_the_model_only():
+    """The twin keeps the particles, seed, cell, flow, outputs and the fluid run's step; it
+    drops the Stokes settings and the preset, which only the Stokes model reads."""
+    import tomllib
+
+    from pyfold.commands.main_job import FLUID_SCENE, contacts_only_twin
+    from pyfold.scene import load_scene, parse_scene
+
+    fluid = load_scene(FLUID_SCENE)
+    text = FLUID_SCENE.read_text(encoding="utf-8")
+    twin_text = contacts_only_twin(text, fluid.dt)
+    twin = parse_scene(twin_text, "twin.toml")
+    assert fluid.hydrodynamics == "stokes" and twin.hydrodynamics == "jeffery"
+    assert twin.dt == fluid.dt and twin.scene.numerics.t_end == fluid.scene.numerics.t_end
+    a, b = tomllib.loads(text), tomllib.loads(twin_text)
+    for key in ("cell", "flow", "particles", "output"):
+        assert a[key] == b[key], key
+    assert b["numerics"]["seed"] == a["numerics"]["seed"] and a["model"]["alpha"] == b["model"]["alpha"]
+    assert "stokes" not in b["numerics"] and "preset" not in b["numerics"]
