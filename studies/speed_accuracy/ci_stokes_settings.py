@@ -149,7 +149,7 @@ def compare(runs: dict, scene: str, settings: list[str], seeds: list[int]) -> li
 
 
 def table(scene: str, rows: list[dict]) -> str:
-    head = (f"### {scene}\n\n| setting | seeds | CPU s/run | × reference | CG it/solve | "
+    head = (f"### {scene}\n\n| setting | seeds | CPU s/run | × cheaper | CG it/solve | "
             + " | ".join(f"C_I {k} ± err | change ± s.e. | in stat. errors" for k in ESTIMATORS)
             + " | a2 RMS change |\n|" + "---|" * (6 + 3 * len(ESTIMATORS)) + "\n")
     lines = []

@@ -67,6 +67,14 @@ def test_the_cheapest_admissible_setting_fills_the_unset_keys_and_the_step(evide
     assert "at 3 voxels per diameter" in r.preset_reason and "-16 %" in r.preset_reason
 
 
+def test_without_an_admissible_cheaper_setting_the_reference_numerics_are_used_and_named(evidence):
+    evidence([_m("tol1e-3", {"tolerance": 1e-3}, 0.8, 0.6), _m("every4", {"solve_every": 4}, 0.6, 0.2)])
+    r = parse_scene(_scene(), "s.toml")
+    st = r.scene.numerics.stokes
+    assert (st.tolerance, st.solve_every, st.cells_per_diameter) == (1e-4, 1, 3)
+    assert "the reference numerics tol1e-4" in r.preset_reason and "tol1e-3 0.80" in r.preset_reason
+
+
 def test_keys_the_scene_states_win_and_are_named(evidence):
     evidence([_m("every4", {"tolerance": 1e-3, "solve_every": 4}, 0.3, 0.3)])
     r = parse_scene(_scene(numerics={"dt": 0.005}, stokes={"solve_every": 2}), "s.toml")
