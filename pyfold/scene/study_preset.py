@@ -86,6 +86,9 @@ class RegimeEvidence:
 
 
 _REF_STOKES = {"cells_per_diameter": 3, "kappa": 1000.0}
+#: The reference numerics of both scenes, against which the changes are measured
+_REFERENCE = Measured(name='tol1e-4', stokes={**_REF_STOKES, 'tolerance': 0.0001}, dt_factor=1.0, closure_free=0.0,
+                      closure_free_stderr=0.0, trajectory=0.0, trajectory_stderr=0.0, cpu_ratio=1.0)
 
 #: The measurements of studies/speed_accuracy/ci_stokes_settings.py, as it prints them
 #: (its evidence check recomputes them from the runs). Changes in units of the reference's
@@ -93,9 +96,7 @@ _REF_STOKES = {"cells_per_diameter": 3, "kappa": 1000.0}
 EVIDENCE: Mapping[str, RegimeEvidence] = MappingProxyType({
     "semi-dilute": RegimeEvidence(
         regime="semi-dilute", beta=5.0, n_l3=98 / 2.7 ** 3, n_fibres=98, seeds=4,
-        reference=Measured(name='tol1e-4', stokes={**_REF_STOKES, 'tolerance': 0.0001}, dt_factor=1.0,
-                           closure_free=0.0, closure_free_stderr=0.0, trajectory=0.0, trajectory_stderr=0.0,
-                           cpu_ratio=1.0),
+        reference=_REFERENCE,
         settings=(
             Measured(name='tol1e-3', stokes={**_REF_STOKES, 'tolerance': 0.001}, dt_factor=1.0,
                      closure_free=0.02, closure_free_stderr=0.11, trajectory=0.1, trajectory_stderr=0.48,
@@ -119,9 +120,7 @@ EVIDENCE: Mapping[str, RegimeEvidence] = MappingProxyType({
         ci_reference=(9.41e-4, 3.5e-4)),
     "concentrated": RegimeEvidence(
         regime="concentrated", beta=5.0, n_l3=157 / 2.7 ** 3, n_fibres=157, seeds=4,
-        reference=Measured(name='tol1e-4', stokes={**_REF_STOKES, 'tolerance': 0.0001}, dt_factor=1.0,
-                           closure_free=0.0, closure_free_stderr=0.0, trajectory=0.0, trajectory_stderr=0.0,
-                           cpu_ratio=1.0),
+        reference=_REFERENCE,
         settings=(
             Measured(name='tol1e-3', stokes={**_REF_STOKES, 'tolerance': 0.001}, dt_factor=1.0,
                      closure_free=0.28, closure_free_stderr=0.58, trajectory=0.85, trajectory_stderr=0.57,
