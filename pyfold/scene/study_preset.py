@@ -214,6 +214,9 @@ def fill(scene: Scene, probe) -> tuple[Scene, str]:
     if "dt" in updates:
         chosen += f", dt = {updates['dt']:.6g} ({m.dt_factor:g} alpha/(gamma_dot L))"
     measured_on = f"{ev.n_fibres} beta = {ev.beta:g} fibres, n L^3 = {ev.n_l3:.3g}, {ev.seeds} seeds"
+    if all(math.isfinite(v) for v in ev.ci_reference):
+        measured_on += (f" (closure-free C_I {ev.ci_reference[0]:.2e} +- {ev.ci_reference[1]:.1e} with the "
+                        "reference numerics)")
     if m is ev.reference:
         worst = ", ".join(f"{o.name} {o.change():.2f}" for o in ev.settings)
         text = (f'numerics.preset = "study": the reference numerics {m.name} ({chosen}) for the {ev.regime} '
