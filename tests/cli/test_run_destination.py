@@ -182,7 +182,7 @@ def test_report_and_main_folders_locked(tmp_path, monkeypatch, capsys):
         calls.append(out)
         return None, []
 
-    def fake_job(work, scene, processes, n_seeds, closures):
+    def fake_job(work, scene, processes, n_seeds, closures, fluid=False):
         (work / "summary.txt").write_text("stand-in job\n")
         calls.append(work)
 
