@@ -384,7 +384,7 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("numerics.preset", "choice", None, ("study",),
             default_text="none: each key keeps its own default",
             help='"study": every numerical setting the scene leaves '
-                 'unset (dt and the Stokes tolerance, precision, rigidity, reuse and resolution) chosen, '
+                 'unset (dt and the Stokes kappa, tolerance, precision, solve reuse and resolution) chosen, '
                  'for the scene\'s regime, as the cheapest measured to move C_I by less than half its '
                  'statistical error over 4 seeds (pyfold/scene/study_preset.py, docs/speed_accuracy.md)'),
     Setting("numerics.time_scheme", "choice", "ab2", ("ab2", "euler"), _codes(euler=1, ab2=2), physics=_STOKES,

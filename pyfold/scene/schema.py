@@ -274,7 +274,7 @@ class Numerics(_Table):
     #: either way. Jeffery hydrodynamics ignores it (exact propagator for constant G).
     time_scheme: _registered("numerics.time_scheme") = _default("numerics.time_scheme")
     #: "study": the numerical settings the scene leaves unset (dt, and for a Stokes-coupled
-    #: run the solver's tolerance, precision, rigidity, reuse and resolution) chosen by their
+    #: run the solver's kappa, tolerance, precision, solve reuse and resolution) chosen by their
     #: measured effect on C_I (pyfold/scene/study_preset.py); absent: each key's own default
     #: (absent rather than a word, so the normalised scene, and a sweep run's identity, of a
     #: scene without a preset are what they were before the key existed)
