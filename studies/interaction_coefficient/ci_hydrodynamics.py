@@ -327,6 +327,7 @@ def analyse_and_write(study: Study, paths: dict, out: Path, sweep_dir: Path) -> 
         print(f"seeds without a finished pair of runs (left out): {missing}")
     grid = rows["stokes", seeds[0]]["grid"]
     side = study.scene("stokes", seeds[0]).side
+    out.mkdir(parents=True, exist_ok=True)
     check = single_fibre_check(study, grid, side, out / "single_fibre_check.nc")
     # Sensitivity: the Stokes runs regressed with the xi of the rotation the solver gives one
     # cylinder on this grid, instead of Cox's (the Jeffery runs rotate with Cox's xi exactly).
@@ -340,7 +341,6 @@ def analyse_and_write(study: Study, paths: dict, out: Path, sweep_dir: Path) -> 
                                                   run_checks.velocity_gradient_of(path), xi_measured)
 
     # Save
-    out.mkdir(parents=True, exist_ok=True)
     result = _dataset(study, rows, seeds, check, xi_measured)
     result.to_netcdf(out / "ci_hydrodynamics.nc", engine="h5netcdf")
     _figure(result, out / "ci_hydrodynamics.png")
