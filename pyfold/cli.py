@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import importlib
 import signal
 import sys
@@ -119,11 +120,19 @@ def _plain_warnings(command: str):
         warnings.showwarning = original
 
 
+def _load_failure(exc: BaseException) -> bool:
+    """An ImportError or MemoryError, or an OSError for want of memory: the import machinery
+    meets ENOMEM as an OSError too (listing a package's folder under a low ``ulimit -v``)."""
+    return not isinstance(exc, OSError) or exc.errno == errno.ENOMEM
+
+
 def main(argv: list[str] | None = None) -> int:
     global _depth
     try:
         parser = build_parser()  # imports every command module, and with them numpy, xarray, ...
-    except (ImportError, MemoryError) as exc:
+    except (ImportError, MemoryError, OSError) as exc:
+        if not _load_failure(exc):
+            raise
         words = [a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("-")]
         command = words[0] if words and words[0] in COMMANDS else None
         print(f"pyfold{' ' + command if command else ''}: failed: {describe_load_failure(exc)}", file=sys.stderr)
@@ -139,8 +148,8 @@ def main(argv: list[str] | None = None) -> int:
     except PyfoldError as exc:
         print(f"pyfold {args.command}: failed: {exc}", file=sys.stderr)
         return EXIT_FAILURE
-    except (ImportError, MemoryError) as exc:  # commands import numpy, JAX, h5py, ... lazily
-        if _depth > 1:
+    except (ImportError, MemoryError, OSError) as exc:  # commands import numpy, JAX, h5py, ... lazily
+        if _depth > 1 or not _load_failure(exc):
             raise
         print(f"pyfold {args.command}: failed: {describe_load_failure(exc)}", file=sys.stderr)
         return EXIT_FAILURE

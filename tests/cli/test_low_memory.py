@@ -51,8 +51,9 @@ def test_a_missing_package_is_not_called_a_memory_problem():
     assert text.startswith("cannot load h5py: No module named 'h5py'") and "memory" not in text
 
 
-@pytest.mark.parametrize("error", [MemoryError(), ImportError("libopenblas.so: cannot allocate memory")],
-                         ids=["MemoryError", "ENOMEM while loading"])
+@pytest.mark.parametrize("error", [MemoryError(), ImportError("libopenblas.so: cannot allocate memory"),
+                                   OSError(12, "Cannot allocate memory", "site-packages/pandas/_libs/tslibs")],
+                         ids=["MemoryError", "ENOMEM while loading", "ENOMEM while listing a package"])
 def test_memory_failure_inside_a_command_exits_1_with_one_line(monkeypatch, capsys, error):
     def fail(args):
         raise error
@@ -62,6 +63,12 @@ def test_memory_failure_inside_a_command_exits_1_with_one_line(monkeypatch, caps
     err = capsys.readouterr().err
     assert err.startswith("pyfold validate: failed: not enough memory") and "ulimit -v" in err, err
     assert len(err.strip().splitlines()) == 1, err
+
+
+def test_only_an_os_error_for_want_of_memory_counts_as_a_load_failure():
+    assert cli._load_failure(OSError(12, "Cannot allocate memory"))
+    assert not cli._load_failure(OSError(28, "No space left on device"))
+    assert cli._load_failure(MemoryError()) and cli._load_failure(ImportError("x"))
 
 
 def test_memory_failure_while_loading_the_commands_exits_1(monkeypatch, capsys):
