@@ -353,7 +353,8 @@ def ci_rows(p: dict, out: Path) -> tuple[list[Row], dict]:
                                 math.isfinite(jeff[dt, s]["load"]) for s in sd) else math.nan,
                             dt=dt, scheme="euler"))
         check_dir = (out / "ci_stokes_settings") if answer == "ci_semi_dilute" else (out / "ci_dilute")
-        if answer == "ci_semi_dilute":  # the dilute study's analysis writes its own
+        # the dilute study's analysis writes its own; made here when that analysis has not run
+        if answer == "ci_semi_dilute" or not (check_dir / "single_fibre_check.nc").exists():
             ch.single_fibre_check(study, stokes[sd[0]]["grid"], study.scene("stokes", sd[0]).side,
                                   check_dir / "single_fibre_check.nc")
         extra[answer] = (stokes, {s: jeff[CI_BASE_DT, s] for s in sd}, check_dir)
