@@ -404,6 +404,8 @@ def results_dataset(rep: Report, out: Path | None = None) -> xr.Dataset:
                                                 one("RMS a2 error of the trajectory fit per run"))
     for name, value in rep.correlations.items():
         out_ds.attrs[f"ci_correlation {name}"] = value
+    if rep.correlations:
+        out_ds.attrs["ci_pyfold_fluid_coupled_fit"] = fluid_coupled_words(rep)
     out_ds.attrs.update(format="pyfold.report", format_version="2.0",
                         runs=json.dumps(_run_references(rep, out)), n_runs=rep.n, error_kind=rep.error_kind,
                         ranking_method=rep.ranking_method, xi=rep.xi, beta=rep.beta, n_L3=rep.n_l3,
@@ -515,6 +517,14 @@ def ranking_verdict(rep: Report, e) -> str:
     return f"{test}; {q.text()}" if q is not None else test
 
 
+def fluid_coupled_words(rep: Report) -> str:
+    """pyfold's own fluid-coupled C_I at the scene's beta and phi beta (pyfold.correlations.fluid_coupled_ci),
+    or why it is not given."""
+    from pyfold.correlations import fluid_coupled_ci
+
+    return fluid_coupled_ci(rep.beta, rep.phi_beta)[1]
+
+
 def summary_lines(rep: Report) -> list[str]:
     """The summary as plain-text lines (also the body of summary.md)."""
     g = rep.gamma_dot
@@ -573,6 +583,8 @@ def summary_lines(rep: Report) -> list[str]:
                      + ", ".join(f"{k} {v:.2e}" for k, v in rep.correlations.items()))
     else:
         lines.append("  published correlations: not applicable (they are for one family of 3-D fibres)")
+    if rep.correlations:
+        lines.append(f"  {fluid_coupled_words(rep)}")
     lines += [f"  {line}" for line in interpretation(rep)]
     if rep.judged:
         lines += ["", "Closures against the runs' own a4 (time mean of ||(closure(a2) - a4):D|| / ||a4:D|| over the "
@@ -664,6 +676,8 @@ def summary_markdown(rep: Report, extra: Sequence[str] = ()) -> str:
         md.append(f"| {label} | {fitted} | {e.mean:+.3e} | {_fmt(e.error)} |")
     for k, v in rep.correlations.items():
         md.append(f"| correlation {k} at φβ = {rep.phi_beta:.3g} | {v:.3e} | | | | | |")
+    if rep.correlations:
+        md += ["", fluid_coupled_words(rep)]
     flagged = flagged_fit_lines(rep)
     if flagged:
         md += ["", "Flagged per-seed values (a fit on its bound is a bound, not a measurement):", ""]

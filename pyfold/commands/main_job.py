@@ -1,6 +1,14 @@
 """``pyfold main``: the bundled default job of the README.
 
-The default scene is simulated for several seeds (the scene's seed, seed + 1, ...),
+By default the job answers with the seed's physics: the bundled ``fluid_coupled.toml``
+(fibres coupled through the Stokes solver, with the collision strategy) is simulated for
+several seeds beside their contacts-only twins (the same placement and time step, Jeffery
+kinematics), and the report's C_I is the fluid-coupled one with the contacts-only one beside
+it. ``--quick`` is the quick look: the bundled ``default.toml`` (contacts only) with a small
+Stokes scene beside it. With ``--scene`` the scene's resolved model decides: a Stokes scene
+gets its contacts-only twins, any other scene the contacts-only report.
+
+The scene is simulated for several seeds (the scene's seed, seed + 1, ...),
 ``--np`` runs at a time as separate processes, then :mod:`pyfold.report` measures
 C_I per closure by trajectory fit (the recommended value; fits on a bound flagged and
 excluded) and by rate regression over the stationary part of every run, closure-free
@@ -45,7 +53,7 @@ def _bundled_scenes() -> Path:
 SCENES = _bundled_scenes()
 DEFAULT_SCENE = SCENES / "default.toml"
 STOKES_SCENE = SCENES / "stokes_small.toml"
-#: The scene of ``--fluid-coupled``: fibres coupled through the Stokes solver, numerics by the
+#: The scene of the default job: fibres coupled through the Stokes solver, numerics by the
 #: study preset (docs/speed_accuracy.md)
 FLUID_SCENE = SCENES / "fluid_coupled.toml"
 #: Seeds of the ensemble by default: enough for a standard error across seeds and a
@@ -57,18 +65,19 @@ DEFAULT_PROCESSES = 2
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/main", help="parent folder of the results (default: out/main)")
-    parser.add_argument("--scene", default=None,
-                        help=f"scene to simulate (default: the bundled {DEFAULT_SCENE.name})")
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--scene", default=None,
+                       help=f"scene to simulate (default: the bundled {FLUID_SCENE.name}, fibres coupled through "
+                            "the Stokes solver); a scene resolving to the Stokes model gets its contacts-only twins "
+                            "on the same seeds, any other scene the contacts-only report")
+    which.add_argument("--quick", action="store_true",
+                       help=f"the quick look (minutes): the bundled {DEFAULT_SCENE.name} (contacts only, Jeffery "
+                            f"kinematics) and the small Stokes scene {STOKES_SCENE.name} beside it")
     parser.add_argument("--np", type=int, default=DEFAULT_PROCESSES, metavar="N",
                         help="cores to use: N seeds are simulated at a time, one MPI rank each "
                              f"(default {DEFAULT_PROCESSES})")
     parser.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, metavar="K",
                         help=f"seeds of the ensemble: the scene's seed, seed + 1, ... (default {DEFAULT_SEEDS})")
-    parser.add_argument("--fluid-coupled", action="store_true",
-                        help=f"the fluid-coupled answer: the bundled {FLUID_SCENE.name} (fibres coupled through the "
-                             "Stokes solver; or --scene, which must resolve to Stokes hydrodynamics) for each seed, "
-                             "its contacts-only twin on the same seeds beside it; the report's C_I is the "
-                             "fluid-coupled one")
     parser.add_argument("--closures", default=None,
                         help="comma-separated closures to estimate C_I with and to judge: 'exact' (the runs' own "
                              "a4) or names of pyfold.closures.available(dim) "
@@ -82,18 +91,24 @@ def _scene_dim(scene: Path) -> int:
     return load_scene(scene).dim
 
 
-def run(args: argparse.Namespace) -> int:
-    fluid = bool(getattr(args, "fluid_coupled", False))
-    scene = Path(args.scene) if args.scene else (FLUID_SCENE if fluid else DEFAULT_SCENE)
-    if not scene.is_file():
-        raise InputError(f"--scene: no such scene file: {scene}")
-    if fluid:
-        from pyfold.scene import load_scene
+def choose_scene(scene: str | None, quick: bool) -> tuple[Path, bool]:
+    """The scene of the job and whether it is the fluid-coupled job (contacts-only twins beside it):
+    ``--quick`` the bundled contacts-only scene; ``--scene`` a scene whose resolved model decides
+    (a bad scene stops here, with its validation error); neither the bundled fluid-coupled scene."""
+    if quick:
+        return DEFAULT_SCENE, False
+    if not scene:
+        return FLUID_SCENE, True
+    path = Path(scene)
+    if not path.is_file():
+        raise InputError(f"--scene: no such scene file: {path}")
+    from pyfold.scene import load_scene
 
-        chosen = load_scene(scene).hydrodynamics
-        if chosen != "stokes":
-            raise InputError(f"--fluid-coupled: the scene {scene} resolves to hydrodynamics = {chosen!r}; the "
-                             "fluid-coupled job needs a scene the Stokes solver runs (model.hydrodynamics = 'stokes')")
+    return path, load_scene(path).hydrodynamics == "stokes"
+
+
+def run(args: argparse.Namespace) -> int:
+    scene, fluid = choose_scene(args.scene, bool(getattr(args, "quick", False)))
     from pyfold.commands.run import check_ranks
 
     check_ranks(args.np)

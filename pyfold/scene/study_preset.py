@@ -83,6 +83,14 @@ class RegimeEvidence:
     command: str = ".venv/bin/python studies/speed_accuracy/ci_stokes_settings.py"
     output: str = "out/speed_accuracy/ci_stokes_settings/ci_stokes_settings.nc"
     ci_reference: tuple[float, float] = field(default=(math.nan, math.nan))  # closure-free C_I ± error
+    trajectory_reference: tuple[float, float] = field(default=(math.nan, math.nan))  # IBOF-fitted C_I ± error
+
+    def settings_error(self, m: "Measured") -> tuple[float, float]:
+        """The setting ``m``'s measured change of C_I as an absolute error (closure-free, IBOF
+        trajectory fit): the paired change and its standard error added in quadrature, times the
+        reference's ensemble error."""
+        return (math.hypot(m.closure_free, m.closure_free_stderr) * self.ci_reference[1],
+                math.hypot(m.trajectory, m.trajectory_stderr) * self.trajectory_reference[1])
 
 
 _REF_STOKES = {"cells_per_diameter": 3, "kappa": 1000.0}
@@ -117,7 +125,7 @@ EVIDENCE: Mapping[str, RegimeEvidence] = MappingProxyType({
         # one beta = 5 spheroid at 3 voxels per diameter (42^3, 2.7 L cell), studies/interaction_coefficient/
         # ci_hydrodynamics.py's single-particle check (pyfold/scene/hydrodynamics_evidence.py)
         period_error=-0.164,
-        ci_reference=(9.41e-4, 3.5e-4)),
+        ci_reference=(9.41e-4, 3.5e-4), trajectory_reference=(4.67e-3, 4.50e-4)),
     "concentrated": RegimeEvidence(
         regime="concentrated", beta=5.0, n_l3=157 / 2.7 ** 3, n_fibres=157, seeds=4,
         reference=_REFERENCE,
@@ -131,7 +139,7 @@ EVIDENCE: Mapping[str, RegimeEvidence] = MappingProxyType({
         ),
         # the same fibre and grid as the semi-dilute scene's check (42^3, 2.7 L cell)
         period_error=-0.164,
-        ci_reference=(8.71e-4, 4.3e-4)),
+        ci_reference=(8.71e-4, 4.3e-4), trajectory_reference=(5.49e-3, 2.68e-4)),
 })
 
 

@@ -231,16 +231,30 @@ def test_hopeless_placement_gives_up_early_naming_the_key(tmp_path, fake_fold_ru
     assert not out.exists() and not out.with_name("hopeless.h5.partial").exists()
 
 
-# --fluid-coupled ---------------------------------------------------------------------
+# which job: fluid-coupled by default, --quick, or the scene's model ----------------------
 
-def test_fluid_coupled_refuses_a_scene_without_the_stokes_solver(tmp_path, no_simulation, capsys):
-    """The fluid-coupled job on a contacts-only scene would report contacts-only C_I under
-    the fluid-coupled name: refused, naming the option and the key."""
+def test_the_job_is_fluid_coupled_by_default_and_follows_the_scene_model():
+    """No option: the bundled Stokes scene with twins; --quick: the contacts-only scene; --scene:
+    the scene's resolved model decides (a contacts-only scene is never reported as fluid-coupled)."""
+    from pyfold.commands.main_job import DEFAULT_SCENE, FLUID_SCENE, choose_scene
+    from pyfold.scene import load_scene
+
+    assert choose_scene(None, False) == (FLUID_SCENE, True)
+    assert load_scene(FLUID_SCENE).hydrodynamics == "stokes"
+    assert choose_scene(None, True) == (DEFAULT_SCENE, False)
+    assert load_scene(DEFAULT_SCENE).hydrodynamics == "jeffery"
+    assert choose_scene(str(DEFAULT_SCENE), False) == (DEFAULT_SCENE, False)
+    assert choose_scene(str(FLUID_SCENE), False) == (FLUID_SCENE, True)
+
+
+def test_quick_and_scene_together_are_refused(tmp_path, no_simulation, capsys):
     out = tmp_path / "m"
     scene = ROOT / "data" / "scenes" / "default.toml"
-    assert main(["main", "--fluid-coupled", "--scene", str(scene), "--out", str(out)]) == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["main", "--quick", "--scene", str(scene), "--out", str(out)])
+    assert exc.value.code == 2
     err = capsys.readouterr().err
-    assert "--fluid-coupled" in err and "model.hydrodynamics" in err and "'jeffery'" in err
+    assert "--quick" in err and "--scene" in err
     assert not out.exists()
 
 

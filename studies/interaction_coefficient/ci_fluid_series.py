@@ -1,0 +1,339 @@
+"""The fluid-coupled C_I of β = 5 fibres against concentration, at steady state.
+
+Question
+    What Folgar–Tucker C_I — per closure, and closure-free — does a suspension of rigid
+    β = 5 fibres coupled through the fluid (Stokes solver, fictitious domain on the FFT
+    grid, with the collision strategy) have at three concentrations from semi-dilute to
+    concentrated, run long enough to reach its steady state? Which closure reproduces the
+    fluid-coupled a4, and how far are the contacts-only twins (the same seeds and
+    initial states, Jeffery kinematics + contacts) from it? This is the table
+    data/ci_fluid_coupled.{nc,csv} and the fit pyfold.correlations.fluid_coupled_ci.
+
+Method
+    Scenes: pyfold.scene.sheared_fibres, β = 5 (L = 1, d = 0.2), cubic cell 2.7 L, simple
+    shear γ̇ = 1 from an isotropic random placement, security zone α = 0.1 d,
+    Δt = α/(γ̇L) = 0.02, records every 0.2 strain, strain 200 (about 6 Jeffery periods of a
+    single fibre), n L³ = 2.49 / 4.98 / 7.98 (49 / 98 / 157 fibres, φβ = 0.39 / 0.78 / 1.25),
+    4 seeds (studies/sweeps/ci_fluid_series.toml). Stokes numerics (STOKES): 3 voxels per
+    diameter (42³), κ = 10³, CG tolerance 10⁻³, a solve every 4th step, AB2: the cheapest
+    setting measured by studies/speed_accuracy/ci_stokes_settings.py (its CPU time 0.21–0.22
+    of the reference's).
+    Each (n L³, model) ensemble is analysed as ``pyfold report`` does (pyfold.report.build_report):
+    MSER-5 steady-state onset and drift per run; the rate-regression C_I over each run's
+    stationary window per closure and with the run's own a4 (closure-free); the trajectory fit
+    of Folgar–Tucker per closure to a2(t) over two Jeffery periods from the isotropic start
+    (the C_I a moulding code running that closure should use); the closures ranked by their
+    a4:D error against the runs' own a4 (paired t-tests, Holm-adjusted).
+    Errors in the table, per estimate: the statistical error (pyfold.ensemble: the larger of
+    the scatter over seeds and the pooled run errors); the settings error, the measured
+    change of C_I of this setting against the reference numerics (κ 10³, tolerance 10⁻⁴, a solve
+    every step) on the same regime, paired change and its s.e. in quadrature
+    (pyfold.scene.study_preset.RegimeEvidence.settings_error; measured at strain 30 from the
+    isotropic start, applied here to every estimator); the shape-factor sensitivity, the
+    change of C_I when the Jeffery term is subtracted with the rotation rate the solver gives
+    one fibre on this grid (single-fibre check: its β_e from the orbit period, as
+    ci_hydrodynamics.py) instead of Cox's β_e. The last is how much of the C_I rests on the
+    3-voxel fibre's kinematics; it is a sensitivity, not a bound on the resolution error
+    (no second grid is run here). The total error is the three in quadrature.
+
+Command
+    .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py [--executor slurm] [--seeds 1 2]
+        [--write-data]     # also write data/ci_fluid_coupled.{nc,csv} (the shipped table)
+    (the sweep runs two serial simulations at a time; finished runs are re-used, a killed one
+    is resumed from its checkpoint; --analyse-only analyses what is there)
+
+Cost (2 cores)
+    Measured, one run per core: Stokes runs about 640 / 860 / 1250 s wall per run at
+    n L³ 2.5 / 5 / 8 (CPU time of every run in the outputs), contacts-only twins 20–60 s;
+    the sweep about 100 min wall, the analysis about 5 CPU-min.
+
+Outputs (under out/interaction_coefficient/fluid_series/, ``--out``)
+    sweep/                        the runs (pyfold sweep folder)
+    nl3_<n>/stokes/, .../jeffery/ the report of each ensemble (pyfold report's files)
+    ci_fluid_series.nc, .csv      the table (one row per n L³, model, closure and estimator)
+    ci_fluid_series.md            the tables, closure ranking, steady state and cost
+    ci_fluid_series.png           C_I against φβ beside the published values and correlations
+
+References
+    Folgar & Tucker (1984), J. Reinf. Plast. Compos. 3:98; Bay (1991), PhD thesis UIUC;
+    Phan-Thien et al. (2002), JNNFM 103:251; Salahuddin, Wu & Aidun (2012), JFM 692;
+    Meyer et al. (2020), J. Compos. Sci. 4:77; Chung & Kwon (2002), J. Rheol. 46:169 (IBOF).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from pyfold.scene.sheared_fibres import sheared_fibres
+
+ROOT = Path(__file__).resolve().parents[2]
+SWEEPS = ROOT / "studies" / "sweeps"
+ALPHA_OVER_D = 0.1
+BETA = 5.0
+MODELS = ("stokes", "jeffery")  # fluid-coupled with contacts, contacts only
+#: The Stokes numerics of every fluid-coupled run: the cheapest setting measured by
+#: studies/speed_accuracy/ci_stokes_settings.py (its change of C_I enters the error bars).
+STOKES = {"cells_per_diameter": 3, "kappa": 1e3, "tolerance": 1e-3, "solve_every": 4}
+SETTING = "tol1e-3_every4"  # its name in pyfold.scene.study_preset.EVIDENCE
+#: The shipped table (``--write-data``), read by pyfold.correlations.fluid_coupled_table
+DATA = ROOT / "data" / "ci_fluid_coupled"
+
+
+def scene_of(n_l3: float, model: str, seed: int, t_end: float):
+    """The sweep's builder: β = 5 fibres at ``n_l3``, ``model`` "stokes" or "jeffery", seed ``seed``."""
+    if model == "jeffery":
+        return sheared_fibres(BETA, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D)
+    return sheared_fibres(BETA, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D, hydrodynamics="stokes",
+                          stokes=STOKES, time_scheme="ab2")
+
+
+def settings_errors(n_l3: float) -> tuple[float, float]:
+    """(closure-free, trajectory) absolute error of SETTING in the regime of ``n_l3``."""
+    from pyfold.scene.shapes import regime
+    from pyfold.scene.study_preset import choice_for
+
+    reg, _ = regime(n_l3, 1.0, 1.0 / BETA, 3)
+    ev, _ = choice_for(reg)
+    m = next(s for s in ev.settings if s.name == SETTING)
+    return ev.settings_error(m)
+
+
+def xi_sensitivity(rep, xi_grid: float) -> dict[tuple[str, str], float]:
+    """Change of each ensemble C_I when the Jeffery term uses ``xi_grid`` instead of the runs' xi:
+    (closure, "steady") for the rate regressions, (closure, "trajectory") for the fits."""
+    from pyfold.ci_estimators import ci_rate_regression
+    from pyfold.closures import get_closure
+    from pyfold.fast_fit import fit_ci_rk4
+    from pyfold.run_results import open_run
+
+    out: dict[tuple[str, str], float] = {}
+    regs: dict[str, list[float]] = {c: [] for c in rep.closures}
+    for r in rep.runs:
+        ds = open_run(r.path)
+        t, a2, a4 = ds["time"].values, ds["a2"].values, ds["a4"].values
+        ds.close()
+        keep = (t >= r.window[0]) & (t <= r.window[1])
+        for c in rep.closures:
+            a4c = a4[keep] if c == "exact" else np.asarray(get_closure(c, 3)(a2[keep]))
+            regs[c].append(ci_rate_regression(t[keep], a2[keep], a4c, rep.L, xi_grid).ci)
+    for c in rep.closures:
+        out[c, "steady"] = float(np.mean(regs[c])) - float(np.mean([r.ci[c] for r in rep.runs]))
+    for c in rep.judged:
+        kept = [k for k, v in enumerate(rep.ci_fit_runs[c]) if math.isfinite(v)]
+        fits = [fit_ci_rk4(c, rep.runs[k].t, rep.runs[k].a2, rep.L, xi_grid, t_end=rep.fit_window[1]).ci
+                for k in kept]
+        out[c, "trajectory"] = float(np.mean(fits)) - float(np.mean([rep.ci_fit_runs[c][k] for k in kept]))
+    return out
+
+
+def grid_xi(out: Path, run: Path) -> tuple[float, float]:
+    """(β_e, xi) of one fibre on the grid of the Stokes run ``run``: the orbit period of the
+    single-fibre check of ci_hydrodynamics.py (the solver's ω(θ) at fixed orientations)."""
+    import dataclasses
+
+    from pyfold.run_input import read_setup
+
+    sys.path.insert(0, str(ROOT / "studies" / "interaction_coefficient"))
+    import ci_hydrodynamics as ch  # noqa: E402
+
+    study = dataclasses.replace(ch.SMALL, tolerance=STOKES["tolerance"], kappa=STOKES["kappa"], check_refinements=(1,))
+    grid = [int(g) for g in np.ravel(read_setup(run).resolved["stokes_grid"])]
+    side = scene_of(5.0, "stokes", 1, 1.0).side
+    ds = ch.single_fibre_check(study, grid, side, out / "single_fibre_check.nc")
+    beta_e = float(ds["beta_e_measured"].sel(shape="fibre").values[0])
+    return beta_e, (beta_e ** 2 - 1) / (beta_e ** 2 + 1)
+
+
+def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_shift: dict) -> list[dict]:
+    """One row per closure and estimator of an ensemble report."""
+    from pyfold.correlations import phi_beta, volume_fraction
+
+    rows = []
+    stationary = sum(r.stationary for r in rep.runs)
+    onsets = [r.onset_time for r in rep.runs if math.isfinite(r.onset_time)]
+    strain = float(min(r.t[-1] for r in rep.runs))
+    base = {"beta": BETA, "n_l3": round(rep.n_l3, 4), "phi": round(volume_fraction(rep.n_l3, BETA), 5),
+            "phi_beta": round(phi_beta(rep.n_l3, BETA), 5), "model": model, "seeds": rep.n,
+            "stationary_runs": stationary, "onset_strain_max": max(onsets) if onsets else math.nan,
+            "strain": strain}
+    fluid = model == "stokes"
+    for est, table, names in (("steady", rep.ci, rep.closures), ("trajectory", rep.ci_fit, rep.judged)):
+        for c in names:
+            e = table[c]
+            if not math.isfinite(e.mean):  # every seed's fit on its bound or failed: no value (the report says so)
+                continue
+            set_err = (settings[0] if est == "steady" else settings[1]) if fluid else 0.0
+            shape_err = abs(xi_shift.get((c, est), 0.0)) if fluid else 0.0
+            stat = e.error
+            rows.append({**base, "closure": "closure-free" if c == "exact" else c, "estimator": est,
+                         "ci": e.mean, "stat_err": stat, "settings_err": set_err, "shape_err": shape_err,
+                         "total_err": math.sqrt(stat ** 2 + set_err ** 2 + shape_err ** 2)})
+    return rows
+
+
+def write_table(rows: list[dict], stem: Path, attrs: dict) -> None:
+    """``stem``.csv (one row per line, header first) and ``stem``.nc (xarray, a row dimension)."""
+    import csv
+
+    import xarray as xr
+
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    keys = list(rows[0])
+    with open(stem.with_suffix(".csv"), "w", newline="", encoding="utf-8") as f:
+        for k, v in attrs.items():
+            f.write(f"# {k}: {v}\n")
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    units = {"ci": "1", "stat_err": "1", "settings_err": "1", "shape_err": "1", "total_err": "1", "strain": "1",
+             "onset_strain_max": "1", "phi": "1", "phi_beta": "1", "n_l3": "1"}
+    ds = xr.Dataset({k: ("row", [r[k] for r in rows], {"units": units[k]} if k in units else {}) for k in keys},
+                    attrs={k: str(v) for k, v in attrs.items()})
+    ds.to_netcdf(stem.with_suffix(".nc"), engine="h5netcdf")
+
+
+def figure(rows: list[dict], path: Path) -> None:
+    """C_I against φβ: fluid-coupled and contacts-only beside the published values."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pyfold.correlations import CORRELATIONS, FOLGAR_TUCKER_1984, MEYER_2020, SALAHUDDIN_2012_ORDER
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    pb = np.linspace(0.02, 2.6, 200)
+    for ax, est in zip(axes, ("trajectory", "steady")):
+        for name, (fn, _) in CORRELATIONS.items():
+            ax.plot(pb, fn(pb), lw=1, label=name)
+        ax.plot([v.phi_beta for v in FOLGAR_TUCKER_1984], [v.ci for v in FOLGAR_TUCKER_1984], "ks",
+                label="Folgar & Tucker 1984 (exp.)")
+        ax.plot([v.phi_beta for v in MEYER_2020], [v.ci for v in MEYER_2020], "kD", mfc="none",
+                label="Meyer et al. 2020 (SPH, β 10, FT fit)")
+        ax.axhline(SALAHUDDIN_2012_ORDER, color="grey", ls=":", label="Salahuddin et al. 2012 (LB), order")
+        for model, closure, mk in (("stokes", "ibof", "o"), ("stokes", "closure-free", "^"),
+                                   ("jeffery", "ibof", "x"), ("jeffery", "closure-free", "v")):
+            sel = [r for r in rows if r["model"] == model and r["closure"] == closure and r["estimator"] == est]
+            if not sel:
+                continue
+            word = "fluid-coupled" if model == "stokes" else "contacts only"
+            ax.errorbar([r["phi_beta"] for r in sel], [r["ci"] for r in sel], [r["total_err"] for r in sel],
+                        fmt=mk, capsize=3, label=f"pyfold β 5, {word}, {closure}")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xlabel("φβ")
+        ax.set_ylabel("C_I")
+        ax.set_title("trajectory fit (2 Jeffery periods from isotropic)" if est == "trajectory"
+                     else "rate regression over the stationary window")
+    axes[0].legend(fontsize=6.5)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def markdown(rows, reps, cost, beta_e_grid) -> str:
+    """The tables of ci_fluid_series.md."""
+    lines = ["# Fluid-coupled C_I of β = 5 fibres against concentration", "",
+             f"Single fibre on the 42³ grid: β_e = {beta_e_grid:.3f} from its orbit period (Cox: 4.89).", "",
+             "| n L³ | φβ | model | closure | estimator | C_I | stat. | settings | shape | total |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['n_l3']:.2f} | {r['phi_beta']:.2f} | {r['model']} | {r['closure']} | {r['estimator']} | "
+                     f"{r['ci']:+.2e} | {r['stat_err']:.1e} | {r['settings_err']:.1e} | {r['shape_err']:.1e} | "
+                     f"{r['total_err']:.1e} |")
+    lines += ["", "## Steady state, closure ranking (fluid-coupled a4) and cost", ""]
+    for (n_l3, model), rep in sorted(reps.items()):
+        onsets = ", ".join(f"{r.onset_time:.0f}" if math.isfinite(r.onset_time) else "none" for r in rep.runs)
+        rank = " ".join(f"{e.name} {e.mean:.3g}" + ("" if not math.isfinite(e.p_next) else
+                                                     f" {'<' if e.better_than_next else '≈'} (p {e.p_next:.2g})")
+                        for e in rep.ranking)
+        lines.append(f"* n L³ {n_l3:g}, {model}: stationary {sum(r.stationary for r in rep.runs)}/{rep.n} "
+                     f"(onset strains {onsets}); a4:D error ranking {rank}; CPU per run "
+                     f"{cost.get((n_l3, model), math.nan):.0f} s (mean)")
+    return "\n".join(lines) + "\n"
+
+
+def cpu_of(path: Path) -> float:
+    from pyfold.sweep import store as sweep_store
+
+    attempts = sweep_store.attempts(path.parent)
+    return float(sum(a.get("cpu_s", math.nan) for a in attempts)) if attempts else math.nan
+
+
+def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool) -> None:
+    from pyfold.ensemble import paired_difference
+    from pyfold.report import build_report, write_report
+
+    points = sorted({n for (n, _m), _s in done})
+    reps, rows, cost, pairs = {}, [], {}, []
+    out.mkdir(parents=True, exist_ok=True)
+    beta_e_grid, xi_grid = grid_xi(out, next(p for ((_n, m), _s), p in done.items() if m == "stokes"))
+    for n_l3 in points:
+        have = [s for s in seeds if all(((n_l3, m), s) in done for m in MODELS)]
+        if len(have) < 2:
+            print(f"n L^3 {n_l3:g}: {len(have)} finished pair(s) of runs; left out")
+            continue
+        settings = settings_errors(n_l3)
+        for model in MODELS:
+            paths = [done[(n_l3, model), s] for s in have]
+            rep = build_report(paths, None, progress=lambda text: None)
+            write_report(rep, out / f"nl3_{n_l3:g}" / model)
+            reps[n_l3, model] = rep
+            cost[n_l3, model] = float(np.mean([cpu_of(p) for p in paths]))
+            shift = xi_sensitivity(rep, xi_grid) if model == "stokes" else {}
+            rows += table_rows(n_l3, model, rep, settings, shift)
+            print(f"n L^3 {n_l3:g} {model}: analysed {len(paths)} runs", flush=True)
+        f, j = reps[n_l3, "stokes"], reps[n_l3, "jeffery"]
+        d = paired_difference([r.ci["exact"] for r in f.runs], [r.ci["exact"] for r in j.runs])
+        pairs.append(f"* n L³ {n_l3:g}: closure-free fluid-coupled − contacts-only {d.mean:+.2e} ± {d.stderr:.1e} "
+                     f"(paired over {d.n} seeds, p = {d.p_value:.2g})")
+    out.mkdir(parents=True, exist_ok=True)
+    attrs = {"title": "Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = 5 fibres",
+             "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --write-data",
+             "scene": "pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = 0.02, "
+                      "strain 200, cell 2.7 L",
+             "stokes_numerics": f"{STOKES}, ab2 (setting {SETTING} of studies/speed_accuracy/ci_stokes_settings.py)",
+             "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
+                           "Folgar-Tucker fit to a2(t) over two Jeffery periods (pyfold.report)",
+             "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting; shape: change "
+                       f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; total: in quadrature",
+             "seeds": " ".join(map(str, seeds))}
+    write_table(rows, out / "ci_fluid_series", attrs)
+    if write_data:
+        write_table(rows, DATA, attrs)
+    figure(rows, out / "ci_fluid_series.png")
+    text = markdown(rows, reps, cost, beta_e_grid) + "\n## Fluid-coupled against contacts only\n\n" + "\n".join(pairs)
+    (out / "ci_fluid_series.md").write_text(text + "\n", encoding="utf-8")
+    print(text)
+
+
+def main() -> None:
+    from pyfold.sweep import study as sweep_study
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
+    ap.add_argument("--np", type=int, default=None, help="MPI ranks per run (default: the sweep file's, 1)")
+    ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
+    ap.add_argument("--write-data", action="store_true", help="also write the shipped table data/ci_fluid_coupled.*")
+    ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/fluid_series"))
+    sweep_study.add_arguments(ap)
+    args = ap.parse_args()
+    spec = sweep_study.load_form(SWEEPS, "ci_fluid_series", False, seeds=tuple(args.seeds) if args.seeds else None)
+    start = time.perf_counter()
+    sweep_dir = args.sweep_dir or args.out / "sweep"
+    done = sweep_study.run_sweep(spec, sweep_dir, args.executor, args.np, analyse_only=args.analyse_only)
+    keyed = {}
+    for values, seed in done:
+        point = dict(zip(spec.axes, values))  # point values in the order of spec.axes
+        keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
+    analyse(keyed, tuple(spec.seeds), args.out, args.write_data)
+    print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,249 @@
+"""How the fluid-coupled C_I depends on the Stokes grid: three resolutions, paired over seeds.
+
+Question
+    The fluid-coupled C_I of the study scenes is computed at 3 voxels per fibre diameter
+    (where one β = 5 spheroid's Jeffery period is 16 % short). Does C_I change when the grid
+    is refined to 4 and 6 voxels per diameter, by how much against its statistical error,
+    with what observed order, and what does a Richardson extrapolation give? Does
+    subtracting the Jeffery term with the rotation rate the solver gives one fibre on each
+    grid (its measured β_e) instead of Cox's β_e take out the grid dependence?
+
+Method
+    The semi-dilute scene of ci_fluid_series.py (β = 5, n L³ = 4.98, 98 fibres, cell 2.7 L,
+    α = 0.1 d, Δt = 0.02, AB2, κ = 10³, CG tolerance 10⁻³, a solve every 4th step) at
+    ``cells_per_diameter`` 3 / 4 / 6 (grids 42³ / 54³ / 81³: 3.11 / 4.0 / 6.0 voxels per
+    diameter), strain 20 (two thirds of a Jeffery period, the transient from the isotropic
+    start where C_I is best determined per strain), 4 seeds: a seed fixes the initial state,
+    so each grid is compared with the finest seed by seed (pyfold.ensemble.paired_difference).
+    Per run: the closure-free C_I (rate regression over all records with the run's own a4)
+    and the IBOF trajectory fit over all records (pyfold.fast_fit.fit_ci_rk4), each once with
+    Cox's ξ (what the runs record) and once with the ξ of the grid's fibre (single-fibre
+    check of ci_hydrodynamics.py on that grid: orbit period from ω(θ) at 24 orientations).
+    Observed order p from the three ensemble means, (C₃ − C₄)/(C₄ − C₆) =
+    (h₃ᵖ − h₄ᵖ)/(h₄ᵖ − h₆ᵖ), when the differences are monotone; Richardson
+    C∞ = C₆ + (C₆ − C₄)/((h₄/h₆)ᵖ − 1) with p the observed order, or p = 1 (the fictitious
+    domain's surface error is first order in h) when none is observed; its error from the
+    paired s.e. of C₆ − C₄ and the s.e. of C₆.
+
+Command
+    .venv/bin/python studies/interaction_coefficient/ci_resolution.py [--executor slurm] [--seeds 1 2]
+    (two serial runs at a time; finished runs are re-used; --analyse-only analyses what is there)
+
+Cost (2 cores)
+    The CPU time of every run is in the outputs (per run about 1 / 3 / 10 CPU-min on the
+    three grids); the single-fibre checks about 3 CPU-min.
+
+Outputs (under out/interaction_coefficient/resolution/, ``--out``)
+    sweep/                  the runs (pyfold sweep folder)
+    ci_resolution.nc        per grid and seed: C_I by both estimators, with Cox's and the grid's ξ, CPU s
+    ci_resolution.md        per grid: ensemble C_I, paired change against the finest grid, order, Richardson
+    ci_resolution.png       C_I against voxel size h/d, both ξ, with the Richardson estimate
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from pyfold.scene.sheared_fibres import sheared_fibres
+
+ROOT = Path(__file__).resolve().parents[2]
+SWEEPS = ROOT / "studies" / "sweeps"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import ci_fluid_series as series  # noqa: E402  (the scene and numerics of the series)
+
+N_L3 = 5.0
+ESTIMATORS = ("closure_free", "ibof_trajectory")
+XI = ("cox", "grid")  # the Jeffery term with Cox's beta_e / with the grid fibre's measured beta_e
+
+
+def scene_of(cells_per_diameter: int, seed: int, t_end: float):
+    """The sweep's builder: the series' semi-dilute Stokes scene at ``cells_per_diameter``."""
+    stokes = {**series.STOKES, "cells_per_diameter": int(cells_per_diameter), "max_grid_points": 1_000_000}
+    return sheared_fibres(series.BETA, N_L3, seed, t_end, alpha_over_d=series.ALPHA_OVER_D, hydrodynamics="stokes",
+                          stokes=stokes, time_scheme="ab2")
+
+
+def grid_of(path: Path) -> list[int]:
+    from pyfold.run_input import read_setup
+
+    return [int(g) for g in np.ravel(read_setup(path).resolved["stokes_grid"])]
+
+
+def beta_e_on(grid: list[int], side: float, out: Path) -> float:
+    """β_e of one fibre on ``grid`` (ci_hydrodynamics.single_fibre_check, cached per grid)."""
+    import ci_hydrodynamics as ch
+
+    study = dataclasses.replace(ch.SMALL, tolerance=series.STOKES["tolerance"], kappa=series.STOKES["kappa"],
+                                check_refinements=(1,))
+    ds = ch.single_fibre_check(study, grid, side, out / f"single_fibre_check_{grid[0]}.nc")
+    return float(ds["beta_e_measured"].sel(shape="fibre").values[0])
+
+
+def analyse_run(path: Path, xis: dict[str, float]) -> dict:
+    """C_I of one run by both estimators for each xi of ``xis``, and its CPU time."""
+    from pyfold import run_checks
+    from pyfold.ci_estimators import ci_rate_regression
+    from pyfold.fast_fit import fit_ci_rk4
+    from pyfold.run_results import open_run
+
+    ds = open_run(path)
+    L = run_checks.velocity_gradient_of(path)
+    t, a2, a4 = ds["time"].values, ds["a2"].values, ds["a4"].values
+    ds.close()
+    out = {"cpu_s": series.cpu_of(path)}
+    for name, xi in xis.items():
+        reg = ci_rate_regression(t, a2, a4, L, xi)
+        fit = fit_ci_rk4("ibof", t, a2, L, xi)
+        out["closure_free", name] = (reg.ci, reg.stderr)
+        out["ibof_trajectory", name] = (fit.ci, fit.stderr)
+    return out
+
+
+def observed_order(c: list[float], h: list[float]) -> float:
+    """p with (c0 - c1)/(c1 - c2) = (h0^p - h1^p)/(h1^p - h2^p) (coarse to fine), NaN when the
+    differences are not monotone (same sign) or no p in (0.1, 8) fits."""
+    from scipy.optimize import brentq
+
+    d01, d12 = c[0] - c[1], c[1] - c[2]
+    if d01 == 0.0 or d12 == 0.0 or (d01 > 0) != (d12 > 0):
+        return math.nan
+    q = d01 / d12
+
+    def f(p):
+        return (h[0] ** p - h[1] ** p) / (h[1] ** p - h[2] ** p) - q
+
+    try:
+        return float(brentq(f, 0.1, 8.0))
+    except ValueError:
+        return math.nan
+
+
+def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
+    import xarray as xr
+
+    from pyfold.ensemble import ensemble_mean, paired_difference
+
+    cpds = sorted({c for c, _ in done})
+    have = [s for s in seeds if all((c, s) in done for c in cpds)]
+    if len(cpds) < 2 or len(have) < 2:
+        raise SystemExit(f"need 2 grids and 2 seeds finished on all of them under {out / 'sweep'}")
+    side = scene_of(cpds[0], have[0], 1.0).side
+    grids = {c: grid_of(done[c, have[0]]) for c in cpds}
+    h = {c: side / grids[c][0] / (1.0 / series.BETA) for c in cpds}  # voxel size / diameter
+    beta_e = {c: beta_e_on(grids[c], side, out) for c in cpds}
+    rows = {}
+    for c in cpds:
+        xis = {"cox": None, "grid": (beta_e[c] ** 2 - 1) / (beta_e[c] ** 2 + 1)}
+        from pyfold import run_checks
+        from pyfold.run_results import open_run
+
+        for s in have:
+            ds = open_run(done[c, s])
+            xis["cox"] = run_checks.shape_factor_of(ds)
+            ds.close()
+            rows[c, s] = analyse_run(done[c, s], xis)
+            print(f"cells_per_diameter {c}, seed {s}: analysed", flush=True)
+    fine = cpds[-1]
+    lines = ["# Fluid-coupled C_I against the Stokes grid (β = 5, n L³ = 4.98, strain 20)", "",
+             "| cells/d | grid | h/d | β_e of one fibre | CPU s/run | estimator | ξ | C_I ± stat. | "
+             "change vs finest ± s.e. | change / stat. |", "|---|---|---|---|---|---|---|---|---|---|"]
+    data = {}
+    richardson = []
+    for est in ESTIMATORS:
+        for xi in XI:
+            means = []
+            for c in cpds:
+                vals = [rows[c, s][est, xi][0] for s in have]
+                errs = [rows[c, s][est, xi][1] for s in have]
+                e = ensemble_mean(vals, errs)
+                d = paired_difference(vals, [rows[fine, s][est, xi][0] for s in have])
+                means.append(e.mean)
+                cpu = float(np.mean([rows[c, s]["cpu_s"] for s in have]))
+                lines.append(f"| {c} | {grids[c][0]}³ | {h[c]:.3f} | {beta_e[c]:.3f} | {cpu:.0f} | {est} | {xi} | "
+                             f"{e.mean:+.2e} ± {e.error:.1e} | {d.mean:+.2e} ± {d.stderr:.1e} | "
+                             f"{abs(d.mean) / e.error:.2f} |" if c != fine else
+                             f"| {c} | {grids[c][0]}³ | {h[c]:.3f} | {beta_e[c]:.3f} | {cpu:.0f} | {est} | {xi} | "
+                             f"{e.mean:+.2e} ± {e.error:.1e} | (finest) | |")
+                data[est, xi, c] = (vals, errs, e.mean, e.error)
+            if len(cpds) >= 3:
+                p = observed_order(means[-3:], [h[c] for c in cpds[-3:]])
+                mid = cpds[-2]
+                d = paired_difference([rows[fine, s][est, xi][0] for s in have],
+                                      [rows[mid, s][est, xi][0] for s in have])
+                p_used = p if math.isfinite(p) else 1.0
+                r = (h[mid] / h[fine]) ** p_used
+                c_inf = means[-1] + d.mean / (r - 1.0)
+                err = math.hypot(data[est, xi, fine][3], d.stderr / (r - 1.0))
+                richardson.append(f"* {est}, ξ {xi}: observed order "
+                                  f"{'none (differences not monotone)' if not math.isfinite(p) else f'{p:.2f}'}; "
+                                  f"Richardson C∞ = {c_inf:+.2e} ± {err:.1e} (p = {p_used:.2g}); finest grid "
+                                  f"{means[-1]:+.2e}, finest − next {d.mean:+.2e} ± {d.stderr:.1e} "
+                                  f"(p-value {d.p_value:.2g})")
+    text = "\n".join(lines + ["", "## Order and Richardson extrapolation", ""] + richardson) + "\n"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "ci_resolution.md").write_text(text, encoding="utf-8")
+    ds = xr.Dataset(
+        {f"ci_{est}_{xi}": (("cells_per_diameter", "seed"), [data[est, xi, c][0] for c in cpds], {"units": "1"})
+         for est in ESTIMATORS for xi in XI},
+        coords={"cells_per_diameter": cpds, "seed": list(have),
+                "h_over_d": ("cells_per_diameter", [h[c] for c in cpds]),
+                "beta_e_grid": ("cells_per_diameter", [beta_e[c] for c in cpds])})
+    for est in ESTIMATORS:
+        for xi in XI:
+            ds[f"ci_{est}_{xi}_stderr"] = (("cells_per_diameter", "seed"), [data[est, xi, c][1] for c in cpds])
+    ds["cpu_s"] = (("cells_per_diameter", "seed"), [[rows[c, s]["cpu_s"] for s in have] for c in cpds],
+                   {"units": "s"})
+    ds.to_netcdf(out / "ci_resolution.nc", engine="h5netcdf")
+    _figure(data, cpds, h, out / "ci_resolution.png")
+    return text
+
+
+def _figure(data, cpds, h, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    x = [h[c] for c in cpds]
+    for ax, est in zip(axes, ESTIMATORS):
+        for xi, mk in zip(XI, ("o", "s")):
+            ax.errorbar(x, [data[est, xi, c][2] for c in cpds], [data[est, xi, c][3] for c in cpds], fmt=mk + "-",
+                        capsize=3, label=f"ξ: {'Cox β_e' if xi == 'cox' else 'the grid fibre’s β_e'}")
+        ax.set_xlabel("voxel size h / d")
+        ax.set_ylabel("C_I")
+        ax.set_xlim(0, max(x) * 1.1)
+        ax.set_title(est.replace("_", " "))
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def main() -> None:
+    from pyfold.sweep import study as sweep_study
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
+    ap.add_argument("--np", type=int, default=None, help="MPI ranks per run (default: the sweep file's, 1)")
+    ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
+    ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/resolution"))
+    sweep_study.add_arguments(ap)
+    args = ap.parse_args()
+    spec = sweep_study.load_form(SWEEPS, "ci_resolution", False, seeds=tuple(args.seeds) if args.seeds else None)
+    start = time.perf_counter()
+    done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor, args.np,
+                                 analyse_only=args.analyse_only)
+    keyed = {(int(values[0]), seed): p for (values, seed), p in done.items()}
+    print(analyse(keyed, tuple(spec.seeds), args.out))
+    print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,103 @@
+"""The fluid-coupled series and resolution studies (studies/interaction_coefficient/ci_fluid_series.py,
+ci_resolution.py): their scenes validate as the sweeps run them, the order and Richardson pieces
+recover a known convergence, and pyfold.correlations' fit of the shipped table
+(data/ci_fluid_coupled.csv) is the weighted least-squares line with its covariance."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pyfold.correlations import fluid_coupled_ci, fluid_coupled_fit, fluid_coupled_table
+from pyfold.scene import parse_scene
+from pyfold.sweep.study import load_form
+
+from study_import import STUDIES, import_study
+
+series = import_study("interaction_coefficient", "ci_fluid_series")
+resolution = import_study("interaction_coefficient", "ci_resolution")
+
+
+@pytest.mark.parametrize("name, builder", [("ci_fluid_series", series.scene_of),
+                                           ("ci_resolution", resolution.scene_of)])
+def test_every_point_of_the_sweeps_is_a_valid_scene_of_the_intended_model(name, builder):
+    spec = load_form(STUDIES / "sweeps", name, False)
+    for point in spec.points:
+        scene = builder(**point, seed=spec.seeds[0], **spec.arguments)
+        checked = parse_scene(scene.toml, f"{name}.toml")
+        assert checked.hydrodynamics == point.get("model", "stokes")
+        if checked.hydrodynamics == "stokes":  # the numerics the docstrings state
+            st = checked.scene.numerics.stokes
+            assert (st.tolerance, st.solve_every, st.kappa) == (1e-3, 4, 1e3)
+        assert scene.side == pytest.approx(2.7) and abs(scene.n_l3 - point.get("n_l3", 5.0)) < 0.05
+
+
+def test_the_series_and_its_twins_share_the_initial_state_and_step():
+    """A seed's Stokes run and contacts-only twin differ in the model only (paired comparison)."""
+    import tomllib
+
+    a = tomllib.loads(series.scene_of(5.0, "stokes", 3, 200.0).toml)
+    b = tomllib.loads(series.scene_of(5.0, "jeffery", 3, 200.0).toml)
+    for key in ("cell", "flow", "particles", "output"):
+        assert a[key] == b[key], key
+    assert a["numerics"]["seed"] == b["numerics"]["seed"] and a["numerics"]["dt"] == b["numerics"]["dt"]
+
+
+@pytest.mark.parametrize("p", [0.7, 1.0, 2.0, 3.5])
+def test_observed_order_and_richardson_recover_a_power_law(p):
+    """c(h) = c_inf + k h^p on the study's three grids: the order is p (brentq to its tolerance)."""
+    h = [1 / 3.11, 1 / 4.0, 1 / 6.0]
+    c = [2e-3 - 1.5e-3 * x ** p for x in h]
+    got = resolution.observed_order(c, h)
+    assert got == pytest.approx(p, rel=1e-6)
+    r = (h[1] / h[2]) ** got
+    assert c[2] + (c[2] - c[1]) / (r - 1) == pytest.approx(2e-3, rel=1e-9)
+
+
+def test_no_order_when_the_differences_change_sign():
+    assert math.isnan(resolution.observed_order([1.0, 2.0, 1.5], [0.3, 0.25, 0.17]))
+
+
+def _rows(points):
+    return [{"beta": 5.0, "model": "stokes", "closure": "ibof", "estimator": "trajectory", "phi_beta": x, "ci": y,
+             "total_err": e} for x, y, e in points]
+
+
+def test_fit_is_the_weighted_least_squares_line_with_its_covariance():
+    pts = [(0.4, 3.0e-3, 2e-4), (0.8, 4.0e-3, 1e-4), (1.2, 5.5e-3, 3e-4)]
+    fit = fluid_coupled_fit(rows=_rows(pts))
+    x, y, e = (np.array(v) for v in zip(*pts))
+    c, cov = np.polyfit(x, y, 1, w=1 / e, cov="unscaled")  # independent route: numpy's weighted fit
+    assert (fit.c1, fit.c0) == pytest.approx(tuple(c), rel=1e-10)
+    assert fit.cov[1][1] == pytest.approx(cov[0, 0], rel=1e-10) and fit.cov[0][0] == pytest.approx(cov[1, 1], rel=1e-10)
+    value, err = fit(0.8)
+    assert value == pytest.approx(c[0] * 0.8 + c[1]) and err == pytest.approx(
+        math.sqrt(cov[1, 1] + 2 * 0.8 * cov[0, 1] + 0.64 * cov[0, 0]), rel=1e-10)
+
+
+def test_two_points_are_interpolated_exactly():
+    fit = fluid_coupled_fit(rows=_rows([(0.4, 3e-3, 1e-4), (1.2, 5e-3, 1e-4)]))
+    assert fit(0.4)[0] == pytest.approx(3e-3) and fit(1.2)[0] == pytest.approx(5e-3) and fit.chi2 < 1e-20
+
+
+def test_the_fit_is_not_quoted_outside_its_beta_or_range():
+    rows = _rows([(0.4, 3e-3, 1e-4), (1.2, 5e-3, 1e-4)])
+    values, words = fluid_coupled_ci(10.0, 0.8, rows=rows)
+    assert not values and "beta = 10" in words
+    values, words = fluid_coupled_ci(5.0, 2.0, rows=rows)
+    assert not values and "outside" in words
+    values, words = fluid_coupled_ci(5.0, 0.8, rows=rows)
+    assert set(values) == {"ibof (trajectory)"} and values["ibof (trajectory)"][0] == pytest.approx(4e-3)
+
+
+def test_the_shipped_table_covers_three_concentrations_with_all_errors():
+    rows = fluid_coupled_table()
+    stokes = [r for r in rows if r["model"] == "stokes"]
+    assert len({r["n_l3"] for r in stokes}) >= 3
+    for r in stokes:
+        assert r["total_err"] >= max(r["stat_err"], r["settings_err"], r["shape_err"]) > 0.0
+        assert r["total_err"] == pytest.approx(math.sqrt(r["stat_err"] ** 2 + r["settings_err"] ** 2
+                                                         + r["shape_err"] ** 2), rel=1e-4)
+    fit = fluid_coupled_fit("ibof", "trajectory", rows=rows)
+    assert math.isfinite(fit.c0) and math.isfinite(fit.c1) and fit.points >= 3
