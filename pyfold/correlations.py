@@ -7,7 +7,12 @@ studies and reports plot their fitted ``C_I`` beside these
 
 * Bay (1991):                 ``C_I = 0.0184 exp(-0.7148 phi beta)``
 * Phan-Thien et al. (2002):   ``C_I = 0.03 (1 - exp(-0.224 phi beta))``
-* Folgar & Tucker (1984), Couette experiments: three points.
+* Folgar & Tucker (1984), Couette experiments: three points; Meyer et al. (2020), SPH,
+  three points; Salahuddin et al. (2012), lattice-Boltzmann, an order of magnitude.
+* pyfold's own fluid-coupled table (data/ci_fluid_coupled.csv, written by
+  studies/interaction_coefficient/ci_fluid_series.py) and its weighted straight-line fit in
+  ``phi * beta`` per closure (:func:`fluid_coupled_fit`, :func:`fluid_coupled_ci`), quoted by
+  ``pyfold report`` inside the table's beta and range of ``phi * beta`` only.
 
 Concentration measures of a fibre population (``n`` fibres per unit volume, length
 ``L``, diameter ``d``, ``beta = L/d``; cylinders without caps):

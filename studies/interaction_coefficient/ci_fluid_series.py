@@ -32,9 +32,14 @@ Method
     isotropic start, applied here to every estimator); the shape-factor sensitivity, the
     change of C_I when the Jeffery term is subtracted with the rotation rate the solver gives
     one fibre on this grid (single-fibre check: its β_e from the orbit period, as
-    ci_hydrodynamics.py) instead of Cox's β_e. The last is how much of the C_I rests on the
-    3-voxel fibre's kinematics; it is a sensitivity, not a bound on the resolution error
-    (no second grid is run here). The total error is the three in quadrature.
+    ci_hydrodynamics.py) instead of Cox's β_e (how much of the C_I rests on the 3-voxel
+    fibre's kinematics); the resolution error, the bias of the 3-voxel C_I against the
+    Richardson limit measured by ci_resolution.py on the semi-dilute scene (three grids,
+    paired seeds; closure-free for the rate regressions, IBOF for the trajectory fits;
+    applied to every concentration). The total error is the four in quadrature.
+    Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
+    run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
+    its drift reported).
 
 Command
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py [--executor slurm] [--seeds 1 2]
@@ -149,7 +154,24 @@ def grid_xi(out: Path, run: Path) -> tuple[float, float]:
     return beta_e, (beta_e ** 2 - 1) / (beta_e ** 2 + 1)
 
 
-def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_shift: dict) -> list[dict]:
+def resolution_errors(path: Path) -> tuple[float, float]:
+    """(closure-free, trajectory) resolution error of the 3-voxel C_I: the bias C(3) − C∞ measured by
+    ci_resolution.py (|mean| and its s.e. in quadrature; ξ of Cox, as the runs here), NaN when absent."""
+    import json
+
+    if not path.is_file():
+        return math.nan, math.nan
+    summary = json.loads(path.read_text(encoding="utf-8"))
+
+    def one(key):
+        b = summary[key]
+        return math.hypot(b["coarse_bias"], b["coarse_bias_stderr"])
+
+    return one("closure_free_cox"), one("ibof_trajectory_cox")
+
+
+def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_shift: dict,
+               resolution: tuple[float, float] = (math.nan, math.nan)) -> list[dict]:
     """One row per closure and estimator of an ensemble report."""
     from pyfold.correlations import phi_beta, volume_fraction
 
@@ -160,7 +182,11 @@ def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_s
     base = {"beta": BETA, "n_l3": round(rep.n_l3, 4), "phi": round(volume_fraction(rep.n_l3, BETA), 5),
             "phi_beta": round(phi_beta(rep.n_l3, BETA), 5), "model": model, "seeds": rep.n,
             "stationary_runs": stationary, "onset_strain_max": max(onsets) if onsets else math.nan,
-            "strain": strain}
+            "strain": strain,
+            # the largest end-of-run drift of a diagonal a2 component over the runs [per unit strain], and
+            # the largest in units of its standard error (pyfold.steady_state: > 3 flags a drift)
+            "drift_max": max(abs(v[0]) for r in rep.runs for v in r.drift.values()),
+            "drift_max_sigma": max(abs(v[0]) / v[1] for r in rep.runs for v in r.drift.values() if v[1] > 0)}
     fluid = model == "stokes"
     for est, table, names in (("steady", rep.ci, rep.closures), ("trajectory", rep.ci_fit, rep.judged)):
         for c in names:
@@ -169,10 +195,12 @@ def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_s
                 continue
             set_err = (settings[0] if est == "steady" else settings[1]) if fluid else 0.0
             shape_err = abs(xi_shift.get((c, est), 0.0)) if fluid else 0.0
+            res_err = (resolution[0] if est == "steady" else resolution[1]) if fluid else 0.0
             stat = e.error
             rows.append({**base, "closure": "closure-free" if c == "exact" else c, "estimator": est,
                          "ci": e.mean, "stat_err": stat, "settings_err": set_err, "shape_err": shape_err,
-                         "total_err": math.sqrt(stat ** 2 + set_err ** 2 + shape_err ** 2)})
+                         "resolution_err": res_err,
+                         "total_err": math.sqrt(stat ** 2 + set_err ** 2 + shape_err ** 2 + res_err ** 2)})
     return rows
 
 
@@ -191,8 +219,10 @@ def write_table(rows: list[dict], stem: Path, attrs: dict) -> None:
         w.writeheader()
         for r in rows:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    units = {"ci": "1", "stat_err": "1", "settings_err": "1", "shape_err": "1", "total_err": "1", "strain": "1",
-             "onset_strain_max": "1", "phi": "1", "phi_beta": "1", "n_l3": "1"}
+    units = {"ci": "1", "stat_err": "1", "settings_err": "1", "shape_err": "1", "resolution_err": "1",
+             "total_err": "1", "strain": "1",
+             "onset_strain_max": "1", "phi": "1", "phi_beta": "1", "n_l3": "1", "drift_max": "1",
+             "drift_max_sigma": "1"}
     ds = xr.Dataset({k: ("row", [r[k] for r in rows], {"units": units[k]} if k in units else {}) for k in keys},
                     attrs={k: str(v) for k, v in attrs.items()})
     ds.to_netcdf(stem.with_suffix(".nc"), engine="h5netcdf")
@@ -240,20 +270,22 @@ def markdown(rows, reps, cost, beta_e_grid) -> str:
     """The tables of ci_fluid_series.md."""
     lines = ["# Fluid-coupled C_I of β = 5 fibres against concentration", "",
              f"Single fibre on the 42³ grid: β_e = {beta_e_grid:.3f} from its orbit period (Cox: 4.89).", "",
-             "| n L³ | φβ | model | closure | estimator | C_I | stat. | settings | shape | total |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "| n L³ | φβ | model | closure | estimator | C_I | stat. | settings | shape | resolution | total |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['n_l3']:.2f} | {r['phi_beta']:.2f} | {r['model']} | {r['closure']} | {r['estimator']} | "
                      f"{r['ci']:+.2e} | {r['stat_err']:.1e} | {r['settings_err']:.1e} | {r['shape_err']:.1e} | "
-                     f"{r['total_err']:.1e} |")
+                     f"{r['resolution_err']:.1e} | {r['total_err']:.1e} |")
     lines += ["", "## Steady state, closure ranking (fluid-coupled a4) and cost", ""]
     for (n_l3, model), rep in sorted(reps.items()):
         onsets = ", ".join(f"{r.onset_time:.0f}" if math.isfinite(r.onset_time) else "none" for r in rep.runs)
         rank = " ".join(f"{e.name} {e.mean:.3g}" + ("" if not math.isfinite(e.p_next) else
                                                      f" {'<' if e.better_than_next else '≈'} (p {e.p_next:.2g})")
                         for e in rep.ranking)
+        drift = max(abs(v[0]) for r in rep.runs for v in r.drift.values())
         lines.append(f"* n L³ {n_l3:g}, {model}: stationary {sum(r.stationary for r in rep.runs)}/{rep.n} "
-                     f"(onset strains {onsets}); a4:D error ranking {rank}; CPU per run "
+                     f"(onset strains {onsets}; largest end drift of a diagonal a2 component {drift:.1e} per "
+                     f"unit strain); a4:D error ranking {rank}; CPU per run "
                      f"{cost.get((n_l3, model), math.nan):.0f} s (mean)")
     return "\n".join(lines) + "\n"
 
@@ -265,10 +297,14 @@ def cpu_of(path: Path) -> float:
     return float(sum(a.get("cpu_s", math.nan) for a in attempts)) if attempts else math.nan
 
 
-def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool) -> None:
+def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path) -> None:
     from pyfold.ensemble import paired_difference
     from pyfold.report import build_report, write_report
 
+    resolution = resolution_errors(resolution_file)
+    if write_data and not all(math.isfinite(v) for v in resolution):
+        raise SystemExit(f"--write-data: the shipped table needs the resolution error; run "
+                         f"studies/interaction_coefficient/ci_resolution.py first ({resolution_file} is missing)")
     points = sorted({n for (n, _m), _s in done})
     reps, rows, cost, pairs = {}, [], {}, []
     out.mkdir(parents=True, exist_ok=True)
@@ -286,12 +322,16 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool) -> 
             reps[n_l3, model] = rep
             cost[n_l3, model] = float(np.mean([cpu_of(p) for p in paths]))
             shift = xi_sensitivity(rep, xi_grid) if model == "stokes" else {}
-            rows += table_rows(n_l3, model, rep, settings, shift)
+            rows += table_rows(n_l3, model, rep, settings, shift, resolution)
             print(f"n L^3 {n_l3:g} {model}: analysed {len(paths)} runs", flush=True)
         f, j = reps[n_l3, "stokes"], reps[n_l3, "jeffery"]
         d = paired_difference([r.ci["exact"] for r in f.runs], [r.ci["exact"] for r in j.runs])
-        pairs.append(f"* n L³ {n_l3:g}: closure-free fluid-coupled − contacts-only {d.mean:+.2e} ± {d.stderr:.1e} "
-                     f"(paired over {d.n} seeds, p = {d.p_value:.2g})")
+        line = (f"* n L³ {n_l3:g}: fluid-coupled − contacts-only, closure-free (steady) {d.mean:+.2e} ± "
+                f"{d.stderr:.1e} (p = {d.p:.2g})")
+        if "ibof" in f.ci_fit_runs and "ibof" in j.ci_fit_runs:
+            d = paired_difference(f.ci_fit_runs["ibof"], j.ci_fit_runs["ibof"])
+            line += f"; IBOF trajectory fit {d.mean:+.2e} ± {d.stderr:.1e} (p = {d.p:.2g})"
+        pairs.append(line + f"; paired over {d.n} seeds")
     out.mkdir(parents=True, exist_ok=True)
     attrs = {"title": "Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = 5 fibres",
              "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --write-data",
@@ -301,7 +341,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool) -> 
              "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
                            "Folgar-Tucker fit to a2(t) over two Jeffery periods (pyfold.report)",
              "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting; shape: change "
-                       f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; total: in quadrature",
+                       f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
+                       "3-voxel C_I against the Richardson limit (ci_resolution.py); total: in quadrature",
              "seeds": " ".join(map(str, seeds))}
     write_table(rows, out / "ci_fluid_series", attrs)
     if write_data:
@@ -321,6 +362,9 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
     ap.add_argument("--write-data", action="store_true", help="also write the shipped table data/ci_fluid_coupled.*")
     ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/fluid_series"))
+    ap.add_argument("--resolution", type=Path,
+                    default=Path("out/interaction_coefficient/resolution/ci_resolution.json"),
+                    help="the resolution study's summary (ci_resolution.py): the resolution error of the C_I")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
     spec = sweep_study.load_form(SWEEPS, "ci_fluid_series", False, seeds=tuple(args.seeds) if args.seeds else None)
@@ -331,7 +375,7 @@ def main() -> None:
     for values, seed in done:
         point = dict(zip(spec.axes, values))  # point values in the order of spec.axes
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
-    analyse(keyed, tuple(spec.seeds), args.out, args.write_data)
+    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, args.resolution)
     print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
 
 

@@ -3,7 +3,7 @@
 Question
     The fluid-coupled C_I of the study scenes is computed at 3 voxels per fibre diameter
     (where one β = 5 spheroid's Jeffery period is 16 % short). Does C_I change when the grid
-    is refined to 4 and 6 voxels per diameter, by how much against its statistical error,
+    is refined to 4 and 5 voxels per diameter, by how much against its statistical error,
     with what observed order, and what does a Richardson extrapolation give? Does
     subtracting the Jeffery term with the rotation rate the solver gives one fibre on each
     grid (its measured β_e) instead of Cox's β_e take out the grid dependence?
@@ -11,7 +11,7 @@ Question
 Method
     The semi-dilute scene of ci_fluid_series.py (β = 5, n L³ = 4.98, 98 fibres, cell 2.7 L,
     α = 0.1 d, Δt = 0.02, AB2, κ = 10³, CG tolerance 10⁻³, a solve every 4th step) at
-    ``cells_per_diameter`` 3 / 4 / 6 (grids 42³ / 54³ / 81³: 3.11 / 4.0 / 6.0 voxels per
+    ``cells_per_diameter`` 3 / 4 / 5 (grids 42³ / 54³ / 70³: 3.11 / 4.0 / 5.19 voxels per
     diameter), strain 20 (two thirds of a Jeffery period, the transient from the isotropic
     start where C_I is best determined per strain), 4 seeds: a seed fixes the initial state,
     so each grid is compared with the finest seed by seed (pyfold.ensemble.paired_difference).
@@ -19,30 +19,35 @@ Method
     and the IBOF trajectory fit over all records (pyfold.fast_fit.fit_ci_rk4), each once with
     Cox's ξ (what the runs record) and once with the ξ of the grid's fibre (single-fibre
     check of ci_hydrodynamics.py on that grid: orbit period from ω(θ) at 24 orientations).
-    Observed order p from the three ensemble means, (C₃ − C₄)/(C₄ − C₆) =
-    (h₃ᵖ − h₄ᵖ)/(h₄ᵖ − h₆ᵖ), when the differences are monotone; Richardson
-    C∞ = C₆ + (C₆ − C₄)/((h₄/h₆)ᵖ − 1) with p the observed order, or p = 1 (the fictitious
-    domain's surface error is first order in h) when none is observed; its error from the
-    paired s.e. of C₆ − C₄ and the s.e. of C₆.
+    Observed order p from the three ensemble means, (C₃ − C₄)/(C₄ − C₅) =
+    (h₃ᵖ − h₄ᵖ)/(h₄ᵖ − h₅ᵖ), when the differences are monotone; otherwise (or with two
+    grids) p = 1 is assumed (the fictitious domain's surface error is first order in h: the
+    largest extrapolation of the plausible orders). Richardson per seed (the grids of a seed
+    share its initial state), C∞ = C₅ + (C₅ − C₄)/((h₄/h₅)ᵖ − 1), and the bias of the
+    3-voxel value, C₃ − C∞, paired over the seeds: ci_fluid_series.py takes that bias
+    (|mean| and its s.e. in quadrature) as the resolution error of its 3-voxel C_I, the
+    closure-free one for its rate regressions and the IBOF one for its trajectory fits.
 
 Command
     .venv/bin/python studies/interaction_coefficient/ci_resolution.py [--executor slurm] [--seeds 1 2]
     (two serial runs at a time; finished runs are re-used; --analyse-only analyses what is there)
 
 Cost (2 cores)
-    The CPU time of every run is in the outputs (per run about 1 / 3 / 10 CPU-min on the
+    The CPU time of every run is in the outputs (per run about 1.4 / 4 / 8 CPU-min on the
     three grids); the single-fibre checks about 3 CPU-min.
 
 Outputs (under out/interaction_coefficient/resolution/, ``--out``)
     sweep/                  the runs (pyfold sweep folder)
     ci_resolution.nc        per grid and seed: C_I by both estimators, with Cox's and the grid's ξ, CPU s
     ci_resolution.md        per grid: ensemble C_I, paired change against the finest grid, order, Richardson
+    ci_resolution.json      per estimator and ξ: C∞, the coarse grid's bias and its s.e. (read by ci_fluid_series.py)
     ci_resolution.png       C_I against voxel size h/d, both ξ, with the Richardson estimate
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import sys
 import time
@@ -60,6 +65,9 @@ import ci_fluid_series as series  # noqa: E402  (the scene and numerics of the s
 N_L3 = 5.0
 ESTIMATORS = ("closure_free", "ibof_trajectory")
 XI = ("cox", "grid")  # the Jeffery term with Cox's beta_e / with the grid fibre's measured beta_e
+#: Order assumed when none is observed: the fictitious domain's surface error is first order in h
+#: (the smallest plausible order, so the largest extrapolation)
+ASSUMED_ORDER = 1.0
 
 
 def scene_of(cells_per_diameter: int, seed: int, t_end: float):
@@ -155,6 +163,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
              "change vs finest ± s.e. | change / stat. |", "|---|---|---|---|---|---|---|---|---|---|"]
     data = {}
     richardson = []
+    summary: dict[str, dict] = {}
     for est in ESTIMATORS:
         for xi in XI:
             means = []
@@ -171,23 +180,31 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
                              f"| {c} | {grids[c][0]}³ | {h[c]:.3f} | {beta_e[c]:.3f} | {cpu:.0f} | {est} | {xi} | "
                              f"{e.mean:+.2e} ± {e.error:.1e} | (finest) | |")
                 data[est, xi, c] = (vals, errs, e.mean, e.error)
-            if len(cpds) >= 3:
-                p = observed_order(means[-3:], [h[c] for c in cpds[-3:]])
-                mid = cpds[-2]
-                d = paired_difference([rows[fine, s][est, xi][0] for s in have],
-                                      [rows[mid, s][est, xi][0] for s in have])
-                p_used = p if math.isfinite(p) else 1.0
-                r = (h[mid] / h[fine]) ** p_used
-                c_inf = means[-1] + d.mean / (r - 1.0)
-                err = math.hypot(data[est, xi, fine][3], d.stderr / (r - 1.0))
-                richardson.append(f"* {est}, ξ {xi}: observed order "
-                                  f"{'none (differences not monotone)' if not math.isfinite(p) else f'{p:.2f}'}; "
-                                  f"Richardson C∞ = {c_inf:+.2e} ± {err:.1e} (p = {p_used:.2g}); finest grid "
-                                  f"{means[-1]:+.2e}, finest − next {d.mean:+.2e} ± {d.stderr:.1e} "
-                                  f"(p-value {d.p_value:.2g})")
+            # Richardson per seed (the grids of a seed share the initial state): C_inf_s from the two
+            # finest grids, and the bias of the coarsest grid's value C_coarse_s - C_inf_s, paired
+            p = observed_order(means[-3:], [h[c] for c in cpds[-3:]]) if len(cpds) >= 3 else math.nan
+            mid, coarse = cpds[-2], cpds[0]
+            p_used = p if math.isfinite(p) else ASSUMED_ORDER
+            r = (h[mid] / h[fine]) ** p_used
+            v_fine, v_mid, v_coarse = (np.array(data[est, xi, c][0]) for c in (fine, mid, coarse))
+            c_inf = v_fine + (v_fine - v_mid) / (r - 1.0)
+            e_inf = ensemble_mean(c_inf)
+            bias = paired_difference(v_coarse, c_inf)
+            summary[f"{est}_{xi}"] = {"coarse_cells_per_diameter": coarse, "coarse": float(np.mean(v_coarse)),
+                                      "richardson": e_inf.mean, "richardson_err": e_inf.error,
+                                      "coarse_bias": bias.mean, "coarse_bias_stderr": bias.stderr,
+                                      "order": p_used, "order_observed": bool(math.isfinite(p)),
+                                      "grids": [int(grids[c][0]) for c in cpds], "seeds": list(have)}
+            order = (f"observed order {p:.2f}" if math.isfinite(p) else
+                     ("no observed order (differences not monotone)" if len(cpds) >= 3 else "two grids")
+                     + f", order {ASSUMED_ORDER:g} assumed")
+            richardson.append(f"* {est}, ξ {xi}: {order}; Richardson C∞ = {e_inf.mean:+.2e} ± {e_inf.error:.1e}; "
+                              f"the {coarse}-voxel value's bias C({coarse}) − C∞ = {bias.mean:+.2e} ± "
+                              f"{bias.stderr:.1e} (paired over {bias.n} seeds, p-value {bias.p:.2g})")
     text = "\n".join(lines + ["", "## Order and Richardson extrapolation", ""] + richardson) + "\n"
     out.mkdir(parents=True, exist_ok=True)
     (out / "ci_resolution.md").write_text(text, encoding="utf-8")
+    (out / "ci_resolution.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
     ds = xr.Dataset(
         {f"ci_{est}_{xi}": (("cells_per_diameter", "seed"), [data[est, xi, c][0] for c in cpds], {"units": "1"})
          for est in ESTIMATORS for xi in XI},
