@@ -260,7 +260,8 @@ def figure(rows: list[dict], path: Path) -> None:
         ax.set_ylabel("C_I")
         ax.set_title("trajectory fit (2 Jeffery periods from isotropic)" if est == "trajectory"
                      else "rate regression over the stationary window")
-    axes[0].legend(fontsize=6.5)
+    for ax in axes:
+        ax.legend(fontsize=6.5)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)

@@ -195,9 +195,15 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
                                       "coarse_bias": bias.mean, "coarse_bias_stderr": bias.stderr,
                                       "order": p_used, "order_observed": bool(math.isfinite(p)),
                                       "grids": [int(grids[c][0]) for c in cpds], "seeds": list(have)}
-            order = (f"observed order {p:.2f}" if math.isfinite(p) else
-                     ("no observed order (differences not monotone)" if len(cpds) >= 3 else "two grids")
-                     + f", order {ASSUMED_ORDER:g} assumed")
+            if math.isfinite(p):
+                order = f"observed order {p:.2f}"
+            elif len(cpds) < 3:
+                order = f"two grids, order {ASSUMED_ORDER:g} assumed"
+            else:
+                d01, d12 = means[-3] - means[-2], means[-2] - means[-1]
+                why = ("the differences change sign" if (d01 > 0) != (d12 > 0) else
+                       f"no order in (0.1, 8) gives the ratio of the differences, {d01 / d12:.3g}")
+                order = f"no observed order ({why}), order {ASSUMED_ORDER:g} assumed"
             richardson.append(f"* {est}, ξ {xi}: {order}; Richardson C∞ = {e_inf.mean:+.2e} ± {e_inf.error:.1e}; "
                               f"the {coarse}-voxel value's bias C({coarse}) − C∞ = {bias.mean:+.2e} ± "
                               f"{bias.stderr:.1e} (paired over {bias.n} seeds, p-value {bias.p:.2g})")
