@@ -48,9 +48,10 @@ Command
     is resumed from its checkpoint; --analyse-only analyses what is there)
 
 Cost (2 cores)
-    Measured, one run per core: Stokes runs about 640 / 860 / 1250 s wall per run at
-    n L³ 2.5 / 5 / 8 (CPU time of every run in the outputs), contacts-only twins 20–60 s;
-    the sweep about 100 min wall, the analysis about 5 CPU-min.
+    Measured (CPU time per run, two serial runs at a time on the shared 2-core machine):
+    Stokes runs 641–689 / 822–847 / 874–887 CPU-s at n L³ 2.49 / 4.98 / 7.98, i.e. 0.7–1.0
+    CPU-hour per point of 4 seeds; contacts-only twins 5–20 CPU-s. The sweep took 115 min
+    wall sharing the machine with the resolution study; the analysis about 6 CPU-min.
 
 Outputs (under out/interaction_coefficient/fluid_series/, ``--out``)
     sweep/                        the runs (pyfold sweep folder)

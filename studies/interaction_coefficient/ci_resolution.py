@@ -33,8 +33,10 @@ Command
     (two serial runs at a time; finished runs are re-used; --analyse-only analyses what is there)
 
 Cost (2 cores)
-    The CPU time of every run is in the outputs (per run about 1.4 / 4 / 8 CPU-min on the
-    three grids); the single-fibre checks about 3 CPU-min.
+    Measured per run (two serial runs at a time on the shared 2-core machine): 84–88 /
+    173–190 / 392–443 CPU-s on the three grids, 0.77 CPU-hour for the 12 runs; the
+    single-fibre checks 76 CPU-s; the analysis about 2 CPU-min. The CPU time of every run
+    is in the outputs.
 
 Outputs (under out/interaction_coefficient/resolution/, ``--out``)
     sweep/                  the runs (pyfold sweep folder)
