@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import fcntl
 import json
+import math
 import os
 import time
 from pathlib import Path
@@ -176,6 +177,13 @@ def attempts(folder: Path) -> list[dict[str, Any]]:
         except ValueError:
             continue
     return out
+
+
+def cpu_seconds(folder: Path) -> float:
+    """CPU time of the run in ``folder`` over all its attempts [s] (a resumed run pays for each);
+    NaN without a recorded attempt, or when one lacks its CPU time."""
+    recorded = attempts(folder)
+    return float(sum(a.get("cpu_s", math.nan) for a in recorded)) if recorded else math.nan
 
 
 def _write_atomic(path: Path, text: str) -> None:

@@ -293,10 +293,10 @@ def markdown(rows, reps, cost, beta_e_grid) -> str:
 
 
 def cpu_of(path: Path) -> float:
+    """CPU time of the sweep run whose run file is ``path`` [s]."""
     from pyfold.sweep import store as sweep_store
 
-    attempts = sweep_store.attempts(path.parent)
-    return float(sum(a.get("cpu_s", math.nan) for a in attempts)) if attempts else math.nan
+    return sweep_store.cpu_seconds(path.parent)
 
 
 def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path) -> None:

@@ -222,7 +222,7 @@ def analyse_run(path: Path) -> dict:
     out["rigidity_max"] = float(ds["rigidity_max"].values.max()) if stokes else math.nan
     out["grid"] = [int(g) for g in np.ravel(setup["stokes_grid"])] if stokes else []
     attempts = sweep_store.attempts(path.parent)  # a sweep run's costs (pyfold.sweep.worker)
-    out["cpu_s"] = float(sum(a.get("cpu_s", math.nan) for a in attempts)) if attempts else math.nan
+    out["cpu_s"] = sweep_store.cpu_seconds(path.parent)
     out["wall_s"] = float(sum(a.get("wall_s", math.nan) for a in attempts)) if attempts else math.nan
     return out
 

@@ -95,6 +95,18 @@ def beta_e_on(grid: list[int], side: float, out: Path) -> float:
     return float(ds["beta_e_measured"].sel(shape="fibre").values[0])
 
 
+def cox_xi(path: Path) -> float:
+    """The shape factor the run records (Cox's β_e, what Folgar–Tucker uses by default)."""
+    from pyfold import run_checks
+    from pyfold.run_results import open_run
+
+    ds = open_run(path)
+    try:
+        return run_checks.shape_factor_of(ds)
+    finally:
+        ds.close()
+
+
 def analyse_run(path: Path, xis: dict[str, float]) -> dict:
     """C_I of one run by both estimators for each xi of ``xis``, and its CPU time."""
     from pyfold import run_checks
@@ -149,14 +161,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
     beta_e = {c: beta_e_on(grids[c], side, out) for c in cpds}
     rows = {}
     for c in cpds:
-        xis = {"cox": None, "grid": (beta_e[c] ** 2 - 1) / (beta_e[c] ** 2 + 1)}
-        from pyfold import run_checks
-        from pyfold.run_results import open_run
-
         for s in have:
-            ds = open_run(done[c, s])
-            xis["cox"] = run_checks.shape_factor_of(ds)
-            ds.close()
+            xis = {"cox": cox_xi(done[c, s]), "grid": (beta_e[c] ** 2 - 1) / (beta_e[c] ** 2 + 1)}
             rows[c, s] = analyse_run(done[c, s], xis)
             print(f"cells_per_diameter {c}, seed {s}: analysed", flush=True)
     fine = cpds[-1]

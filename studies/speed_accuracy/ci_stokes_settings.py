@@ -112,8 +112,7 @@ def analyse_run(path: Path) -> dict:
     t, a2, a4 = ds["time"].values, ds["a2"].values, ds["a4"].values
     reg = ci_rate_regression(t, a2, a4, L, xi)
     fit = fit_ci_rk4("ibof", t, a2, L, xi)
-    attempts = sweep_store.attempts(path.parent)
-    return {"t": t, "a2": a2, "cpu_s": float(sum(a.get("cpu_s", math.nan) for a in attempts)) if attempts else math.nan,
+    return {"t": t, "a2": a2, "cpu_s": sweep_store.cpu_seconds(path.parent),
             "closure_free": (reg.ci, reg.stderr), "ibof_trajectory": (fit.ci, fit.stderr),
             "iterations": float(ds["stokes_iterations"].values.mean()) if "stokes_iterations" in ds else math.nan}
 
