@@ -125,3 +125,19 @@ def test_the_reason_is_written_to_the_run_file(evidence, tmp_path):
     path.write_text(_scene())
     datasets = load_scene(path).resolved_datasets()
     assert "numerics_preset_reason" in datasets and "tol1e-3" in datasets["numerics_preset_reason"][0]
+
+
+def test_settings_error_is_the_measured_absolute_change():
+    """The absolute error a study carries for a setting (pyfold.scene.study_preset.RegimeEvidence.settings_error)
+    equals the paired change and its s.e. in quadrature that docs/speed_accuracy.md tabulates in absolute
+    units (semi-dilute, a solve every 4th step: closure-free +4.6e-5 ± 1.7e-4, IBOF +2.0e-4 ± 2.4e-4;
+    the stored ratios carry two digits, hence the 10 %)."""
+    import math
+
+    from pyfold.scene.study_preset import EVIDENCE
+
+    ev = EVIDENCE["semi-dilute"]
+    m = next(s for s in ev.settings if s.name == "tol1e-3_every4")
+    closure_free, trajectory = ev.settings_error(m)
+    assert closure_free == pytest.approx(math.hypot(4.6e-5, 1.7e-4), rel=0.1)
+    assert trajectory == pytest.approx(math.hypot(2.0e-4, 2.4e-4), rel=0.1)
