@@ -137,22 +137,33 @@ def xi_sensitivity(rep, xi_grid: float) -> dict[tuple[str, str], float]:
     return out
 
 
-def grid_xi(out: Path, run: Path) -> tuple[float, float]:
-    """(β_e, xi) of one fibre on the grid of the Stokes run ``run``: the orbit period of the
-    single-fibre check of ci_hydrodynamics.py (the solver's ω(θ) at fixed orientations)."""
-    import dataclasses
-
+def grid_of(path: Path) -> list[int]:
+    """The Stokes grid of the run ``path`` (its resolved setup)."""
     from pyfold.run_input import read_setup
+
+    return [int(g) for g in np.ravel(read_setup(path).resolved["stokes_grid"])]
+
+
+def beta_e_on(grid: list[int], side: float, cache: Path) -> float:
+    """β_e of one fibre on ``grid`` in the cell ``side`` at the series' κ and tolerance: the orbit
+    period of ci_hydrodynamics.py's single-fibre check (the solver's ω(θ) at fixed orientations),
+    cached in ``cache``."""
+    import dataclasses
 
     sys.path.insert(0, str(ROOT / "studies" / "interaction_coefficient"))
     import ci_hydrodynamics as ch  # noqa: E402
 
     study = dataclasses.replace(ch.SMALL, tolerance=STOKES["tolerance"], kappa=STOKES["kappa"], check_refinements=(1,))
-    grid = [int(g) for g in np.ravel(read_setup(run).resolved["stokes_grid"])]
-    side = scene_of(5.0, "stokes", 1, 1.0).side
-    ds = ch.single_fibre_check(study, grid, side, out / "single_fibre_check.nc")
-    beta_e = float(ds["beta_e_measured"].sel(shape="fibre").values[0])
-    return beta_e, (beta_e ** 2 - 1) / (beta_e ** 2 + 1)
+    ds = ch.single_fibre_check(study, grid, side, cache)
+    return float(ds["beta_e_measured"].sel(shape="fibre").values[0])
+
+
+def grid_xi(out: Path, run: Path) -> tuple[float, float]:
+    """(β_e, xi) of one fibre on the grid of the Stokes run ``run`` (:func:`beta_e_on`)."""
+    from pyfold.kinematics import aspect_ratio_to_xi
+
+    beta_e = beta_e_on(grid_of(run), scene_of(5.0, "stokes", 1, 1.0).side, out / "single_fibre_check.nc")
+    return beta_e, float(aspect_ratio_to_xi(beta_e))
 
 
 def resolution_errors(path: Path) -> tuple[float, float]:

@@ -48,7 +48,6 @@ Outputs (under out/interaction_coefficient/resolution/, ``--out``)
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import sys
@@ -77,22 +76,6 @@ def scene_of(cells_per_diameter: int, seed: int, t_end: float):
     stokes = {**series.STOKES, "cells_per_diameter": int(cells_per_diameter), "max_grid_points": 1_000_000}
     return sheared_fibres(series.BETA, N_L3, seed, t_end, alpha_over_d=series.ALPHA_OVER_D, hydrodynamics="stokes",
                           stokes=stokes, time_scheme="ab2")
-
-
-def grid_of(path: Path) -> list[int]:
-    from pyfold.run_input import read_setup
-
-    return [int(g) for g in np.ravel(read_setup(path).resolved["stokes_grid"])]
-
-
-def beta_e_on(grid: list[int], side: float, out: Path) -> float:
-    """β_e of one fibre on ``grid`` (ci_hydrodynamics.single_fibre_check, cached per grid)."""
-    import ci_hydrodynamics as ch
-
-    study = dataclasses.replace(ch.SMALL, tolerance=series.STOKES["tolerance"], kappa=series.STOKES["kappa"],
-                                check_refinements=(1,))
-    ds = ch.single_fibre_check(study, grid, side, out / f"single_fibre_check_{grid[0]}.nc")
-    return float(ds["beta_e_measured"].sel(shape="fibre").values[0])
 
 
 def cox_xi(path: Path) -> float:
@@ -150,19 +133,20 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
     import xarray as xr
 
     from pyfold.ensemble import ensemble_mean, paired_difference
+    from pyfold.kinematics import aspect_ratio_to_xi
 
     cpds = sorted({c for c, _ in done})
     have = [s for s in seeds if all((c, s) in done for c in cpds)]
     if len(cpds) < 2 or len(have) < 2:
         raise SystemExit(f"need 2 grids and 2 seeds finished on all of them under {out / 'sweep'}")
     side = scene_of(cpds[0], have[0], 1.0).side
-    grids = {c: grid_of(done[c, have[0]]) for c in cpds}
+    grids = {c: series.grid_of(done[c, have[0]]) for c in cpds}
     h = {c: side / grids[c][0] / (1.0 / series.BETA) for c in cpds}  # voxel size / diameter
-    beta_e = {c: beta_e_on(grids[c], side, out) for c in cpds}
+    beta_e = {c: series.beta_e_on(grids[c], side, out / f"single_fibre_check_{grids[c][0]}.nc") for c in cpds}
     rows = {}
     for c in cpds:
         for s in have:
-            xis = {"cox": cox_xi(done[c, s]), "grid": (beta_e[c] ** 2 - 1) / (beta_e[c] ** 2 + 1)}
+            xis = {"cox": cox_xi(done[c, s]), "grid": float(aspect_ratio_to_xi(beta_e[c]))}
             rows[c, s] = analyse_run(done[c, s], xis)
             print(f"cells_per_diameter {c}, seed {s}: analysed", flush=True)
     fine = cpds[-1]
