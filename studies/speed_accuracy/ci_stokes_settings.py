@@ -6,7 +6,7 @@ Question
     suspension (closure-free rate regression with the run's own a4, and the trajectory fit
     of Folgar–Tucker + IBOF to a2(t)) and for a2(t) itself: how far does each cheaper
     setting of the Stokes numerics (CG tolerance, single-precision transforms, a solve every
-    k-th step, the time step) move the
+    k-th step, the time step, the penalty κ) and the number of MPI ranks move the
     answer from the reference setting, in units of the answer's statistical error over 4
     seeds, and what does it save in CPU time? Which settings keep their change below half
     that statistical error (the rule of ``numerics.preset = "study"``)?
@@ -23,21 +23,29 @@ Method
     paired change against the reference ± its standard error, the change in units of the
     reference's ensemble error, the RMS change of a2(t) over the run (paired mean), and the
     mean CPU time per run with its ratio to the reference's.
-    The penalty's tolerance stops at 10⁻³: at 10⁻² ``pyfold validate`` refuses κ = 10³ on
+    The penalty κ: a softer solid (κ = 10² and 30) needs fewer CG iterations (about √κ) and
+    carries a looser tolerance (the stress bound below allows 10⁻² for κ ≤ 10²); its own error
+    is a rigidity error of order 1/κ (the fibres' strain rate inside, /stokes/rigidity_max).
+    Ranks (studies/sweeps/ci_stokes_settings_ranks.toml, the RANKED rows): the setting
+    "tolerance 10⁻³, a solve every 4th step" on 2 MPI ranks per run, one run at a time; the
+    domain decomposition changes the transforms' round-off only, so its change of C_I is that
+    round-off grown by the suspension's chaos, and what it buys is wall time (CPU time counts
+    both ranks). Ranks are the run's resources, not a preset setting.
+    The penalty's tolerance stops at 10⁻³ for κ = 10³: at 10⁻² ``pyfold validate`` refuses κ = 10³ on
     these grids (the bound on the particles' stress error,
     docs/physics.md#how-large-a-penalty-the-solver-can-carry). Exact rigidity
     (``rigidity = "exact"``) is not a point: at tolerance 10⁻² on the semi-dilute scene it
     ran at about 4 times the reference's CPU time per step and stopped at step 183 (1000 CG
     iterations, rigidity error 1.3·10⁻²), docs/speed_accuracy.md. The grid is
-    not varied: the C_I is that of 3 voxels per diameter (a β = 5 spheroid's period is 16 %
-    short there; a 4-voxel repeat costs about 3 times the reference).
+    not varied here: the C_I is that of 3 voxels per diameter (a β = 5 spheroid's period is 16 %
+    short there); studies/interaction_coefficient/ci_resolution.py measures the resolution.
     Scenes: semi-dilute n L³ = 5 (98 fibres, cell 2.7 L, 42³ at 3 voxels per diameter) and
     concentrated n L³ = 8 (157 fibres, volume fraction 0.25; at n L³ = 10, φ = 0.31, the
     random placement jams); the settings are listed in SETTINGS, the points in
     studies/sweeps/ci_stokes_settings.toml.
 
 Command
-    .venv/bin/python studies/speed_accuracy/ci_stokes_settings.py [--executor slurm] [--seeds 1 2]
+    .venv/bin/python studies/speed_accuracy/ci_stokes_settings.py [--executor slurm] [--seeds 1 2] [--no-ranks]
     (the sweep runs two serial simulations at a time; finished runs are re-used, a killed
     one is resumed from its checkpoint; --analyse-only analyses what is there)
 
@@ -48,6 +56,7 @@ Cost (2 cores)
 
 Outputs (under out/speed_accuracy/ci_stokes_settings/, ``--out``)
     sweep/                       the runs (pyfold sweep folder)
+    sweep_ranks/                 the 2-rank runs (--no-ranks: none)
     ci_stokes_settings.nc        per scene, setting and seed: C_I (both estimators), a2 RMS
                                  change, CPU s; per scene and setting the ensemble and paired values
     ci_stokes_settings.md        the tables
@@ -89,6 +98,18 @@ SETTINGS: dict[str, tuple[dict, float | None, str]] = {
     "tol1e-3_every2": ({"tolerance": 1e-3, "solve_every": 2}, None, "tolerance 10⁻³, a solve every 2nd step"),
     "tol1e-3_every4": ({"tolerance": 1e-3, "solve_every": 4}, None, "tolerance 10⁻³, a solve every 4th step"),
     "tol1e-3_dt0.04": ({"tolerance": 1e-3}, 0.04, "tolerance 10⁻³, Δt 0.04 (twice the reference)"),
+    "kappa100_tol1e-3_every4": ({"kappa": 1e2, "tolerance": 1e-3, "solve_every": 4}, None,
+                                "κ 10², tolerance 10⁻³, a solve every 4th step"),
+    "kappa100_tol1e-2_every4": ({"kappa": 1e2, "tolerance": 1e-2, "solve_every": 4}, None,
+                                "κ 10², tolerance 10⁻², a solve every 4th step"),
+    "kappa30_tol1e-2_every4": ({"kappa": 30.0, "tolerance": 1e-2, "solve_every": 4}, None,
+                               "κ 30, tolerance 10⁻², a solve every 4th step"),
+}
+#: the ranks lever (studies/sweeps/ci_stokes_settings_ranks.toml): its row -> (the setting it runs,
+#: MPI ranks per run, what it is). Not a preset setting: ranks are the run's resources, not its
+#: numerics, and change the answer only through round-off.
+RANKED: dict[str, tuple[str, int, str]] = {
+    "tol1e-3_every4_np2": ("tol1e-3_every4", 2, "tolerance 10⁻³, a solve every 4th step, 2 MPI ranks"),
 }
 ESTIMATORS = {"closure_free": "rate regression with the run's own a4",
               "ibof_trajectory": "Folgar–Tucker + IBOF fitted to a2(t)"}
@@ -104,6 +125,11 @@ def scene_of(scene: str, setting: str, seed: int, t_end: float):
                           hydrodynamics="stokes", stokes=stokes, time_scheme="ab2")
 
 
+def label(row: str) -> str:
+    """What the row ``row`` (a SETTINGS or RANKED key) is, for the tables."""
+    return RANKED[row][2] if row in RANKED else SETTINGS[row][2]
+
+
 def analyse_run(path: Path) -> dict:
     """C_I of one run by both estimators, its a2(t) and its CPU time."""
     ds = open_run(path)
@@ -112,7 +138,9 @@ def analyse_run(path: Path) -> dict:
     t, a2, a4 = ds["time"].values, ds["a2"].values, ds["a4"].values
     reg = ci_rate_regression(t, a2, a4, L, xi)
     fit = fit_ci_rk4("ibof", t, a2, L, xi)
+    attempts = sweep_store.attempts(path.parent)
     return {"t": t, "a2": a2, "cpu_s": sweep_store.cpu_seconds(path.parent),
+            "wall_s": float(sum(a.get("wall_s", math.nan) for a in attempts)) if attempts else math.nan,
             "closure_free": (reg.ci, reg.stderr), "ibof_trajectory": (fit.ci, fit.stderr),
             "iterations": float(ds["stokes_iterations"].values.mean()) if "stokes_iterations" in ds else math.nan}
 
@@ -124,6 +152,7 @@ def compare(runs: dict, scene: str, settings: list[str], seeds: list[int]) -> li
     for name in settings:
         have = [s for s in seeds if (scene, name, s) in runs]
         row = {"setting": name, "seeds": have, "cpu_s": float(np.mean([runs[scene, name, s]["cpu_s"] for s in have])),
+               "wall_s": float(np.mean([runs[scene, name, s]["wall_s"] for s in have])),
                "iterations": float(np.mean([runs[scene, name, s]["iterations"] for s in have]))}
         row["cpu_ratio"] = row["cpu_s"] / float(np.mean([ref[s]["cpu_s"] for s in have]))
         for est in ESTIMATORS:
@@ -148,12 +177,13 @@ def compare(runs: dict, scene: str, settings: list[str], seeds: list[int]) -> li
 
 
 def table(scene: str, rows: list[dict]) -> str:
-    head = (f"### {scene}\n\n| setting | seeds | CPU s/run | × cheaper | CG it/solve | "
+    head = (f"### {scene}\n\n| setting | seeds | CPU s/run | wall s/run | × cheaper | CG it/solve | "
             + " | ".join(f"C_I {k} ± err | change ± s.e. | in stat. errors" for k in ESTIMATORS)
-            + " | a2 RMS change |\n|" + "---|" * (6 + 3 * len(ESTIMATORS)) + "\n")
+            + " | a2 RMS change |\n|" + "---|" * (7 + 3 * len(ESTIMATORS)) + "\n")
     lines = []
     for r in rows:
-        cells = [SETTINGS[r["setting"]][2], str(len(r["seeds"])), f"{r['cpu_s']:.0f}", f"{1 / r['cpu_ratio']:.2f}",
+        cells = [label(r["setting"]), str(len(r["seeds"])), f"{r['cpu_s']:.0f}", f"{r['wall_s']:.0f}",
+                 f"{1 / r['cpu_ratio']:.2f}",
                  f"{r['iterations']:.1f}"]
         for est in ESTIMATORS:
             c = r[est]
@@ -190,20 +220,21 @@ def figure(all_rows: dict, path: Path) -> None:
 
 
 def dataset(runs: dict, all_rows: dict, seeds: list[int]) -> xr.Dataset:
-    scenes, settings = list(all_rows), list(SETTINGS)
+    scenes, settings = list(all_rows), [*SETTINGS, *RANKED]
     shape = (len(scenes), len(settings), len(seeds))
     data = {f"ci_{est}": np.full(shape, np.nan) for est in ESTIMATORS}
     data.update({f"ci_{est}_stderr": np.full(shape, np.nan) for est in ESTIMATORS})
     data["cpu_s"] = np.full(shape, np.nan)
+    data["wall_s"] = np.full(shape, np.nan)
     for (sc, st, sd), r in runs.items():
         if sc in scenes and sd in seeds:
             k = (scenes.index(sc), settings.index(st), seeds.index(sd))
             for est in ESTIMATORS:
                 data[f"ci_{est}"][k], data[f"ci_{est}_stderr"][k] = r[est]
-            data["cpu_s"][k] = r["cpu_s"]
+            data["cpu_s"][k], data["wall_s"][k] = r["cpu_s"], r["wall_s"]
     dims = ("scene", "setting", "seed")
-    ds = xr.Dataset({k: (dims, v, {"units": "s" if k == "cpu_s" else "1",
-                                   "long_name": "CPU time of the run" if k == "cpu_s" else k.replace("_", " ")})
+    names = {"cpu_s": "CPU time of the run (all ranks)", "wall_s": "wall time of the run"}
+    ds = xr.Dataset({k: (dims, v, {"units": "s" if k in names else "1", "long_name": names.get(k, k.replace("_", " "))})
                      for k, v in data.items()},
                     coords={"scene": scenes, "setting": settings, "seed": seeds})
     for est in ESTIMATORS:
@@ -226,6 +257,8 @@ def measured(rows: list[dict]) -> dict[str, "Measured"]:
 
     out = {}
     for r in rows:
+        if r["setting"] in RANKED:
+            continue
         stokes = {**REFERENCE_STOKES, **SETTINGS[r["setting"]][0]}
         cf, tr = r["closure_free"], r["ibof_trajectory"]
         out[r["setting"]] = Measured(
@@ -277,6 +310,8 @@ def main() -> None:
     ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
     ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
     ap.add_argument("--np", type=int, default=None, help="MPI ranks per run (default: the sweep file's)")
+    ap.add_argument("--no-ranks", action="store_true",
+                    help="leave out the ranks lever (studies/sweeps/ci_stokes_settings_ranks.toml)")
     ap.add_argument("--out", type=Path, default=Path("out/speed_accuracy/ci_stokes_settings"))
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
@@ -285,10 +320,22 @@ def main() -> None:
     done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor, args.np,
                                  analyse_only=args.analyse_only)
     runs = {(scene, setting, seed): analyse_run(path) for ((scene, setting), seed), path in done.items()}
+    if not args.no_ranks:
+        ranked = sweep_study.load_form(Path(__file__).resolve().parents[1] / "sweeps", "ci_stokes_settings_ranks",
+                                       False, seeds=tuple(args.seeds) if args.seeds else None)
+        # after the serial sweep, one run of 2 ranks at a time; the ranks are the sweep file's
+        serial = args.sweep_dir or args.out / "sweep"
+        done = sweep_study.run_sweep(ranked, serial.with_name(serial.name + "_ranks"),
+                                     args.executor, analyse_only=args.analyse_only)
+        rows_of = {(setting, RANKED[row][1]): row for row, (setting, _, _) in RANKED.items()}
+        for ((scene, setting), seed), path in done.items():
+            row = rows_of.get((setting, ranked.resources.np))
+            if row is not None:
+                runs[scene, row, seed] = analyse_run(path)
     seeds = list(spec.seeds)
     all_rows = {}
     for scene in SCENES:
-        settings = [st for st in SETTINGS if any((scene, st, s) in runs for s in seeds)]
+        settings = [st for st in [*SETTINGS, *RANKED] if any((scene, st, s) in runs for s in seeds)]
         ref_seeds = [s for s in seeds if (scene, REFERENCE, s) in runs]
         if REFERENCE in settings and ref_seeds:
             all_rows[scene] = compare(runs, scene, settings, ref_seeds)

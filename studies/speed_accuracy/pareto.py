@@ -24,18 +24,25 @@ Question
         method); the measured grid values are checked against
         out/rheology/sphere_viscosity.nc when that file exists. The ``jeffery`` row: no
         hydrodynamic interactions, i.e. Einstein's 1 + 2.5 phi.
-    (3) C_I (closure-free rate regression, pyfold.ci_estimators.ci_rate_regression with
-        the run's own a4) of beta = 5 fibres in simple shear, 4 paired seeds, strain 30:
-        semi-dilute (98 fibres, n L^3 = 4.98; the runs of
-        studies/speed_accuracy/ci_stokes_settings.py, one per Stokes setting) and dilute
-        (18 fibres, n L^3 = 0.91; runs of studies/speed_accuracy/ci_dilute.py). Reference:
-        the Stokes model (42^3, 3.11 voxels per diameter, kappa 1e3, tol 1e-4, AB2,
-        dt = 0.02) on the same seeds; a row's error is |paired mean difference| to it, ±
-        the paired s.e.; the reference row's "error" is its ensemble s.e. Stokes rows: each
-        setting of ci_stokes_settings.py (semi-dilute); contacts-only rows at dt = 0.04,
+    (3) C_I of beta = 5 fibres in simple shear, 4 paired seeds, strain 30, by two estimators:
+        the closure-free rate regression (pyfold.ci_estimators.ci_rate_regression with the run's
+        own a4) and the trajectory fit of Folgar–Tucker + IBOF to a2(t)
+        (pyfold.fast_fit.fit_ci_rk4), one answer each: semi-dilute (98 fibres, n L^3 = 4.98;
+        the runs of studies/speed_accuracy/ci_stokes_settings.py, one per Stokes setting,
+        and of its ranks sweep) and dilute (18 fibres, n L^3 = 0.91; runs of
+        studies/speed_accuracy/ci_dilute.py). Reference: the Stokes model (42^3, 3.11 voxels
+        per diameter, kappa 1e3, tol 1e-4, AB2, dt = 0.02) on the same seeds; a row's error
+        is |paired mean difference| to it, ± the paired s.e.; the reference row's "error" is
+        its ensemble s.e. Stokes rows (semi-dilute): each setting of ci_stokes_settings.py
+        (tolerance, transform precision, solve reuse, time step, kappa) and its RANKED rows
+        (2 MPI ranks; their CPU time counts both ranks); contacts-only rows at dt = 0.04,
         0.02, 0.01, 0.005 (dt = alpha/(gamma_dot L) = 0.02 with alpha = 0.1 d, the rule of
         the studies). The runs are sweeps (pyfold.sweep): re-used when finished, created
         when absent (the Stokes runs then dominate the cost, see Cost).
+        Resolution rows (both estimators): the semi-dilute scene at 3 / 4 / 5 voxels per
+        diameter, each against the finest, read from
+        studies/interaction_coefficient/ci_resolution.py's table when it exists (strain 20,
+        tolerance 1e-3, a solve every 4th step; 0.8 CPU-hour to make, so not re-run here).
 
     The evidence ``hydrodynamics = "auto"`` quotes (pyfold/scene/hydrodynamics_evidence.py)
     is recomputed from the C_I run files (``evidence_check``); any disagreement with the
@@ -45,19 +52,20 @@ Command
     nice -n 10 .venv/bin/python studies/speed_accuracy/pareto.py [--large] [--out out/speed_accuracy]
 
 Cost on 2 cores
-    Small form with all C_I runs present (measured, nice 10): 127 CPU-s, 127 s wall at a load
-    average of 2.0 -> 1.1 (period 106 CPU-s, eta_eff 10, C_I analysis the rest); the 12
-    contacts-only dt runs add 28 CPU-s when absent; ``total_cpu_s`` in pareto.nc and the
-    Cost line of pareto.md give each run's own.
-    Re-creating absent C_I Stokes runs adds about
-    31 CPU-min (semi-dilute, ci_hydrodynamics.py docstring) plus the dilute study's
-    (ci_dilute.py: 4 x 340 CPU-s measured). --large (not run): grids to 96^3 and ntheta 32
-    for the period, 128^3 for eta_eff, dt 0.025 for the marched orbit.
+    Small form with all C_I runs present (measured, nice 10): 206 CPU-s, 206 s wall at a load
+    average of 1.3 -> 1.1 (period about 110 CPU-s, eta_eff 10, the C_I analysis with its
+    trajectory fits the rest); the 12 contacts-only dt runs add 28 CPU-s when absent;
+    ``total_cpu_s`` in pareto.nc and the Cost line of pareto.md give each run's own.
+    Re-creating absent C_I Stokes runs adds about 3.5 CPU-hours (ci_stokes_settings.py's
+    sweeps, settings, soft penalties and 2 ranks) plus the dilute study's (ci_dilute.py:
+    4 x 340 CPU-s measured). --large (not run): grids to 96^3 and ntheta 32 for the period,
+    128^3 for eta_eff, dt 0.025 for the marched orbit.
 
 Outputs (out/speed_accuracy/)
     pareto.nc (one row dimension; answer, setting, error, CPU/wall, load, pareto flag),
     pareto.md (the table a user picks settings from), pareto.png (error against CPU time,
-    log-log, one panel per answer, the Pareto front drawn).
+    log-log, one panel per answer, the Pareto front drawn; docs/figures/speed_accuracy_pareto.png
+    is a copy).
 """
 from __future__ import annotations
 
@@ -108,11 +116,13 @@ ETA_REF_GRIDS = (32, 48, 64)  # the rheology study's grids: its Richardson tripl
 CI_BASE_DT = 0.02             # alpha/(gamma_dot L) of sheared_fibres at beta = 5
 SEMI = ch.SMALL               # the semi-dilute study (98 fibres, n L^3 = 4.98)
 DILUTE = ci_dilute.DILUTE     # 18 fibres, n L^3 = 0.91
+#: the resolution study's table (studies/interaction_coefficient/ci_resolution.py)
+RESOLUTION = ROOT / "out" / "interaction_coefficient" / "resolution" / "ci_resolution.nc"
 
 
 @dataclasses.dataclass
 class Row:
-    answer: str          # "jeffery_period", "eta_eff", "ci_semi_dilute", "ci_dilute"
+    answer: str          # a key of TITLES
     model: str           # "jeffery" or "stokes"
     backend: str         # "fft" or "-" (no Stokes solve)
     setting: str         # human-readable
@@ -253,9 +263,11 @@ def _rheology_cross_check(solves: dict, base: StokesSettings, out: Path) -> dict
 def _run_info(path: Path) -> dict:
     """Closure-free C_I of one run with its s.e., its a2(t) for the trajectory fit, and its cost."""
     r = ch.analyse_run(path)
+    L = ch.run_checks.velocity_gradient_of(path)
+    fit = fit_ci_rk4("ibof", r["t"], r["a2"], L, r["xi"])
     return dict(ci=r["regs"]["own_a4"].ci, stderr=r["regs"]["own_a4"].stderr, cpu=r["cpu_s"], wall=r["wall_s"],
-                t=r["t"], a2=r["a2"], xi=r["xi"], L=ch.run_checks.velocity_gradient_of(path), load=math.nan,
-                grid=r["grid"])
+                t=r["t"], a2=r["a2"], xi=r["xi"], L=L, load=math.nan, grid=r["grid"],
+                ci_trajectory=fit.ci, ci_trajectory_stderr=fit.stderr)
 
 
 def stokes_settings_runs(out: Path) -> dict:
@@ -263,10 +275,21 @@ def stokes_settings_runs(out: Path) -> dict:
     here when runs are missing; finished runs are re-used)."""
     from pyfold.sweep import study as sweep_study
 
+    from ci_stokes_settings import RANKED
+
     spec = sweep_study.load_form(ROOT / "studies" / "sweeps", "ci_stokes_settings", False)
     done = sweep_study.run_sweep(spec, out / "ci_stokes_settings" / "sweep")
-    return {(setting, seed): _run_info(path) for ((scene, setting), seed), path in done.items()
+    runs = {(setting, seed): _run_info(path) for ((scene, setting), seed), path in done.items()
             if scene == "semi-dilute"}
+    # the ranks lever: the same scenes on 2 MPI ranks per run (ci_stokes_settings.py's RANKED rows)
+    ranked = sweep_study.load_form(ROOT / "studies" / "sweeps", "ci_stokes_settings_ranks", False)
+    done = sweep_study.run_sweep(ranked, out / "ci_stokes_settings" / "sweep_ranks")
+    rows_of = {(setting, np_): row for row, (setting, np_, _) in RANKED.items()}
+    for ((scene, setting), seed), path in done.items():
+        row = rows_of.get((setting, ranked.resources.np))
+        if scene == "semi-dilute" and row is not None:
+            runs[row, seed] = _run_info(path)
+    return runs
 
 
 def contacts_only_dt_runs(study: ch.Study, dts, out: Path) -> dict:
@@ -306,59 +329,123 @@ def dilute_runs(out: Path) -> tuple[dict, dict]:
     return by_model["stokes"], by_model["jeffery"]
 
 
+#: C_I estimators of the Pareto rows: run-info key -> (answer suffix, what it is)
+CI_ESTIMATORS = {"ci": ("", "closure-free rate regression"),
+                 "ci_trajectory": ("_trajectory", "Folgar–Tucker + IBOF fitted to a2(t)")}
+
+
+def _lever(keys: dict) -> str:
+    """The factor a ci_stokes_settings.py setting varies (the figure's marker)."""
+    if "kappa" in keys:
+        return "kappa"
+    if "solve_every" in keys:
+        return "reuse"
+    if "fft_precision" in keys:
+        return "precision"
+    return "tol"
+
+
 def ci_rows(p: dict, out: Path) -> tuple[list[Row], dict]:
-    from ci_stokes_settings import REFERENCE, SETTINGS
+    from ci_stokes_settings import RANKED, REFERENCE, REFERENCE_STOKES, SETTINGS
 
     rows, extra = [], {}
     settings = stokes_settings_runs(out)
     seeds = sorted(s for (name, s) in settings if name == REFERENCE)
     dil_stokes, dil_jeff = dilute_runs(out)
-    for answer, study in (("ci_semi_dilute", SEMI), ("ci_dilute", DILUTE)):
-        stokes = {s: settings[REFERENCE, s] for s in seeds} if answer == "ci_semi_dilute" else dil_stokes
+    for base, study in (("ci_semi_dilute", SEMI), ("ci_dilute", DILUTE)):
+        stokes = {s: settings[REFERENCE, s] for s in seeds} if base == "ci_semi_dilute" else dil_stokes
         sd = sorted(stokes)
-        st = np.array([stokes[s]["ci"] for s in sd])
-        ens = ensemble_mean(st, [stokes[s]["stderr"] for s in sd])
-        numerics = f"3 cells/d requested (42^3), κ {study.kappa:g}, tol {study.tolerance:g}, AB2"
-        ref = (f"stokes fft ({numerics}), dt {CI_BASE_DT:g}, seeds {sd} (C_I_ref = {ens.mean:.2e} ± {ens.error:.1e}); "
-               "error = |paired mean difference| ± paired s.e.; the reference row: its ensemble s.e.")
-        rows.append(Row(answer, "stokes", "fft", f"stokes fft 42^3 (3.11 vox/d), κ {study.kappa:g}, tol "
-                        f"{study.tolerance:g}, AB2 dt {CI_BASE_DT:g} [reference]", "model", ens.mean, ens.error,
-                        math.nan, ref, "measured", float(np.mean([stokes[s]["cpu"] for s in sd])),
-                        float(np.mean([stokes[s]["wall"] for s in sd])), math.nan, 3.11, study.kappa,
-                        study.tolerance, CI_BASE_DT, "ab2"))
-        if answer == "ci_semi_dilute":
-            for name, (keys, dt, words) in SETTINGS.items():
-                if name == REFERENCE or not all((name, s) in settings for s in sd):
-                    continue
-                v = np.array([settings[name, s]["ci"] for s in sd])
-                d = paired_difference(v, st)
-                rows.append(Row(answer, "stokes", "fft", f"stokes fft, {words}", "setting", float(v.mean()),
-                                abs(d.mean), d.stderr, ref, "measured",
-                                float(np.mean([settings[name, s]["cpu"] for s in sd])),
-                                float(np.mean([settings[name, s]["wall"] for s in sd])), math.nan,
-                                tol=float(keys.get("tolerance", math.nan)), dt=dt or CI_BASE_DT, scheme="ab2"))
+        if base == "ci_semi_dilute":
             jeff = contacts_only_dt_runs(study, p["ci_dts"], out)
             dts = p["ci_dts"]
         else:
             jeff = {(CI_BASE_DT, s): dict(dil_jeff[s], source="measured") for s in sd}
             dts = [CI_BASE_DT]
-        for dt in dts:
-            je = np.array([jeff[dt, s]["ci"] for s in sd])
-            d = paired_difference(je, st)
-            rows.append(Row(answer, "jeffery", "-", f"jeffery kinematics + contacts, dt {dt:g}", "dt",
-                            float(je.mean()), abs(d.mean), d.stderr, ref, "measured",
-                            float(np.mean([jeff[dt, s]["cpu"] for s in sd])),
-                            float(np.mean([jeff[dt, s]["wall"] for s in sd])),
-                            float(np.nanmean([jeff[dt, s]["load"] for s in sd])) if any(
-                                math.isfinite(jeff[dt, s]["load"]) for s in sd) else math.nan,
-                            dt=dt, scheme="euler"))
-        check_dir = (out / "ci_stokes_settings") if answer == "ci_semi_dilute" else (out / "ci_dilute")
+        estimators = CI_ESTIMATORS
+        for key, (suffix, words_est) in estimators.items():
+            answer = base + suffix
+            st = np.array([stokes[s][key] for s in sd])
+            stderr = [stokes[s]["stderr" if key == "ci" else f"{key}_stderr"] for s in sd]
+            ens = ensemble_mean(st, stderr)
+            numerics = f"3 cells/d requested (42^3), κ {study.kappa:g}, tol {study.tolerance:g}, AB2"
+            ref = (f"{words_est}; stokes fft ({numerics}), dt {CI_BASE_DT:g}, seeds {sd} (C_I_ref = {ens.mean:.2e} ± "
+                   f"{ens.error:.1e}); error = |paired mean difference| ± paired s.e.; the reference row: its "
+                   "ensemble s.e.")
+            rows.append(Row(answer, "stokes", "fft", f"stokes fft 42^3 (3.11 vox/d), κ {study.kappa:g}, tol "
+                            f"{study.tolerance:g}, AB2 dt {CI_BASE_DT:g} [reference]", "model", ens.mean, ens.error,
+                            math.nan, ref, "measured", float(np.mean([stokes[s]["cpu"] for s in sd])),
+                            float(np.mean([stokes[s]["wall"] for s in sd])), math.nan, 3.11, study.kappa,
+                            study.tolerance, CI_BASE_DT, "ab2"))
+            if base == "ci_semi_dilute":
+                levers = {name: (keys, dt, words, _lever(keys)) for name, (keys, dt, words) in SETTINGS.items()}
+                levers.update({row: (SETTINGS[setting][0], SETTINGS[setting][1], words, "ranks")
+                               for row, (setting, _, words) in RANKED.items()})
+                for name, (keys, dt, words, lever) in levers.items():
+                    if name == REFERENCE or not all((name, s) in settings for s in sd):
+                        continue
+                    v = np.array([settings[name, s][key] for s in sd])
+                    d = paired_difference(v, st)
+                    stokes_keys = {**REFERENCE_STOKES, **keys}
+                    rows.append(Row(answer, "stokes", "fft", f"stokes fft, {words}", lever, float(v.mean()),
+                                    abs(d.mean), d.stderr, ref, "measured",
+                                    float(np.mean([settings[name, s]["cpu"] for s in sd])),
+                                    float(np.mean([settings[name, s]["wall"] for s in sd])), math.nan, 3.11,
+                                    float(stokes_keys["kappa"]), float(stokes_keys.get("tolerance", math.nan)),
+                                    dt=dt or CI_BASE_DT, scheme="ab2"))
+            for dt in dts:
+                je = np.array([jeff[dt, s][key] for s in sd])
+                d = paired_difference(je, st)
+                rows.append(Row(answer, "jeffery", "-", f"jeffery kinematics + contacts, dt {dt:g}", "dt",
+                                float(je.mean()), abs(d.mean), d.stderr, ref, "measured",
+                                float(np.mean([jeff[dt, s]["cpu"] for s in sd])),
+                                float(np.mean([jeff[dt, s]["wall"] for s in sd])),
+                                float(np.nanmean([jeff[dt, s]["load"] for s in sd])) if any(
+                                    math.isfinite(jeff[dt, s]["load"]) for s in sd) else math.nan,
+                                dt=dt, scheme="euler"))
+        check_dir = (out / "ci_stokes_settings") if base == "ci_semi_dilute" else (out / "ci_dilute")
         # the dilute study's analysis writes its own; made here when that analysis has not run
-        if answer == "ci_semi_dilute" or not (check_dir / "single_fibre_check.nc").exists():
+        if base == "ci_semi_dilute" or not (check_dir / "single_fibre_check.nc").exists():
             ch.single_fibre_check(study, stokes[sd[0]]["grid"], study.scene("stokes", sd[0]).side,
                                   check_dir / "single_fibre_check.nc")
-        extra[answer] = (stokes, {s: jeff[CI_BASE_DT, s] for s in sd}, check_dir)
+        extra[base] = (stokes, {s: jeff[CI_BASE_DT, s] for s in sd}, check_dir)
+    rows += resolution_rows(RESOLUTION)
     return rows, extra
+
+
+def resolution_rows(path: Path) -> list[Row]:
+    """The resolution lever: C_I of the semi-dilute scene at 3 / 4 / 5 voxels per diameter
+    (studies/interaction_coefficient/ci_resolution.py's table ``path``; its own 4 paired seeds, strain 20,
+    tolerance 1e-3, a solve every 4th step), each grid's error against the finest grid. Read from the
+    study's output, not re-run (0.8 CPU-hour): none when it is absent (the report says so)."""
+    if not path.exists():
+        return []
+    ds = xr.open_dataset(path, engine="h5netcdf")
+    cpds = [int(c) for c in ds["cells_per_diameter"].values]
+    finest = max(cpds)
+    rows = []
+    for est, suffix, words in (("closure_free", "", "closure-free rate regression"),
+                               ("ibof_trajectory", "_trajectory", "Folgar–Tucker + IBOF fitted to a2(t)")):
+        values = ds[f"ci_{est}_cox"]
+        ref_v = values.sel(cells_per_diameter=finest).values
+        ens = ensemble_mean(ref_v, ds[f"ci_{est}_cox_stderr"].sel(cells_per_diameter=finest).values)
+        ref = (f"{words}; stokes fft at {finest} cells/d requested, κ 1000, tol 0.001, a solve every 4th step, "
+               f"AB2 dt {CI_BASE_DT:g}, strain 20, seeds {[int(s) for s in ds['seed'].values]} (C_I_ref = {ens.mean:.2e} ± "
+               f"{ens.error:.1e}); error = |paired mean difference| ± paired s.e.; the reference row: its ensemble s.e.")
+        for c in cpds:
+            v = values.sel(cells_per_diameter=c).values
+            cpu = float(np.mean(ds["cpu_s"].sel(cells_per_diameter=c).values))
+            vpd = 1.0 / float(ds["h_over_d"].sel(cells_per_diameter=c))
+            if c == finest:
+                err, err_se, tag = ens.error, math.nan, " [reference]"
+            else:
+                d = paired_difference(v, ref_v)
+                err, err_se, tag = abs(d.mean), d.stderr, ""
+            rows.append(Row("ci_resolution" + suffix, "stokes", "fft",
+                            f"stokes fft, {c} cells/d requested ({vpd:.2f} vox/d){tag}", "grid", float(np.mean(v)),
+                            err, err_se, ref, f"re-used: {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}",
+                            cpu, math.nan, math.nan, vpd, 1e3, 1e-3, CI_BASE_DT, "ab2"))
+    ds.close()
+    return rows
 
 
 # Solver: the evidence check and the Pareto front
@@ -406,8 +493,7 @@ def evidence_check(extra: dict) -> tuple[list[str], list[str], dict]:
             bad.append(f"{regime}.seeds: module {row.seeds}, run files {len(seeds)}")
         # Trajectory fit of Folgar-Tucker + IBOF to a2(t) (pyfold.fast_fit.fit_ci_rk4): the C_I a
         # moulding code running IBOF needs; stated beside the closure-free headline.
-        fits = {m: np.array([fit_ci_rk4("ibof", r[s]["t"], r[s]["a2"], r[s]["L"], r[s]["xi"]).ci for s in seeds])
-                for m, r in (("stokes", stokes), ("jeffery", jeff))}
+        fits = {m: np.array([r[s]["ci_trajectory"] for s in seeds]) for m, r in (("stokes", stokes), ("jeffery", jeff))}
         dt_ = paired_difference(fits["stokes"], fits["jeffery"])
         traj[regime] = dict(stokes=float(fits["stokes"].mean()), jeffery=float(fits["jeffery"].mean()),
                             delta=dt_.mean, stderr=dt_.stderr, p=dt_.p)
@@ -450,33 +536,55 @@ def mark_pareto(rows: list[Row]) -> None:
 # Save
 TITLES = {"jeffery_period": "Jeffery period, β = 3 spheroid (relative error vs T_J)",
           "eta_eff": "η_eff, random spheres φ = 0.1 (relative error vs extrapolated)",
-          "ci_semi_dilute": "C_I, β = 5, n L³ = 4.98 (|ΔC_I| vs Stokes 42³)",
-          "ci_dilute": "C_I, β = 5, n L³ = 0.91 (|ΔC_I| vs Stokes 42³)"}
+          "ci_semi_dilute": "C_I closure-free, β = 5, n L³ = 4.98 (|ΔC_I| vs Stokes 42³, tol 1e-4)",
+          "ci_semi_dilute_trajectory": "C_I IBOF trajectory fit, β = 5, n L³ = 4.98 (|ΔC_I| vs Stokes 42³, tol 1e-4)",
+          "ci_dilute": "C_I closure-free, β = 5, n L³ = 0.91 (|ΔC_I| vs Stokes 42³, tol 1e-4)",
+          "ci_dilute_trajectory": "C_I IBOF trajectory fit, β = 5, n L³ = 0.91 (|ΔC_I| vs Stokes 42³, tol 1e-4)",
+          "ci_resolution": "C_I closure-free, β = 5, n L³ = 4.98, resolution (|ΔC_I| vs the finest grid)",
+          "ci_resolution_trajectory": "C_I IBOF trajectory fit, β = 5, n L³ = 4.98, resolution (|ΔC_I| vs the "
+                                      "finest grid)"}
+#: figure panels: (title, ((answer, legend label), ...)); the second answer of a panel in other colours
+PANELS = (("Jeffery period", (("jeffery_period", ""),)),
+          ("η_eff", (("eta_eff", ""),)),
+          ("C_I closure-free", (("ci_semi_dilute", "semi-dilute"), ("ci_dilute", "dilute"))),
+          ("C_I IBOF trajectory fit", (("ci_semi_dilute_trajectory", "semi-dilute"),
+                                       ("ci_dilute_trajectory", "dilute"))),
+          ("C_I against resolution, semi-dilute", (("ci_resolution", "closure-free"),
+                                                   ("ci_resolution_trajectory", "IBOF trajectory"))))
+#: figure markers per factor varied
+MARKS = {"grid": "o", "kappa": "s", "tol": "^", "dt": "D", "model": "*", "reuse": "v", "precision": "x",
+         "ranks": "P", "setting": "o"}
 
 
 def figure(rows: list[Row], path: Path) -> None:
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(13, 3.8), layout="constrained")
-    axes = fig.subplots(1, 3)
-    panels = (("jeffery_period",), ("eta_eff",), ("ci_semi_dilute", "ci_dilute"))
-    marks = {"grid": "o", "kappa": "s", "tol": "^", "dt": "D", "model": "*"}
-    for ax, answers in zip(axes, panels):
-        for answer, colour_shift in zip(answers, (0, 1)):
+    fig = Figure(figsize=(13, 7.6), layout="constrained")
+    axes = fig.subplots(2, 3).ravel()
+    for ax, (title, answers) in zip(axes, PANELS):
+        for (answer, label), colour_shift in zip(answers, (0, 1)):
             sub = [r for r in rows if r.answer == answer]
+            if not sub:
+                continue
             floor = 1e-4  # analytic rows (no cost) drawn at 0.1 ms
             for r in sub:
                 colour = ("tab:blue" if r.model == "stokes" else "tab:orange") if not colour_shift else \
                     ("tab:purple" if r.model == "stokes" else "tab:red")
                 x, y = max(r.cpu_s, floor), max(r.error, 1e-8)
-                ax.plot(x, y, marks.get(r.sweep, "o"), color=colour, ms=5,
+                ax.plot(x, y, MARKS.get(r.sweep, "o"), color=colour, ms=5,
                         mfc=colour if (r.pareto or (len(answers) == 1 and r.pareto_stokes)) else "none")
                 if math.isfinite(r.error_stderr):
                     ax.errorbar(x, y, yerr=[[min(r.error_stderr, 0.99 * y)], [r.error_stderr]], color=colour, lw=0.7)
             front = sorted((r for r in sub if r.pareto), key=lambda r: r.cpu_s)
             ax.step([max(r.cpu_s, floor) for r in front], [max(r.error, 1e-8) for r in front], where="post",
                     color="k" if not colour_shift else "grey", lw=1,
-                    label=f"Pareto front{'' if len(answers) == 1 else ' ' + answer[3:].replace('_', '-')}")
+                    label="Pareto front" + (f" {label}" if label else ""))
+            ref = [r for r in sub if r.setting.endswith("[reference]")]
+            if answer.startswith("ci_semi_dilute") and ref:  # the rule of numerics.preset = "study"
+                from pyfold.scene.study_preset import ADMISSIBLE_FRACTION
+
+                ax.axhline(ADMISSIBLE_FRACTION * ref[0].error, color="tab:green", ls=":", lw=1,
+                           label=f"{ADMISSIBLE_FRACTION:g} × statistical error ({label})")
             front_s = sorted((r for r in sub if r.pareto_stokes), key=lambda r: r.cpu_s)
             if len(answers) == 1 and len(front_s) > 1:
                 ax.step([r.cpu_s for r in front_s], [max(r.error, 1e-8) for r in front_s], where="post", color="tab:blue",
@@ -484,12 +592,14 @@ def figure(rows: list[Row], path: Path) -> None:
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("CPU time per answer [s]")
-        ax.set_title(" / ".join(TITLES[a].split(" (")[0] for a in answers), fontsize=9)
+        ax.set_title(title, fontsize=9)
         ax.legend(fontsize=7)
+    axes[-1].set_axis_off()
     axes[0].set_ylabel("relative error (filled: on a front)")
-    axes[2].set_ylabel("|C_I − C_I(Stokes)| (blue/orange semi-dilute, purple/red dilute)", fontsize=8)
-    fig.suptitle("speed-accuracy: ○ grid, □ κ, △ tolerance, ◇ Δt/scheme, ★ model level; blue Stokes (fft), "
-                 "orange jeffery kinematics", fontsize=9)
+    for ax in axes[2:5]:
+        ax.set_ylabel("|ΔC_I| (blue/orange first, purple/red second)", fontsize=8)
+    fig.suptitle("speed-accuracy: ○ grid, □ κ, △ tolerance, ▽ solve reuse, × precision, ✚ ranks, ◇ Δt/scheme, "
+                 "★ model level; blue Stokes (fft), orange jeffery kinematics", fontsize=9)
     fig.savefig(path, dpi=130)
 
 
@@ -516,7 +626,8 @@ def report(rows: list[Row], info: dict, ev_lines: list[str], bad: list[str], tra
         for r in sub:
             val = f"{r.value:.3e}" if answer.startswith("ci") else f"{r.value:.5g}"
             lines.append(f"| {'★' if r.pareto else ('☆' if r.pareto_stokes else '')} | {r.model} | {r.setting} | {val} | {_fmt_err(r)} | "
-                         f"{r.cpu_s:.3g} | {r.wall_s:.3g} | {'–' if not math.isfinite(r.load) else f'{r.load:.1f}'} | "
+                         f"{r.cpu_s:.3g} | {'–' if not math.isfinite(r.wall_s) else f'{r.wall_s:.3g}'} | "
+                         f"{'–' if not math.isfinite(r.load) else f'{r.load:.1f}'} | "
                          f"{r.source} |")
         lines.append("")
     lines += [f"η_eff cross-check: {info['rheology_cross_check']}.", "",
