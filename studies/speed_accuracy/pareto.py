@@ -52,8 +52,8 @@ Command
     nice -n 10 .venv/bin/python studies/speed_accuracy/pareto.py [--large] [--out out/speed_accuracy]
 
 Cost on 2 cores
-    Small form with all C_I runs present (measured, nice 10): 206 CPU-s, 206 s wall at a load
-    average of 1.3 -> 1.1 (period about 110 CPU-s, eta_eff 10, the C_I analysis with its
+    Small form with all C_I runs present (measured twice, nice 10): 186 and 206 CPU-s, as much
+    wall time, at load averages of 0.7-1.3 (period about 110 CPU-s, eta_eff 10, the C_I analysis with its
     trajectory fits the rest); the 12 contacts-only dt runs add 28 CPU-s when absent;
     ``total_cpu_s`` in pareto.nc and the Cost line of pareto.md give each run's own.
     Re-creating absent C_I Stokes runs adds about 3.5 CPU-hours (ci_stokes_settings.py's

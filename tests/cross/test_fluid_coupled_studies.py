@@ -1,5 +1,5 @@
-"""The fluid-coupled series and resolution studies (studies/interaction_coefficient/ci_fluid_series.py,
-ci_resolution.py): their scenes validate as the sweeps run them, the order and Richardson pieces
+"""The fluid-coupled series, resolution and steady-state studies (studies/interaction_coefficient/
+ci_fluid_series.py, ci_resolution.py, steady_state_strain.py): their scenes validate as the sweeps run them, the order and Richardson pieces
 recover a known convergence, and pyfold.correlations' fit of the shipped table
 (data/ci_fluid_coupled.csv) is the weighted least-squares line with its covariance."""
 from __future__ import annotations
@@ -20,7 +20,8 @@ resolution = import_study("interaction_coefficient", "ci_resolution")
 
 
 @pytest.mark.parametrize("name, builder", [("ci_fluid_series", series.scene_of),
-                                           ("ci_resolution", resolution.scene_of)])
+                                           ("ci_resolution", resolution.scene_of),
+                                           ("steady_state_strain", series.scene_of)])
 def test_every_point_of_the_sweeps_is_a_valid_scene_of_the_intended_model(name, builder):
     spec = load_form(STUDIES / "sweeps", name, False)
     for point in spec.points:
@@ -42,6 +43,23 @@ def test_the_series_and_its_twins_share_the_initial_state_and_step():
     for key in ("cell", "flow", "particles", "output"):
         assert a[key] == b[key], key
     assert a["numerics"]["seed"] == b["numerics"]["seed"] and a["numerics"]["dt"] == b["numerics"]["dt"]
+
+
+def test_the_long_contacts_only_runs_continue_the_series_twins():
+    """steady_state_strain.py's runs are the series' contacts-only twins with a later end only, so
+    their first 200 strain are those twins' (the same seed, placement, step and records)."""
+    import tomllib
+
+    spec, twins = load_form(STUDIES / "sweeps", "steady_state_strain", False), load_form(STUDIES / "sweeps",
+                                                                                           "ci_fluid_series", False)
+    assert spec.seeds == twins.seeds and spec.arguments["t_end"] > twins.arguments["t_end"]
+    assert {p["n_l3"] for p in spec.points} == {p["n_l3"] for p in twins.points if p["model"] == "jeffery"}
+    long = tomllib.loads(series.scene_of(5.0, "jeffery", 2, spec.arguments["t_end"]).toml)
+    short = tomllib.loads(series.scene_of(5.0, "jeffery", 2, twins.arguments["t_end"]).toml)
+    for table in (long, short):
+        table.pop("title")
+        del table["numerics"]["t_end"], table["output"]["snapshot_interval"]
+    assert long == short
 
 
 @pytest.mark.parametrize("p", [0.7, 1.0, 2.0, 3.5])

@@ -1,0 +1,178 @@
+"""How much strain a β = 5 fibre suspension needs to reach its steady state.
+
+Question
+    The fluid-coupled series (ci_fluid_series.py) runs every scene to a strain of 200 from
+    an isotropic start, and MSER-5 finds 1 of its 24 runs stationary there. Is that a
+    transient that ends — at which strain — or a drift that goes on? What does it change in
+    the closure-free C_I read over the stationary window? The contacts-only twins of the
+    series (the same scenes, seeds and initial states, Jeffery kinematics + contacts) cost
+    seconds per run, so they are run to a strain of 1000 and the question is asked of each
+    prefix: the records up to strain T, for T = 200, 400, ..., 1000.
+
+Method
+    Scenes: ci_fluid_series.scene_of(n_l3, "jeffery", seed, 1000): β = 5, n L³ = 2.49 /
+    4.98 / 7.98 (49 / 98 / 157 fibres in the 2.7 L cell), α = 0.1 d, Δt = 0.02, records every
+    0.2 strain, seeds 1–4 (studies/sweeps/steady_state_strain.toml). Per run and prefix T:
+    pyfold.steady_state.detect_steady_state on a2(t) over [0, T] (MSER-5 onset, the latest
+    over the components; stationary unless the MSER minimum lies in the second half or a
+    diagonal component drifts by more than 3 s.e. over the last half of the kept part); the
+    end drift of the diagonal components [per unit strain]; the closure-free C_I by rate
+    regression (pyfold.ci_estimators.ci_rate_regression with the run's own a4, Cox's ξ) over
+    the window [onset, T]. Per n L³ and T: the number of stationary runs, the largest onset
+    and drift, and the ensemble C_I (pyfold.ensemble.ensemble_mean: the larger of the scatter
+    over seeds and the pooled regression errors).
+    What it does not answer: the fluid-coupled runs' own strain to steady state. Their
+    transients are of the same kind (the ensemble's Jeffery oscillation damped by
+    interactions), so the contacts-only strain is the estimate the fluid-coupled cost is
+    planned with; it is not a measurement of it.
+
+Command
+    .venv/bin/python studies/interaction_coefficient/steady_state_strain.py [--executor slurm]
+        [--seeds 1 2] [--t-end 1000] [--analyse-only]
+
+Cost (2 cores)
+    Measured: the sweep's 12 contacts-only runs 948 CPU-s in all (17 / 58–59 / 161–163 CPU-s
+    per run at n L³ 2.49 / 4.98 / 7.98), about 8 min wall two at a time; the analysis about a
+    CPU-minute.
+
+Outputs (under out/interaction_coefficient/steady_state_strain/, ``--out``)
+    sweep/                     the runs (pyfold sweep folder)
+    steady_state_strain.nc     per n L³, prefix strain and seed: stationary, onset, drift, C_I ± s.e.
+    steady_state_strain.md     the table per n L³ and prefix strain
+    steady_state_strain.png    a2_xx(t) of every run with its onsets, and C_I against the prefix strain
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import ci_fluid_series as series  # noqa: E402
+
+#: prefix strains at which the steady-state question is asked
+PREFIXES = (200.0, 400.0, 600.0, 800.0, 1000.0)
+DIAGONAL = ((0, 0), (1, 1), (2, 2))
+
+
+def analyse_run(path: Path, prefixes) -> dict:
+    """Per prefix strain: stationary, onset, largest diagonal end drift, closure-free C_I ± s.e."""
+    from pyfold import run_checks
+    from pyfold.ci_estimators import ci_rate_regression
+    from pyfold.run_results import open_run
+    from pyfold.steady_state import detect_steady_state
+
+    ds = open_run(path)
+    L = run_checks.velocity_gradient_of(path)
+    xi = run_checks.shape_factor_of(ds)
+    t, a2, a4 = ds["time"].values, ds["a2"].values, ds["a4"].values
+    ds.close()
+    out = {"t": t, "a2_xx": a2[:, 0, 0]}
+    for T in prefixes:
+        keep = t <= T + 1e-9
+        if t[keep][-1] < T - 1e-6:
+            continue  # the run is shorter than this prefix
+        ss = detect_steady_state(t[keep], a2[keep])
+        drift = ss.drift_slope.reshape(3, 3)
+        reg = ci_rate_regression(t[keep], a2[keep], a4[keep], L, xi, window=(ss.onset_time, T))
+        out[T] = {"stationary": bool(ss.stationary), "onset": float(ss.onset_time),
+                  "drift": float(max(abs(drift[i, j]) for i, j in DIAGONAL)), "ci": reg.ci, "stderr": reg.stderr}
+    return out
+
+
+def analyse(done: dict, seeds: list[int], out: Path) -> str:
+    from pyfold.ensemble import ensemble_mean
+
+    runs = {(n_l3, seed): analyse_run(path, PREFIXES) for ((n_l3, _model), seed), path in done.items()}
+    concentrations = sorted({n for n, _ in runs})
+    shape = (len(concentrations), len(PREFIXES), len(seeds))
+    fields = {k: np.full(shape, np.nan) for k in ("stationary", "onset", "drift", "ci", "ci_stderr")}
+    lines = ["| n L³ | strain T | stationary runs | onsets (strain) | largest end drift [1/strain] | "
+             "C_I closure-free over [onset, T] ± s.e. |", "|---|---|---|---|---|---|"]
+    for i, n in enumerate(concentrations):
+        for j, T in enumerate(PREFIXES):
+            have = [s for s in seeds if (n, s) in runs and T in runs[n, s]]
+            if not have:
+                continue
+            rows = [runs[n, s][T] for s in have]
+            for s, r in zip(have, rows):
+                k = (i, j, seeds.index(s))
+                fields["stationary"][k], fields["onset"][k], fields["drift"][k] = r["stationary"], r["onset"], r["drift"]
+                fields["ci"][k], fields["ci_stderr"][k] = r["ci"], r["stderr"]
+            ens = ensemble_mean([r["ci"] for r in rows], [r["stderr"] for r in rows])
+            lines.append(f"| {n:g} | {T:g} | {sum(r['stationary'] for r in rows)}/{len(rows)} | "
+                         f"{', '.join(format(r['onset'], '.0f') for r in rows)} | {max(r['drift'] for r in rows):.1e} | "
+                         f"{ens.mean:+.2e} ± {ens.error:.1e} |")
+    dims = ("n_l3", "strain", "seed")
+    units = {"stationary": "1", "onset": "1", "drift": "1", "ci": "1", "ci_stderr": "1"}
+    names = {"stationary": "1 when detect_steady_state finds the prefix stationary",
+             "onset": "MSER-5 onset strain (latest over the components)",
+             "drift": "largest end drift of a diagonal a2 component per unit strain",
+             "ci": "closure-free C_I by rate regression over [onset, strain]", "ci_stderr": "its standard error"}
+    ds = xr.Dataset({k: (dims, v, {"units": units[k], "long_name": names[k]}) for k, v in fields.items()},
+                    coords={"n_l3": concentrations, "strain": list(PREFIXES), "seed": seeds})
+    ds.attrs.update(beta=series.BETA, alpha_over_d=series.ALPHA_OVER_D, model="jeffery kinematics + contacts")
+    out.mkdir(parents=True, exist_ok=True)
+    ds.to_netcdf(out / "steady_state_strain.nc", engine="h5netcdf")
+    _figure(runs, concentrations, seeds, ds, out / "steady_state_strain.png")
+    text = "\n".join(lines) + "\n"
+    (out / "steady_state_strain.md").write_text(text)
+    return text
+
+
+def _figure(runs: dict, concentrations, seeds, ds: xr.Dataset, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, len(concentrations), figsize=(4.2 * len(concentrations), 6.5), squeeze=False)
+    for i, n in enumerate(concentrations):
+        ax = axes[0, i]
+        for s in seeds:
+            if (n, s) in runs:
+                r = runs[n, s]
+                line, = ax.plot(r["t"], r["a2_xx"], lw=0.6)
+                final = max((T for T in PREFIXES if T in r), default=None)
+                if final is not None:
+                    ax.axvline(r[final]["onset"], color=line.get_color(), ls=":", lw=0.8)
+        ax.set_title(f"n L³ = {n:g}: a2_xx (dotted: onset over the whole run)", fontsize=9)
+        ax.set_xlabel("strain")
+        ax = axes[1, i]
+        ci = ds["ci"].sel(n_l3=n)
+        mean = ci.mean("seed").values
+        err = ci.std("seed", ddof=1).values / math.sqrt(ci.sizes["seed"])
+        ax.errorbar(list(PREFIXES), mean, yerr=err, fmt="o-")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xlabel("prefix strain T")
+        ax.set_ylabel("closure-free C_I over [onset, T]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main() -> None:
+    from pyfold.sweep import study as sweep_study
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
+    ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
+    ap.add_argument("--t-end", type=float, help="override the sweep's strain")
+    ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/steady_state_strain"))
+    sweep_study.add_arguments(ap)
+    args = ap.parse_args()
+    spec = sweep_study.load_form(series.SWEEPS, "steady_state_strain", False,
+                                 seeds=tuple(args.seeds) if args.seeds else None,
+                                 arguments={"t_end": args.t_end} if args.t_end else None)
+    done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor,
+                                 analyse_only=args.analyse_only)
+    print(analyse(done, list(spec.seeds), args.out))
+
+
+if __name__ == "__main__":
+    main()
