@@ -125,6 +125,14 @@ def scene_of(scene: str, setting: str, seed: int, t_end: float):
                           hydrodynamics="stokes", stokes=stokes, time_scheme="ab2")
 
 
+def ranked_runs(done: dict, ranks: int) -> dict[tuple[str, str, int], Path]:
+    """The finished runs ``done`` of the ranks sweep (``{((scene, setting), seed): run file}``, run
+    on ``ranks`` ranks each) keyed ``(scene, RANKED row, seed)``; runs of no RANKED row are left out."""
+    rows_of = {(setting, np_): row for row, (setting, np_, _) in RANKED.items()}
+    return {(scene, rows_of[setting, ranks], seed): path for ((scene, setting), seed), path in done.items()
+            if (setting, ranks) in rows_of}
+
+
 def label(row: str) -> str:
     """What the row ``row`` (a SETTINGS or RANKED key) is, for the tables."""
     return RANKED[row][2] if row in RANKED else SETTINGS[row][2]
@@ -327,11 +335,7 @@ def main() -> None:
         serial = args.sweep_dir or args.out / "sweep"
         done = sweep_study.run_sweep(ranked, serial.with_name(serial.name + "_ranks"),
                                      args.executor, analyse_only=args.analyse_only)
-        rows_of = {(setting, RANKED[row][1]): row for row, (setting, _, _) in RANKED.items()}
-        for ((scene, setting), seed), path in done.items():
-            row = rows_of.get((setting, ranked.resources.np))
-            if row is not None:
-                runs[scene, row, seed] = analyse_run(path)
+        runs.update({key: analyse_run(path) for key, path in ranked_runs(done, ranked.resources.np).items()})
     seeds = list(spec.seeds)
     all_rows = {}
     for scene in SCENES:

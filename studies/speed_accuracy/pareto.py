@@ -275,7 +275,7 @@ def stokes_settings_runs(out: Path) -> dict:
     here when runs are missing; finished runs are re-used)."""
     from pyfold.sweep import study as sweep_study
 
-    from ci_stokes_settings import RANKED
+    from ci_stokes_settings import ranked_runs
 
     spec = sweep_study.load_form(ROOT / "studies" / "sweeps", "ci_stokes_settings", False)
     done = sweep_study.run_sweep(spec, out / "ci_stokes_settings" / "sweep")
@@ -284,11 +284,8 @@ def stokes_settings_runs(out: Path) -> dict:
     # the ranks lever: the same scenes on 2 MPI ranks per run (ci_stokes_settings.py's RANKED rows)
     ranked = sweep_study.load_form(ROOT / "studies" / "sweeps", "ci_stokes_settings_ranks", False)
     done = sweep_study.run_sweep(ranked, out / "ci_stokes_settings" / "sweep_ranks")
-    rows_of = {(setting, np_): row for row, (setting, np_, _) in RANKED.items()}
-    for ((scene, setting), seed), path in done.items():
-        row = rows_of.get((setting, ranked.resources.np))
-        if scene == "semi-dilute" and row is not None:
-            runs[row, seed] = _run_info(path)
+    runs.update({(row, seed): _run_info(path) for (scene, row, seed), path in
+                 ranked_runs(done, ranked.resources.np).items() if scene == "semi-dilute"})
     return runs
 
 

@@ -69,3 +69,13 @@ def test_the_resolution_rows_are_paired_changes_against_the_finest_grid(tmp_path
             assert got[vpd].error_stderr == pytest.approx(d.stderr, rel=1e-12)
             assert got[vpd].cpu_s == pytest.approx([100.0, 200.0][i])
     assert pareto.resolution_rows(tmp_path / "absent.nc") == []
+
+
+def test_ranked_runs_key_the_ranks_sweep_by_its_rows(tmp_path):
+    done = {(("semi-dilute", "tol1e-3_every4"), 1): tmp_path / "a.h5",
+            (("concentrated", "tol1e-3_every4"), 2): tmp_path / "b.h5",
+            (("semi-dilute", "tol1e-4"), 1): tmp_path / "c.h5"}  # no RANKED row runs this setting
+    (row, (setting, ranks, _)), = settings.RANKED.items()
+    got = settings.ranked_runs(done, ranks)
+    assert got == {("semi-dilute", row, 1): tmp_path / "a.h5", ("concentrated", row, 2): tmp_path / "b.h5"}
+    assert settings.ranked_runs(done, ranks + 1) == {}  # run on other ranks: not these rows
