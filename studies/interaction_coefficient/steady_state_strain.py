@@ -21,14 +21,17 @@ Method
     the window [onset, T]. Per n L³ and T: the number of stationary runs, the largest onset
     and drift, and the ensemble C_I (pyfold.ensemble.ensemble_mean: the larger of the scatter
     over seeds and the pooled regression errors).
-    What it does not answer: the fluid-coupled runs' own strain to steady state. Their
-    transients are of the same kind (the ensemble's Jeffery oscillation damped by
-    interactions), so the contacts-only strain is the estimate the fluid-coupled cost is
-    planned with; it is not a measurement of it.
+    The fluid-coupled runs (--fluid N_L3 ...): the series' finished Stokes runs at those
+    concentrations are copied (the series' own files stay as they are) and extended to
+    --fluid-t-end with ``pyfold run --resume`` (pyfold.extend: the same steps as a run made in
+    one go), and the same question is asked of every prefix. Without --fluid the
+    contacts-only strain is only the estimate the fluid-coupled cost is planned with.
 
 Command
     .venv/bin/python studies/interaction_coefficient/steady_state_strain.py [--executor slurm]
         [--seeds 1 2] [--t-end 1000] [--analyse-only]
+        [--fluid 8 --fluid-t-end 400]   # also extend the series' Stokes runs at n L³ 8 to strain 400
+    (--fluid needs the series' finished runs: ci_fluid_series.py, its --out or --series-dir)
 
 Cost (2 cores)
     Measured: the sweep's 12 contacts-only runs 948 CPU-s in all (17 / 58–59 / 161–163 CPU-s
@@ -40,6 +43,8 @@ Outputs (under out/interaction_coefficient/steady_state_strain/, ``--out``)
     steady_state_strain.nc     per n L³, prefix strain and seed: stationary, onset, drift, C_I ± s.e.
     steady_state_strain.md     the table per n L³ and prefix strain
     steady_state_strain.png    a2_xx(t) of every run with its onsets, and C_I against the prefix strain
+    fluid/nl3_<n>/seed<k>/     the extended fluid-coupled runs (scene.toml, run.h5, cost.json)
+    fluid.md, fluid.nc, fluid.png  their table, data and figure (--fluid)
 """
 from __future__ import annotations
 
@@ -86,17 +91,93 @@ def analyse_run(path: Path, prefixes) -> dict:
     return out
 
 
-def analyse(done: dict, seeds: list[int], out: Path) -> str:
+def extended_scene(n_l3: float, seed: int, t_end: float) -> str:
+    """The series' Stokes scene of ``n_l3`` and ``seed`` with the later end ``t_end`` and every
+    other key as the series ran it (its snapshot interval included: pyfold.extend keeps the
+    recorded intervals and refuses a scene that sets another)."""
+    import re
+
+    text = series.scene_of(n_l3, "stokes", seed, series_t_end()).toml
+    text, n = re.subn(r"(?m)^t_end = .*$", f"t_end = {t_end!r}", text)
+    if n != 1:
+        raise SystemExit(f"the series' scene has {n} t_end lines, expected one")
+    return text
+
+
+def series_t_end() -> float:
+    """The strain the fluid-coupled series ran to (its sweep file)."""
+    from pyfold.sweep.study import load_form
+
+    return float(load_form(series.SWEEPS, "ci_fluid_series", False).arguments["t_end"])
+
+
+def extend_fluid(concentrations, seeds, t_end: float, series_dir: Path, out: Path, parallel: int = 2) -> dict:
+    """Copy the series' finished Stokes runs at ``concentrations`` into ``out`` and extend each to
+    ``t_end`` (two ``pyfold run --resume`` at a time; a finished extension is kept). Returns
+    ``{(n_l3, seed): run file}`` and writes each run's CPU and wall time to its cost.json."""
+    import json
+    import os
+    import shutil
+    import subprocess
+    import time
+
+    from pyfold.sweep import study as sweep_study
+
+    spec = sweep_study.load_form(series.SWEEPS, "ci_fluid_series", False, seeds=tuple(seeds))
+    done = sweep_study.run_sweep(spec, series_dir, analyse_only=True)
+    todo, result = [], {}
+    for n_l3 in concentrations:
+        for seed in seeds:
+            source = done.get(((n_l3, "stokes"), seed))
+            if source is None:
+                raise SystemExit(f"--fluid {n_l3:g}: the series has no finished Stokes run of seed {seed} in "
+                                 f"{series_dir}; run ci_fluid_series.py first")
+            folder = out / "fluid" / f"nl3_{n_l3:g}" / f"seed{seed}"
+            folder.mkdir(parents=True, exist_ok=True)
+            run, scene, cost = folder / "run.h5", folder / "scene.toml", folder / "cost.json"
+            result[n_l3, seed] = run
+            text = extended_scene(n_l3, seed, t_end)
+            if cost.exists() and scene.exists() and scene.read_text() == text:
+                continue  # extended already
+            if not run.exists() and not (folder / "run.h5.partial").exists():
+                shutil.copyfile(source, run)
+            scene.write_text(text)
+            todo.append(folder)
+    pyfold = str(Path(sys.executable).with_name("pyfold"))
+    live: dict = {}
+    while todo or live:
+        while todo and len(live) < parallel:
+            folder = todo.pop(0)
+            log = open(folder / "log.txt", "a")
+            proc = subprocess.Popen([pyfold, "run", str(folder / "scene.toml"), "-o", str(folder / "run.h5"),
+                                     "--resume"], stdout=log, stderr=subprocess.STDOUT)
+            live[proc.pid] = (proc, folder, log, time.perf_counter())
+        pid, status, usage = os.wait4(-1, 0)
+        if pid not in live:
+            continue
+        proc, folder, log, start = live.pop(pid)
+        log.close()
+        if os.waitstatus_to_exitcode(status) != 0:
+            raise SystemExit(f"{folder}: pyfold run --resume failed (exit {os.waitstatus_to_exitcode(status)}); "
+                             f"see {folder / 'log.txt'}; rerun to continue it")
+        (folder / "cost.json").write_text(json.dumps({"cpu_s": usage.ru_utime + usage.ru_stime,
+                                                      "wall_s": time.perf_counter() - start}))
+        print(f"extended {folder}", flush=True)
+    return result
+
+
+def analyse(done: dict, seeds: list[int], out: Path, prefixes=PREFIXES, name: str = "steady_state_strain",
+            model: str = "jeffery kinematics + contacts") -> str:
     from pyfold.ensemble import ensemble_mean
 
-    runs = {(n_l3, seed): analyse_run(path, PREFIXES) for ((n_l3, _model), seed), path in done.items()}
+    runs = {(n_l3, seed): analyse_run(path, prefixes) for ((n_l3, _model), seed), path in done.items()}
     concentrations = sorted({n for n, _ in runs})
-    shape = (len(concentrations), len(PREFIXES), len(seeds))
+    shape = (len(concentrations), len(prefixes), len(seeds))
     fields = {k: np.full(shape, np.nan) for k in ("stationary", "onset", "drift", "ci", "ci_stderr")}
     lines = ["| n L³ | strain T | stationary runs | onsets (strain) | largest end drift [1/strain] | "
              "C_I closure-free over [onset, T] ± s.e. |", "|---|---|---|---|---|---|"]
     for i, n in enumerate(concentrations):
-        for j, T in enumerate(PREFIXES):
+        for j, T in enumerate(prefixes):
             have = [s for s in seeds if (n, s) in runs and T in runs[n, s]]
             if not have:
                 continue
@@ -116,17 +197,17 @@ def analyse(done: dict, seeds: list[int], out: Path) -> str:
              "drift": "largest end drift of a diagonal a2 component per unit strain",
              "ci": "closure-free C_I by rate regression over [onset, strain]", "ci_stderr": "its standard error"}
     ds = xr.Dataset({k: (dims, v, {"units": units[k], "long_name": names[k]}) for k, v in fields.items()},
-                    coords={"n_l3": concentrations, "strain": list(PREFIXES), "seed": seeds})
-    ds.attrs.update(beta=series.BETA, alpha_over_d=series.ALPHA_OVER_D, model="jeffery kinematics + contacts")
+                    coords={"n_l3": concentrations, "strain": list(prefixes), "seed": seeds})
+    ds.attrs.update(beta=series.BETA, alpha_over_d=series.ALPHA_OVER_D, model=model)
     out.mkdir(parents=True, exist_ok=True)
-    ds.to_netcdf(out / "steady_state_strain.nc", engine="h5netcdf")
-    _figure(runs, concentrations, seeds, ds, out / "steady_state_strain.png")
-    text = "\n".join(lines) + "\n"
-    (out / "steady_state_strain.md").write_text(text)
+    ds.to_netcdf(out / f"{name}.nc", engine="h5netcdf")
+    _figure(runs, concentrations, seeds, ds, prefixes, out / f"{name}.png")
+    text = f"{model}:\n\n" + "\n".join(lines) + "\n"
+    (out / f"{name}.md").write_text(text)
     return text
 
 
-def _figure(runs: dict, concentrations, seeds, ds: xr.Dataset, path: Path) -> None:
+def _figure(runs: dict, concentrations, seeds, ds: xr.Dataset, prefixes, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -139,7 +220,7 @@ def _figure(runs: dict, concentrations, seeds, ds: xr.Dataset, path: Path) -> No
             if (n, s) in runs:
                 r = runs[n, s]
                 line, = ax.plot(r["t"], r["a2_xx"], lw=0.6)
-                final = max((T for T in PREFIXES if T in r), default=None)
+                final = max((T for T in prefixes if T in r), default=None)
                 if final is not None:
                     ax.axvline(r[final]["onset"], color=line.get_color(), ls=":", lw=0.8)
         ax.set_title(f"n L³ = {n:g}: a2_xx (dotted: onset over the whole run)", fontsize=9)
@@ -148,7 +229,7 @@ def _figure(runs: dict, concentrations, seeds, ds: xr.Dataset, path: Path) -> No
         ci = ds["ci"].sel(n_l3=n)
         mean = ci.mean("seed").values
         err = ci.std("seed", ddof=1).values / math.sqrt(ci.sizes["seed"])
-        ax.errorbar(list(PREFIXES), mean, yerr=err, fmt="o-")
+        ax.errorbar(list(prefixes), mean, yerr=err, fmt="o-")
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_xlabel("prefix strain T")
         ax.set_ylabel("closure-free C_I over [onset, T]")
@@ -164,6 +245,11 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
     ap.add_argument("--t-end", type=float, help="override the sweep's strain")
     ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/steady_state_strain"))
+    ap.add_argument("--fluid", type=float, nargs="+", metavar="N_L3",
+                    help="also extend the fluid-coupled series' Stokes runs at these n L^3 (see the docstring)")
+    ap.add_argument("--fluid-t-end", type=float, default=400.0, help="strain of the extended fluid-coupled runs")
+    ap.add_argument("--series-dir", type=Path, default=Path("out/interaction_coefficient/fluid_series/sweep"),
+                    help="the fluid-coupled series' sweep folder")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
     spec = sweep_study.load_form(series.SWEEPS, "steady_state_strain", False,
@@ -172,6 +258,15 @@ def main() -> None:
     done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor,
                                  analyse_only=args.analyse_only)
     print(analyse(done, list(spec.seeds), args.out))
+    if args.fluid:
+        first = series_t_end()
+        if not args.fluid_t_end > first:
+            raise SystemExit(f"--fluid-t-end: must exceed the series' strain {first:g}, got {args.fluid_t_end:g}")
+        runs = extend_fluid(args.fluid, list(spec.seeds), args.fluid_t_end, args.series_dir, args.out)
+        prefixes = tuple(T for T in np.arange(first, args.fluid_t_end + 1e-9, 100.0))
+        done_fluid = {((n, "stokes"), seed): path for (n, seed), path in runs.items()}
+        print(analyse(done_fluid, list(spec.seeds), args.out, prefixes, "fluid",
+                      "Stokes-coupled with contacts (the series' runs extended)"))
 
 
 if __name__ == "__main__":

@@ -62,6 +62,18 @@ def test_the_long_contacts_only_runs_continue_the_series_twins():
     assert long == short
 
 
+def test_an_extended_fluid_run_differs_from_the_series_run_by_its_end_only():
+    """pyfold.extend continues a run only for a scene that differs by a larger t_end (the recorded
+    snapshot interval kept): the steady-state study's scene for the series' Stokes run."""
+    import tomllib
+
+    steady = import_study("interaction_coefficient", "steady_state_strain")
+    longer = tomllib.loads(steady.extended_scene(8.0, 3, 400.0))
+    recorded = tomllib.loads(series.scene_of(8.0, "stokes", 3, steady.series_t_end()).toml)
+    assert longer["numerics"].pop("t_end") == 400.0 and recorded["numerics"].pop("t_end") == steady.series_t_end()
+    assert longer == recorded
+
+
 @pytest.mark.parametrize("p", [0.7, 1.0, 2.0, 3.5])
 def test_observed_order_and_richardson_recover_a_power_law(p):
     """c(h) = c_inf + k h^p on the study's three grids: the order is p (brentq to its tolerance)."""
