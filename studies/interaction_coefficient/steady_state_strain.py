@@ -36,7 +36,8 @@ Command
 Cost (2 cores)
     Measured: the sweep's 12 contacts-only runs 948 CPU-s in all (17 / 58–59 / 161–163 CPU-s
     per run at n L³ 2.49 / 4.98 / 7.98), about 8 min wall two at a time; the analysis about a
-    CPU-minute.
+    CPU-minute. --fluid 8 --fluid-t-end 400: 812–843 CPU-s per Stokes run for its extra strain
+    200, 3315 CPU-s for the four (about 28 min wall two at a time on the idle machine).
 
 Outputs (under out/interaction_coefficient/steady_state_strain/, ``--out``)
     sweep/                     the runs (pyfold sweep folder)
