@@ -126,7 +126,7 @@ def extend_fluid(concentrations, seeds, t_end: float, series_dir: Path, out: Pat
 
     spec = sweep_study.load_form(series.SWEEPS, "ci_fluid_series", False, seeds=tuple(seeds))
     done = sweep_study.run_sweep(spec, series_dir, analyse_only=True)
-    todo, result = [], {}
+    waiting, result = [], {}
     for n_l3 in concentrations:
         for seed in seeds:
             source = done.get(((n_l3, "stokes"), seed))
@@ -143,12 +143,12 @@ def extend_fluid(concentrations, seeds, t_end: float, series_dir: Path, out: Pat
             if not run.exists() and not (folder / "run.h5.partial").exists():
                 shutil.copyfile(source, run)
             scene.write_text(text)
-            todo.append(folder)
+            waiting.append(folder)
     pyfold = str(Path(sys.executable).with_name("pyfold"))
     live: dict = {}
-    while todo or live:
-        while todo and len(live) < parallel:
-            folder = todo.pop(0)
+    while waiting or live:
+        while waiting and len(live) < parallel:
+            folder = waiting.pop(0)
             log = open(folder / "log.txt", "a")
             proc = subprocess.Popen([pyfold, "run", str(folder / "scene.toml"), "-o", str(folder / "run.h5"),
                                      "--resume"], stdout=log, stderr=subprocess.STDOUT)
