@@ -1,8 +1,8 @@
-"""The fluid-coupled C_I of β = 5 fibres against concentration, at steady state.
+"""The fluid-coupled C_I of β = 5 and β = 10 fibres against concentration, at steady state.
 
 Question
     What Folgar–Tucker C_I — per closure, and closure-free — does a suspension of rigid
-    β = 5 fibres coupled through the fluid (Stokes solver, fictitious domain on the FFT
+    β = 5 (and β = 10) fibres coupled through the fluid (Stokes solver, fictitious domain on the FFT
     grid, with the collision strategy) have at three concentrations from semi-dilute to
     concentrated, run long enough to reach its steady state? Which closure reproduces the
     fluid-coupled a4, and how far are the contacts-only twins (the same seeds and
@@ -14,7 +14,10 @@ Method
     shear γ̇ = 1 from an isotropic random placement, security zone α = 0.1 d,
     Δt = α/(γ̇L) = 0.02, records every 0.2 strain, strain 200 (about 6 Jeffery periods of a
     single fibre), n L³ = 2.49 / 4.98 / 7.98 (49 / 98 / 157 fibres, φβ = 0.39 / 0.78 / 1.25),
-    4 seeds (studies/sweeps/ci_fluid_series.toml). Stokes numerics (STOKES): 3 voxels per
+    4 seeds (studies/sweeps/ci_fluid_series.toml). ``--beta 10`` (studies/sweeps/
+    ci_fluid_series_beta10.toml): β = 10 (d = 0.1), cell 2.4 L, Δt = 0.01, φβ = 0.5 / 0.25 / 1.0
+    (n L³ = 6.37 / 3.18 / 12.7; 88 / 44 / 176 fibres; Meyer et al. 2020's middle point first), the
+    same Stokes numerics on a 72³ grid. Stokes numerics (STOKES): 3 voxels per
     diameter (42³), κ = 10³, CG tolerance 10⁻³, a solve every 4th step, AB2: the cheapest
     setting measured by studies/speed_accuracy/ci_stokes_settings.py (its CPU time 0.21–0.22
     of the reference's).
@@ -36,7 +39,9 @@ Method
     fibre's kinematics); the resolution error, the bias of the 3-voxel C_I against the
     Richardson limit measured by ci_resolution.py on the semi-dilute scene (three grids,
     paired seeds; closure-free for the rate regressions, IBOF for the trajectory fits;
-    applied to every concentration). The total error is the four in quadrature.
+    applied to every concentration). The total error is the four in quadrature. At β = 10 the
+    settings error is the β = 5 regime's (not measured at β = 10) and the resolution error is not
+    measured: its column is NaN, ``resolution_in_total`` = 0 and the total leaves it out.
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
     run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
     its drift reported).
@@ -44,6 +49,8 @@ Method
 Command
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py [--executor slurm] [--seeds 1 2]
         [--write-data]     # also write data/ci_fluid_coupled.{nc,csv} (the shipped table)
+    .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10   # the β = 10 sweep
+        (analysed once a concentration has two finished pairs of runs; no --write-data)
     (the sweep runs two serial simulations at a time; finished runs are re-used, a killed one
     is resumed from its checkpoint; --analyse-only analyses what is there)
 
@@ -52,8 +59,10 @@ Cost (2 cores)
     Stokes runs 641–689 / 822–847 / 874–887 CPU-s at n L³ 2.49 / 4.98 / 7.98, i.e. 0.7–1.0
     CPU-hour per point of 4 seeds; contacts-only twins 5–20 CPU-s. The sweep took 115 min
     wall sharing the machine with the resolution study; the analysis about 6 CPU-min.
+    β = 10: about 33 CPU-s per unit strain per Stokes run at φβ = 0.5 (7 000 CPU-s per run,
+    ~7 CPU-hours per point of 4 seeds; docs/fluid_coupled_ci.md#cost), contacts-only twins ~1 CPU-min.
 
-Outputs (under out/interaction_coefficient/fluid_series/, ``--out``)
+Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/; ``--out``)
     sweep/                        the runs (pyfold sweep folder)
     nl3_<n>/stokes/, .../jeffery/ the report of each ensemble (pyfold report's files)
     ci_fluid_series.nc, .csv      the table (one row per n L³, model, closure and estimator)
@@ -86,24 +95,31 @@ MODELS = ("stokes", "jeffery")  # fluid-coupled with contacts, contacts only
 #: studies/speed_accuracy/ci_stokes_settings.py (its change of C_I enters the error bars).
 STOKES = {"cells_per_diameter": 3, "kappa": 1e3, "tolerance": 1e-3, "solve_every": 4}
 SETTING = "tol1e-3_every4"  # its name in pyfold.scene.study_preset.EVIDENCE
+#: The sweep (studies/sweeps/<name>.toml) of each aspect ratio
+SERIES = {5.0: "ci_fluid_series", 10.0: "ci_fluid_series_beta10"}
 #: The shipped table (``--write-data``), read by pyfold.correlations.fluid_coupled_table
 DATA = ROOT / "data" / "ci_fluid_coupled"
 
 
-def scene_of(n_l3: float, model: str, seed: int, t_end: float):
-    """The sweep's builder: β = 5 fibres at ``n_l3``, ``model`` "stokes" or "jeffery", seed ``seed``."""
+def scene_of(n_l3: float, model: str, seed: int, t_end: float, beta: float = BETA,
+             max_grid_points: int | None = None):
+    """The sweep's builder: ``beta`` fibres at ``n_l3``, ``model`` "stokes" or "jeffery", seed ``seed``
+    (``max_grid_points``: the Stokes grid bound, for the finer grids of slender fibres)."""
     if model == "jeffery":
-        return sheared_fibres(BETA, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D)
-    return sheared_fibres(BETA, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D, hydrodynamics="stokes",
-                          stokes=STOKES, time_scheme="ab2")
+        return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D)
+    stokes = STOKES if max_grid_points is None else {**STOKES, "max_grid_points": int(max_grid_points)}
+    return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D, hydrodynamics="stokes",
+                          stokes=stokes, time_scheme="ab2")
 
 
-def settings_errors(n_l3: float) -> tuple[float, float]:
-    """(closure-free, trajectory) absolute error of SETTING in the regime of ``n_l3``."""
+def settings_errors(n_l3: float, beta: float = BETA) -> tuple[float, float]:
+    """(closure-free, trajectory) absolute error of SETTING in the regime of ``n_l3`` (measured on
+    β = 5 fibres, pyfold.scene.study_preset.EVIDENCE; applied to another β as the measured value of
+    its regime, which the tables say)."""
     from pyfold.scene.shapes import regime
     from pyfold.scene.study_preset import choice_for
 
-    reg, _ = regime(n_l3, 1.0, 1.0 / BETA, 3)
+    reg, _ = regime(n_l3, 1.0, 1.0 / beta, 3)
     ev, _ = choice_for(reg)
     m = next(s for s in ev.settings if s.name == SETTING)
     return ev.settings_error(m)
@@ -144,7 +160,7 @@ def grid_of(path: Path) -> list[int]:
     return [int(g) for g in np.ravel(read_setup(path).resolved["stokes_grid"])]
 
 
-def beta_e_on(grid: list[int], side: float, cache: Path) -> float:
+def beta_e_on(grid: list[int], side: float, cache: Path, beta: float = BETA) -> float:
     """β_e of one fibre on ``grid`` in the cell ``side`` at the series' κ and tolerance: the orbit
     period of ci_hydrodynamics.py's single-fibre check (the solver's ω(θ) at fixed orientations),
     cached in ``cache``."""
@@ -153,16 +169,17 @@ def beta_e_on(grid: list[int], side: float, cache: Path) -> float:
     sys.path.insert(0, str(ROOT / "studies" / "interaction_coefficient"))
     import ci_hydrodynamics as ch  # noqa: E402
 
-    study = dataclasses.replace(ch.SMALL, tolerance=STOKES["tolerance"], kappa=STOKES["kappa"], check_refinements=(1,))
+    study = dataclasses.replace(ch.SMALL, beta=beta, tolerance=STOKES["tolerance"], kappa=STOKES["kappa"],
+                                check_refinements=(1,), max_grid_points=max(ch.SMALL.max_grid_points, math.prod(grid)))
     ds = ch.single_fibre_check(study, grid, side, cache)
     return float(ds["beta_e_measured"].sel(shape="fibre").values[0])
 
 
-def grid_xi(out: Path, run: Path) -> tuple[float, float]:
+def grid_xi(out: Path, run: Path, beta: float = BETA) -> tuple[float, float]:
     """(β_e, xi) of one fibre on the grid of the Stokes run ``run`` (:func:`beta_e_on`)."""
     from pyfold.kinematics import aspect_ratio_to_xi
 
-    beta_e = beta_e_on(grid_of(run), scene_of(5.0, "stokes", 1, 1.0).side, out / "single_fibre_check.nc")
+    beta_e = beta_e_on(grid_of(run), scene_of(5.0, "stokes", 1, 1.0, beta).side, out / "single_fibre_check.nc", beta)
     return beta_e, float(aspect_ratio_to_xi(beta_e))
 
 
@@ -183,16 +200,18 @@ def resolution_errors(path: Path) -> tuple[float, float]:
 
 
 def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_shift: dict,
-               resolution: tuple[float, float] = (math.nan, math.nan)) -> list[dict]:
-    """One row per closure and estimator of an ensemble report."""
+               resolution: tuple[float, float] = (math.nan, math.nan), beta: float = BETA) -> list[dict]:
+    """One row per closure and estimator of an ensemble report. A resolution error that was not
+    measured (NaN) stays NaN in its column and is left out of the total, and the row says so
+    (``resolution_in_total``)."""
     from pyfold.correlations import phi_beta, volume_fraction
 
     rows = []
     stationary = sum(r.stationary for r in rep.runs)
     onsets = [r.onset_time for r in rep.runs if math.isfinite(r.onset_time)]
     strain = float(min(r.t[-1] for r in rep.runs))
-    base = {"beta": BETA, "n_l3": round(rep.n_l3, 4), "phi": round(volume_fraction(rep.n_l3, BETA), 5),
-            "phi_beta": round(phi_beta(rep.n_l3, BETA), 5), "model": model, "seeds": rep.n,
+    base = {"beta": beta, "n_l3": round(rep.n_l3, 4), "phi": round(volume_fraction(rep.n_l3, beta), 5),
+            "phi_beta": round(phi_beta(rep.n_l3, beta), 5), "model": model, "seeds": rep.n,
             "stationary_runs": stationary, "onset_strain_max": max(onsets) if onsets else math.nan,
             "strain": strain,
             # the largest end-of-run drift of a diagonal a2 component over the runs [per unit strain], and
@@ -209,10 +228,12 @@ def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_s
             shape_err = abs(xi_shift.get((c, est), 0.0)) if fluid else 0.0
             res_err = (resolution[0] if est == "steady" else resolution[1]) if fluid else 0.0
             stat = e.error
+            known = math.isfinite(res_err)
             rows.append({**base, "closure": "closure-free" if c == "exact" else c, "estimator": est,
                          "ci": e.mean, "stat_err": stat, "settings_err": set_err, "shape_err": shape_err,
                          "resolution_err": res_err,
-                         "total_err": math.sqrt(stat ** 2 + set_err ** 2 + shape_err ** 2 + res_err ** 2)})
+                         "total_err": math.sqrt(stat ** 2 + set_err ** 2 + shape_err ** 2 + (res_err ** 2 if known else 0.0)),
+                         "resolution_in_total": int(known)})
     return rows
 
 
@@ -240,7 +261,7 @@ def write_table(rows: list[dict], stem: Path, attrs: dict) -> None:
     ds.to_netcdf(stem.with_suffix(".nc"), engine="h5netcdf")
 
 
-def figure(rows: list[dict], path: Path) -> None:
+def figure(rows: list[dict], path: Path, beta: float = BETA) -> None:
     """C_I against φβ: fluid-coupled and contacts-only beside the published values."""
     import matplotlib
 
@@ -266,7 +287,7 @@ def figure(rows: list[dict], path: Path) -> None:
                 continue
             word = "fluid-coupled" if model == "stokes" else "contacts only"
             ax.errorbar([r["phi_beta"] for r in sel], [r["ci"] for r in sel], [r["total_err"] for r in sel],
-                        fmt=mk, capsize=3, label=f"pyfold β 5, {word}, {closure}")
+                        fmt=mk, capsize=3, label=f"pyfold β {beta:g}, {word}, {closure}")
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_xlabel("φβ")
         ax.set_ylabel("C_I")
@@ -279,12 +300,21 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def markdown(rows, reps, cost, beta_e_grid) -> str:
+def markdown(rows, reps, cost, beta_e_grid, beta: float = BETA, grid: str = "42³") -> str:
     """The tables of ci_fluid_series.md."""
-    lines = ["# Fluid-coupled C_I of β = 5 fibres against concentration", "",
-             f"Single fibre on the 42³ grid: β_e = {beta_e_grid:.3f} from its orbit period (Cox: 4.89).", "",
-             "| n L³ | φβ | model | closure | estimator | C_I | stat. | settings | shape | resolution | total |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    from pyfold.kinematics import equivalent_aspect_ratio
+
+    lines = [f"# Fluid-coupled C_I of β = {beta:g} fibres against concentration", "",
+             f"Single fibre on the {grid} grid: β_e = {beta_e_grid:.3f} from its orbit period "
+             f"(Cox: {float(equivalent_aspect_ratio(beta)):.2f}).", ""]
+    if any(not r["resolution_in_total"] for r in rows if r["model"] == "stokes"):
+        lines += ["The resolution error was measured for β = 5 only (ci_resolution.py): at this β it is "
+                  "*not measured*, and the total below leaves it out.", ""]
+    if beta != BETA:
+        lines += [f"The settings error is the one measured on β = {BETA:g} fibres in the same regime "
+                  "(pyfold.scene.study_preset.EVIDENCE), not at this β.", ""]
+    lines += ["| n L³ | φβ | model | closure | estimator | C_I | stat. | settings | shape | resolution | total |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['n_l3']:.2f} | {r['phi_beta']:.2f} | {r['model']} | {r['closure']} | {r['estimator']} | "
                      f"{r['ci']:+.2e} | {r['stat_err']:.1e} | {r['settings_err']:.1e} | {r['shape_err']:.1e} | "
@@ -310,24 +340,30 @@ def cpu_of(path: Path) -> float:
     return sweep_store.cpu_seconds(path.parent)
 
 
-def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path) -> None:
+def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path,
+            beta: float = BETA) -> None:
     from pyfold.ensemble import paired_difference
     from pyfold.report import build_report, write_report
 
-    resolution = resolution_errors(resolution_file)
+    # the resolution study measured the β = 5 semi-dilute scene: its bias is not carried to another β
+    resolution = resolution_errors(resolution_file) if beta == BETA else (math.nan, math.nan)
+    if write_data and beta != BETA:
+        raise SystemExit(f"--write-data: the shipped table holds beta = {BETA:g} only (the resolution error is "
+                         f"measured there); beta = {beta:g} is analysed into --out")
     if write_data and not all(math.isfinite(v) for v in resolution):
         raise SystemExit(f"--write-data: the shipped table needs the resolution error; run "
                          f"studies/interaction_coefficient/ci_resolution.py first ({resolution_file} is missing)")
     points = sorted({n for (n, _m), _s in done})
     reps, rows, cost, pairs = {}, [], {}, []
     out.mkdir(parents=True, exist_ok=True)
-    beta_e_grid, xi_grid = grid_xi(out, next(p for ((_n, m), _s), p in done.items() if m == "stokes"))
+    first_stokes = next(p for ((_n, m), _s), p in done.items() if m == "stokes")
+    beta_e_grid, xi_grid = grid_xi(out, first_stokes, beta)
     for n_l3 in points:
         have = [s for s in seeds if all(((n_l3, m), s) in done for m in MODELS)]
         if len(have) < 2:
             print(f"n L^3 {n_l3:g}: {len(have)} finished pair(s) of runs; left out")
             continue
-        settings = settings_errors(n_l3)
+        settings = settings_errors(n_l3, beta)
         for model in MODELS:
             paths = [done[(n_l3, model), s] for s in have]
             rep = build_report(paths, None, progress=lambda text: None)
@@ -335,7 +371,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
             reps[n_l3, model] = rep
             cost[n_l3, model] = float(np.mean([cpu_of(p) for p in paths]))
             shift = xi_sensitivity(rep, xi_grid) if model == "stokes" else {}
-            rows += table_rows(n_l3, model, rep, settings, shift, resolution)
+            rows += table_rows(n_l3, model, rep, settings, shift, resolution, beta)
             print(f"n L^3 {n_l3:g} {model}: analysed {len(paths)} runs", flush=True)
         f, j = reps[n_l3, "stokes"], reps[n_l3, "jeffery"]
         d = paired_difference([r.ci["exact"] for r in f.runs], [r.ci["exact"] for r in j.runs])
@@ -346,22 +382,29 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
             line += f"; IBOF trajectory fit {d.mean:+.2e} ± {d.stderr:.1e} (p = {d.p:.2g})"
         pairs.append(line + f"; paired over {d.n} seeds")
     out.mkdir(parents=True, exist_ok=True)
-    attrs = {"title": "Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = 5 fibres",
-             "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --write-data",
-             "scene": "pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = 0.02, "
-                      "strain 200, cell 2.7 L",
+    if not rows:
+        raise SystemExit(f"no concentration has two finished pairs of runs in the sweep yet (seeds {seeds})")
+    grid = "x".join(map(str, grid_of(first_stokes)))
+    first = scene_of(5.0, "jeffery", 1, 1.0, beta)
+    attrs = {"title": f"Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = {beta:g} fibres",
+             "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py "
+                        + ("--write-data" if beta == BETA else f"--beta {beta:g}"),
+             "scene": f"pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = "
+                      f"{ALPHA_OVER_D / beta:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
+                      f"Stokes grid {grid}",
              "stokes_numerics": f"{STOKES}, ab2 (setting {SETTING} of studies/speed_accuracy/ci_stokes_settings.py)",
              "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
                            "Folgar-Tucker fit to a2(t) over two Jeffery periods (pyfold.report)",
              "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting; shape: change "
                        f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
-                       "3-voxel C_I against the Richardson limit (ci_resolution.py); total: in quadrature",
+                       "3-voxel C_I against the Richardson limit (ci_resolution.py; beta = 5 only, NaN = not "
+                       "measured and left out of the total: resolution_in_total = 0); total: in quadrature",
              "seeds": " ".join(map(str, seeds))}
     write_table(rows, out / "ci_fluid_series", attrs)
     if write_data:
         write_table(rows, DATA, attrs)
-    figure(rows, out / "ci_fluid_series.png")
-    text = markdown(rows, reps, cost, beta_e_grid) + "\n## Fluid-coupled against contacts only\n\n" + "\n".join(pairs)
+    figure(rows, out / "ci_fluid_series.png", beta)
+    text = markdown(rows, reps, cost, beta_e_grid, beta, grid) + "\n## Fluid-coupled against contacts only\n\n" + "\n".join(pairs)
     (out / "ci_fluid_series.md").write_text(text + "\n", encoding="utf-8")
     print(text)
 
@@ -374,13 +417,20 @@ def main() -> None:
     ap.add_argument("--np", type=int, default=None, help="MPI ranks per run (default: the sweep file's, 1)")
     ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
     ap.add_argument("--write-data", action="store_true", help="also write the shipped table data/ci_fluid_coupled.*")
-    ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/fluid_series"))
+    ap.add_argument("--beta", type=float, default=BETA, choices=sorted(SERIES),
+                    help="fibre aspect ratio: the sweep of that beta (SERIES)")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="output folder (default out/interaction_coefficient/fluid_series, "
+                         "fluid_series_beta<beta> for another beta)")
     ap.add_argument("--resolution", type=Path,
                     default=Path("out/interaction_coefficient/resolution/ci_resolution.json"),
                     help="the resolution study's summary (ci_resolution.py): the resolution error of the C_I")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
-    spec = sweep_study.load_form(SWEEPS, "ci_fluid_series", False, seeds=tuple(args.seeds) if args.seeds else None)
+    if args.out is None:
+        args.out = Path("out/interaction_coefficient") / ("fluid_series" if args.beta == BETA
+                                                          else f"fluid_series_beta{args.beta:g}")
+    spec = sweep_study.load_form(SWEEPS, SERIES[args.beta], False, seeds=tuple(args.seeds) if args.seeds else None)
     start = time.perf_counter()
     sweep_dir = args.sweep_dir or args.out / "sweep"
     done = sweep_study.run_sweep(spec, sweep_dir, args.executor, args.np, analyse_only=args.analyse_only)
@@ -388,7 +438,7 @@ def main() -> None:
     for values, seed in done:
         point = dict(zip(spec.axes, values))  # point values in the order of spec.axes
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
-    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, args.resolution)
+    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, args.resolution, args.beta)
     print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
 
 

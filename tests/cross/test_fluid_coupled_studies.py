@@ -34,6 +34,30 @@ def test_every_point_of_the_sweeps_is_a_valid_scene_of_the_intended_model(name, 
         assert scene.side == pytest.approx(2.7) and abs(scene.n_l3 - point.get("n_l3", 5.0)) < 0.05
 
 
+def test_the_beta10_series_is_the_beta5_series_at_twice_the_aspect_ratio():
+    """ci_fluid_series_beta10.toml: every point a valid scene with the series' Stokes numerics on the
+    72³ grid it states (3 voxels per diameter of the 0.1 L fibre in the 2.4 L cell), at the φβ its
+    comments give; the β = 5 series' scenes keep the default grid bound (their run ids unchanged)."""
+    from pyfold.correlations import phi_beta
+
+    spec = load_form(STUDIES / "sweeps", "ci_fluid_series_beta10", False)
+    assert spec.arguments["beta"] == 10.0 and series.SERIES[10.0] == "ci_fluid_series_beta10"
+    targets = {6.4: 0.5, 3.2: 0.25, 12.7: 1.0}
+    assert {p["n_l3"] for p in spec.points} == set(targets)
+    for point in spec.points:
+        scene = series.scene_of(**point, seed=spec.seeds[0], **spec.arguments)
+        checked = parse_scene(scene.toml, "ci_fluid_series_beta10.toml")
+        assert checked.hydrodynamics == point["model"]
+        assert scene.side == pytest.approx(2.4) and scene.beta == 10.0
+        assert phi_beta(scene.n_l3, 10.0) == pytest.approx(targets[point["n_l3"]], abs=2e-3)
+        if point["model"] == "stokes":
+            st = checked.scene.numerics.stokes
+            assert (st.tolerance, st.solve_every, st.kappa, st.cells_per_diameter) == (1e-3, 4, 1e3, 3)
+            assert st.max_grid_points >= 72 ** 3
+            assert checked.scene.numerics.dt == pytest.approx(0.01)
+    assert "max_grid_points" not in series.scene_of(5.0, "stokes", 1, 200.0).toml
+
+
 def test_the_series_and_its_twins_share_the_initial_state_and_step():
     """A seed's Stokes run and contacts-only twin differ in the model only (paired comparison)."""
     import tomllib
