@@ -30,7 +30,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Mapping
 
 import h5py
 import numpy as np
@@ -46,6 +46,11 @@ T_END_KEYS = ("numerics.t_end", "resolved/t_end", "resolved/n_steps", "resolved/
 #: Scene key of each resolved interval (steps) that defaults to a fraction of ``t_end``.
 INTERVALS = {"output_every": "interval", "snapshot_every": "snapshot_interval",
              "checkpoint_every": "checkpoint_interval"}
+#: Keys (:func:`pyfold.fingerprint.setup_keys`) an extension may change: ``t_end`` and what
+#: follows from it, and the intervals (kept as recorded; a scene that sets one is checked
+#: against the recorded value apart, in :func:`plan`).
+MAY_CHANGE = frozenset(T_END_KEYS) | frozenset(f"output.{key}" for key in INTERVALS.values()) | frozenset(
+    f"resolved/{name}" for name in INTERVALS)
 
 
 def _same(a, b) -> bool:
@@ -93,10 +98,8 @@ def plan(run_path: Path, resolved: ResolvedScene, scene_path: Path, partial: boo
     old = setup_keys(setup.scene, recorded)
     new = setup_keys(json.loads(resolved.scene_json()),
                        {k: v for k, (v, _, _) in resolved.resolved_datasets().items()})
-    ignored = set(T_END_KEYS) | {f"output.{key}" for key in INTERVALS.values()} | {f"resolved/{k}" for k in INTERVALS}
+    old, new = kept_keys(old), kept_keys(new)
     for key in sorted(set(old) | set(new)):
-        if key in ignored:
-            continue
         if key not in old or key not in new or not _same(old[key], new[key]):
             raise InputError(
                 f"--resume: {scene_path} differs from the scene {run_path} was made from at key {key!r}: "
@@ -125,6 +128,14 @@ def plan(run_path: Path, resolved: ResolvedScene, scene_path: Path, partial: boo
         # plain resume completes it)
         _check_complete(run_path, scene_path, extension, recorded_steps, every)
     return extension
+
+
+def kept_keys(keys: Mapping[str, object]) -> dict[str, object]:
+    """``keys`` (:func:`pyfold.fingerprint.setup_keys`, or the flattened normalised scene alone)
+    without :data:`MAY_CHANGE`: what a run and its extension must share. A sweep looking for a
+    run to extend (:mod:`pyfold.sweep.donors`) narrows its candidates with it, so that both ask
+    the same question; :func:`plan` then decides."""
+    return {key: value for key, value in keys.items() if key not in MAY_CHANGE}
 
 
 def _output_keys(toml_text: str) -> set[str]:

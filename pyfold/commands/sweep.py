@@ -4,7 +4,10 @@
 file and every scene it makes (exit 2 naming the key, nothing written), prepares
 ``DIR`` (:mod:`pyfold.sweep.store`) and runs what is not complete: nothing when every
 run is done; interrupted runs resume from their checkpoints; runs that failed for a
-physical reason are reported with their cause (exit 1), not retried.
+physical reason are reported with their cause (exit 1), not retried. A run not yet
+started whose scene a finished run holds to an earlier ``numerics.t_end`` (in ``DIR``, or
+in the sweep folders of ``--extend-from``) continues a copy of that run instead of
+starting at t = 0 (:mod:`pyfold.sweep.donors`).
 ``pyfold sweep status DIR`` lists the runs and their states (with Slurm's, for the
 Slurm executor). ``pyfold sweep gather DIR`` writes ``DIR/sweep.nc`` and a report per
 point (:mod:`pyfold.sweep.gather`). docs/cluster.md describes the sweep file.
@@ -39,6 +42,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="slurm: resubmissions of timed-out or cancelled runs (default: resources.retries)")
     run.add_argument("--no-wait", action="store_true", help="slurm: submit and return (follow with "
                                                             "pyfold sweep status DIR)")
+    run.add_argument("--extend-from", nargs="+", default=[], metavar="DIR",
+                     help="other sweep folders (the --out of earlier sweeps) whose finished runs may be continued: "
+                          "a new run whose scene one of them (or a run in --out) holds to an earlier "
+                          "numerics.t_end starts as a copy of it (the largest t_end; the original is left as it "
+                          "is) and is extended like pyfold run --resume extends a run")
     status = sub.add_parser("status", help="the state of each run of a sweep folder")
     status.add_argument("dir", metavar="DIR")
     gather = sub.add_parser("gather", help="DIR/sweep.nc over the sweep's axes and seed, and a report per point")
@@ -66,6 +74,7 @@ def _resources(args: argparse.Namespace, spec):
 
 def _run(args: argparse.Namespace) -> int:
     from pyfold.sweep import store
+    from pyfold.sweep.donors import check_sweep_folders, plan_donors
     from pyfold.sweep.executors import EXECUTORS, make_executor
     from pyfold.sweep.plan import plan
     from pyfold.sweep.progress import Progress
@@ -79,6 +88,7 @@ def _run(args: argparse.Namespace) -> int:
         raise InputError("--out: empty path; name the sweep folder")
     spec = read_sweep(args.sweep)
     resources = _resources(args, spec)
+    extend_from = check_sweep_folders(args.extend_from)
     from pyfold.commands.run import check_ranks
 
     if args.executor == "local":
@@ -96,6 +106,7 @@ def _run(args: argparse.Namespace) -> int:
     if not todo:
         print("pyfold sweep: nothing to run")
         return 0
+    plan_donors(root, todo, extend_from, report=lambda line: print(f"pyfold sweep: {line}", flush=True))
     executor = make_executor(args.executor, parallel=args.parallel, wait=not args.no_wait)
     progress = Progress(len(ids), f"sweep {spec.name}")
     try:
@@ -120,6 +131,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _status(args: argparse.Namespace) -> int:
     from pyfold.sweep import store
+    from pyfold.sweep.donors import describe
     from pyfold.sweep.progress import counts_line
 
     root = Path(args.dir)
@@ -128,12 +140,14 @@ def _status(args: argparse.Namespace) -> int:
     states = {}
     print(f"sweep {data.get('name')}: {len(data['runs'])} runs in {root}")
     for r in data["runs"]:
-        state = store.run_state(store.run_folder(root, r["id"]))
+        folder = store.run_folder(root, r["id"])
+        state = store.run_state(folder)
         states[r["id"]] = state.state
         point = ", ".join(f"{k} = {v}" for k, v in r["point"].items())
         extra = f" [slurm {slurm_state[r['id']]}]" if r["id"] in slurm_state else ""
         detail = f": {state.detail}" if state.state in ("failed", "interrupted") and state.detail else ""
-        print(f"  {r['id']}  {point + ', ' if point else ''}seed {r['seed']}: {state.state}{extra}{detail}")
+        origin = describe(folder, state.state)
+        print(f"  {r['id']}  {point + ', ' if point else ''}seed {r['seed']}: {state.state}{origin}{extra}{detail}")
     print(counts_line(states))
     return 1 if any(s == "failed" for s in states.values()) else 0
 

@@ -8,7 +8,8 @@ expands it into runs, each identified by a content hash of its normalised scene
 (:mod:`pyfold.sweep.store`) keeps one folder per run (``runs/<id>/``: scene, run file,
 attempts); an executor (:mod:`pyfold.sweep.executors`: ``local`` or ``slurm``) runs
 what is missing, each run through :mod:`pyfold.sweep.worker` (``pyfold run``, resumed
-from its checkpoint when it was interrupted); :mod:`pyfold.sweep.gather` builds
+from its checkpoint when it was interrupted, or started as a copy of a finished run of its
+scene to an earlier end, :mod:`pyfold.sweep.donors`); :mod:`pyfold.sweep.gather` builds
 ``sweep.nc`` over the sweep's axes and seed.
 
 Command line: ``pyfold sweep run|status|gather`` (:mod:`pyfold.commands.sweep`);

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Protocol
 
-from pyfold.sweep import store
+from pyfold.sweep import donors, store
 from pyfold.sweep.progress import Progress
 from pyfold.sweep.spec import Resources
 
@@ -96,13 +96,15 @@ class LocalExecutor:
                 while todo and len(live) < slots:
                     rid = todo.pop(0)
                     folder = store.run_folder(root, rid)
+                    donor = donors.planned(folder) if current[rid] == "queued" else None
                     with open(folder / store.LOG, "a", encoding="utf-8") as log:
                         live[rid] = subprocess.Popen(worker_command(folder, resources.np, self.name), stdout=log,
                                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                                      start_new_session=True)
                     started[rid] = time.monotonic()
                     current[rid] = "running"
-                    progress.event(f"{rid} started", current, walls, slots)
+                    progress.event(f"{rid} started" + (f", {donor.note()}" if donor else ""), current, walls,
+                                   slots)
                 time.sleep(POLL_SECONDS)
                 for rid, proc in list(live.items()):
                     if proc.poll() is None:

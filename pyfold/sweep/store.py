@@ -9,6 +9,8 @@ Layout of ``DIR``::
     runs/<id>/attempts.jsonl   one line per attempt (start, end, exit status, executor,
                           host, Slurm job), the source of the costs in sweep.nc
     runs/<id>/log.txt     what ``pyfold run`` printed (local executor)
+    runs/<id>/donor.json  its donor, a finished run of its scene to an earlier end that it
+                          starts as a copy of (:mod:`pyfold.sweep.donors`), found while it was queued
     slurm/                job scripts, run lists, job ids and logs of the Slurm executor
     sweep.nc              the gathered dataset (``pyfold sweep gather``)
     reports/<point>/      ``pyfold report`` of each point's seeds
@@ -43,6 +45,7 @@ PARTIAL = RUN_FILE + ".partial"
 LOCK = RUN_FILE + ".lock"
 ATTEMPTS = "attempts.jsonl"
 LOG = "log.txt"
+DONOR = "donor.json"
 #: Run states, in the order tables show them.
 STATES = ("done", "running", "interrupted", "queued", "failed")
 
@@ -147,9 +150,9 @@ def prepare(root: Path, spec, runs) -> dict[str, Any]:
         folder.mkdir(exist_ok=True)
         scene = folder / SCENE
         if not scene.exists():
-            _write_atomic(scene, r.toml)
+            write_atomic(scene, r.toml)
     # resources may change between invocations (the command line): the latest is kept
-    _write_atomic(root / MANIFEST, json.dumps(data, indent=1))
+    write_atomic(root / MANIFEST, json.dumps(data, indent=1))
     return data
 
 
@@ -186,7 +189,8 @@ def cpu_seconds(folder: Path) -> float:
     return float(sum(a.get("cpu_s", math.nan) for a in recorded)) if recorded else math.nan
 
 
-def _write_atomic(path: Path, text: str) -> None:
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file beside it: a reader sees the old or the new text."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{time.monotonic_ns()}")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)

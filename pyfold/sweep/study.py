@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 from pyfold.errors import PyfoldError
 from pyfold.sweep import store
@@ -50,12 +50,15 @@ def load_form(folder: Path, study: str, large: bool, seeds: tuple[int, ...] | No
 
 
 def run_sweep(spec: SweepSpec, root: Path, executor: str = "local", ranks: int | None = None,
-              analyse_only: bool = False) -> dict[tuple[tuple, int], Path]:
+              analyse_only: bool = False, extend_from: Sequence[Path] = ()) -> dict[tuple[tuple, int], Path]:
     """Run ``spec`` into ``root`` (nothing when ``analyse_only``) and return ``{(point values, seed):
     run file}`` of its complete runs (point values in the order of ``spec.axes``). Runs that could not
-    be completed are named on stderr and left out; a refused scene stops before anything runs."""
+    be completed are named on stderr and left out; a refused scene stops before anything runs.
+    ``extend_from``: other sweep folders whose finished runs of the same scenes to an earlier end
+    the new runs continue (``pyfold sweep run --extend-from``, :mod:`pyfold.sweep.donors`)."""
     import sys
 
+    from pyfold.sweep.donors import check_sweep_folders, plan_donors
     from pyfold.sweep.executors import make_executor
     from pyfold.sweep.plan import plan
     from pyfold.sweep.progress import Progress
@@ -64,10 +67,12 @@ def run_sweep(spec: SweepSpec, root: Path, executor: str = "local", ranks: int |
         spec = dataclasses.replace(spec, resources=dataclasses.replace(spec.resources, np=ranks))
     runs = plan(spec)
     if not analyse_only:
+        donor_folders = check_sweep_folders(extend_from)
         data = store.prepare(root, spec, runs)
         ids = [rid for rid in store.unique_runs(data)
                if store.run_state(store.run_folder(root, rid)).state != "done"]
         if ids:
+            plan_donors(root, ids, donor_folders, report=lambda line: print(f"sweep {spec.name}: {line}", flush=True))
             progress = Progress(len(ids), f"sweep {spec.name}")
             try:
                 kwargs = {"name": spec.name} if executor == "slurm" else {}

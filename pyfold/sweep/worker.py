@@ -5,7 +5,10 @@ Brings the run in ``RUN_FOLDER`` (:mod:`pyfold.sweep.store`) to completion with
 (exit 1) when it is ``failed``; ``pyfold run --resume`` from the last checkpoint when
 it was ``interrupted`` (cancelled, timed out, killed), and a fresh ``pyfold run
 --force`` when it was interrupted before its first checkpoint (``--resume`` refuses
-that file with exit 2); ``pyfold run`` when ``queued``. Each attempt is appended to
+that file with exit 2); ``pyfold run`` when ``queued``, or, when ``pyfold sweep run``
+found it a donor (a finished run of its scene to an earlier end,
+:mod:`pyfold.sweep.donors`), a copy of the donor's run file continued by ``pyfold run
+--resume`` like an interrupted run. Each attempt is appended to
 ``attempts.jsonl`` (start, end, wall and CPU seconds, exit status, host, Slurm job). The exit status is
 ``pyfold run``'s. Signals (``scancel``, a time limit) reach ``pyfold run``, which stops
 fold_run and keeps the partial file for the next attempt.
@@ -55,12 +58,16 @@ def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
              "np": ranks, "from": state.state}
     rc = 1
     try:
+        if state.state == "queued":
+            state = _start_from_donor(folder, entry) or state
         if state.state == "interrupted":
             rc = cli_main(argv + ["--resume", "--force"])
             if rc == 2 and store.run_state(folder).state == "interrupted":
-                # nothing to resume (killed before its first checkpoint, or the file is damaged): start over
+                # nothing to resume (killed before its first checkpoint, the file is damaged, or a
+                # donor's file the run's scene cannot extend after all): start over
                 print(f"pyfold sweep: {folder.name}: not resumable, starting again", file=sys.stderr, flush=True)
                 entry["from"] = "start (not resumable)"
+                entry.pop("donor", None)
                 rc = cli_main(argv + ["--force"])
         else:  # --force: only a stale run.xmf can be here (its run.h5 was removed); the lock guards the rest
             rc = cli_main(argv + ["--force"])
@@ -73,6 +80,25 @@ def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
         except OSError:  # pragma: no cover - the run's own result is what counts
             pass
     return rc
+
+
+def _start_from_donor(folder: Path, entry: dict) -> store.RunState | None:
+    """Copy the queued run's donor into ``folder`` (:func:`pyfold.sweep.donors.start_from_donor`),
+    noting it in the attempt ``entry``; the run's new state (interrupted: continued by
+    ``--resume``), or None when it has no donor and starts at t = 0."""
+    from pyfold.errors import PyfoldError
+    from pyfold.sweep import donors
+
+    try:
+        donor = donors.start_from_donor(folder)
+    except PyfoldError as exc:  # its lock held: the pyfold run below says so, naming the holder
+        print(f"pyfold sweep: {folder.name}: not started from its donor: {exc}", file=sys.stderr, flush=True)
+        return None
+    if donor is None:
+        return None
+    entry.update({"from": donors.EXTENDED, "donor": donor.record()})
+    print(f"pyfold sweep: {folder.name}: {donor.note()} (a copy of {donor.run_file})", flush=True)
+    return store.run_state(folder)
 
 
 def main(argv: list[str] | None = None) -> int:
