@@ -155,3 +155,26 @@ def test_the_shipped_table_covers_three_concentrations_with_all_errors():
         assert r["total_err"] == pytest.approx(math.sqrt(sum(v * v for v in parts)), rel=1e-4)  # 6 digits in the csv
     fit = fluid_coupled_fit("ibof", "trajectory", rows=rows)
     assert math.isfinite(fit.c0) and math.isfinite(fit.c1) and fit.points >= 3
+
+
+def test_an_unmeasured_resolution_error_is_left_out_of_the_total_and_flagged():
+    """At β = 10 the resolution study has not run: the rows keep NaN in its column, the total is
+    the other parts in quadrature, and ``resolution_in_total`` says which total is which."""
+    from types import SimpleNamespace
+
+    from pyfold.ensemble import EnsembleMean
+
+    run = SimpleNamespace(stationary=False, onset_time=40.0, t=np.array([0.0, 200.0]),
+                          drift={"a_xx": (1e-4, 1e-4)})
+    e = EnsembleMean(3e-3, 3e-4, 2e-4, 4)
+    rep = SimpleNamespace(runs=[run] * 4, n=4, n_l3=6.3657, ci={"exact": e}, ci_fit={"ibof": e},
+                          closures=("exact",), judged=("ibof",))
+    shift = {("exact", "steady"): 1e-4, ("ibof", "trajectory"): 2e-4}
+    unknown = series.table_rows(6.3657, "stokes", rep, (4e-4, 5e-4), shift, beta=10.0)
+    known = series.table_rows(6.3657, "stokes", rep, (4e-4, 5e-4), shift, (7e-4, 8e-4), beta=10.0)
+    for u, k in zip(unknown, known):
+        assert math.isnan(u["resolution_err"]) and u["resolution_in_total"] == 0 and k["resolution_in_total"] == 1
+        parts = (u["stat_err"], u["settings_err"], u["shape_err"])
+        assert u["total_err"] == pytest.approx(math.sqrt(sum(p * p for p in parts)), rel=1e-12)
+        assert k["total_err"] == pytest.approx(math.hypot(u["total_err"], k["resolution_err"]), rel=1e-12)
+        assert u["phi_beta"] == pytest.approx(0.5, abs=1e-4) and u["beta"] == 10.0
