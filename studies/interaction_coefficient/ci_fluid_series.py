@@ -261,8 +261,9 @@ def write_table(rows: list[dict], stem: Path, attrs: dict) -> None:
     ds.to_netcdf(stem.with_suffix(".nc"), engine="h5netcdf")
 
 
-def figure(rows: list[dict], path: Path, beta: float = BETA) -> None:
-    """C_I against φβ: fluid-coupled and contacts-only beside the published values."""
+def figure(rows: list[dict], path: Path) -> None:
+    """C_I against φβ: fluid-coupled and contacts-only beside the published values, one colour
+    per aspect ratio of ``rows``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -280,14 +281,16 @@ def figure(rows: list[dict], path: Path, beta: float = BETA) -> None:
         ax.plot([v.phi_beta for v in MEYER_2020], [v.ci for v in MEYER_2020], "kD", mfc="none",
                 label="Meyer et al. 2020 (SPH, β 10, FT fit)")
         ax.axhline(SALAHUDDIN_2012_ORDER, color="grey", ls=":", label="Salahuddin et al. 2012 (LB), order")
-        for model, closure, mk in (("stokes", "ibof", "o"), ("stokes", "closure-free", "^"),
-                                   ("jeffery", "ibof", "x"), ("jeffery", "closure-free", "v")):
-            sel = [r for r in rows if r["model"] == model and r["closure"] == closure and r["estimator"] == est]
-            if not sel:
-                continue
-            word = "fluid-coupled" if model == "stokes" else "contacts only"
-            ax.errorbar([r["phi_beta"] for r in sel], [r["ci"] for r in sel], [r["total_err"] for r in sel],
-                        fmt=mk, capsize=3, label=f"pyfold β {beta:g}, {word}, {closure}")
+        for colour, beta in zip(("tab:blue", "tab:red", "tab:green"), sorted({float(r["beta"]) for r in rows})):
+            for model, closure, mk in (("stokes", "ibof", "o"), ("stokes", "closure-free", "^"),
+                                       ("jeffery", "ibof", "x"), ("jeffery", "closure-free", "v")):
+                sel = [r for r in rows if float(r["beta"]) == beta and r["model"] == model
+                       and r["closure"] == closure and r["estimator"] == est]
+                if not sel:
+                    continue
+                word = "fluid-coupled" if model == "stokes" else "contacts only"
+                ax.errorbar([r["phi_beta"] for r in sel], [r["ci"] for r in sel], [r["total_err"] for r in sel],
+                            fmt=mk, color=colour, capsize=3, label=f"pyfold β {beta:g}, {word}, {closure}")
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_xlabel("φβ")
         ax.set_ylabel("C_I")
@@ -342,6 +345,7 @@ def cpu_of(path: Path) -> float:
 
 def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path,
             beta: float = BETA) -> None:
+    from pyfold.correlations import fluid_coupled_table
     from pyfold.ensemble import paired_difference
     from pyfold.report import build_report, write_report
 
@@ -403,7 +407,10 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     write_table(rows, out / "ci_fluid_series", attrs)
     if write_data:
         write_table(rows, DATA, attrs)
-    figure(rows, out / "ci_fluid_series.png", beta)
+    # beside the shipped β = 5 table: how the answer moves with the aspect ratio at equal φβ
+    shipped = [] if beta == BETA or not DATA.with_suffix(".csv").is_file() else fluid_coupled_table(
+        DATA.with_suffix(".csv"))
+    figure(rows + shipped, out / "ci_fluid_series.png")
     text = markdown(rows, reps, cost, beta_e_grid, beta, grid) + "\n## Fluid-coupled against contacts only\n\n" + "\n".join(pairs)
     (out / "ci_fluid_series.md").write_text(text + "\n", encoding="utf-8")
     print(text)
