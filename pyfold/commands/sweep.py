@@ -42,11 +42,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="slurm: resubmissions of timed-out or cancelled runs (default: resources.retries)")
     run.add_argument("--no-wait", action="store_true", help="slurm: submit and return (follow with "
                                                             "pyfold sweep status DIR)")
-    run.add_argument("--extend-from", nargs="+", default=[], metavar="DIR",
+    run.add_argument("--extend-from", action="append", default=[], metavar="DIR",
                      help="other sweep folders (the --out of earlier sweeps) whose finished runs may be continued: "
                           "a new run whose scene one of them (or a run in --out) holds to an earlier "
                           "numerics.t_end starts as a copy of it (the largest t_end; the original is left as it "
-                          "is) and is extended like pyfold run --resume extends a run")
+                          "is) and is extended like pyfold run --resume extends a run; repeat the option for "
+                          "several folders")
     status = sub.add_parser("status", help="the state of each run of a sweep folder")
     status.add_argument("dir", metavar="DIR")
     gather = sub.add_parser("gather", help="DIR/sweep.nc over the sweep's axes and seed, and a report per point")

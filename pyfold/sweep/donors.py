@@ -16,8 +16,8 @@ the largest ``t_end`` first; the first it accepts is the donor, recorded in
 The worker (:mod:`pyfold.sweep.worker`) copies the donor's run file (only read: the
 donor's sweep stays as it is) to the run's ``run.h5.partial`` and continues it with
 ``pyfold run --resume``, which extends it to the run a single ``pyfold run`` of the
-scene makes, bit for bit; killed during the extension it is an interrupted run like
-any other. The attempt that copied it names the donor in ``attempts.jsonl``
+scene makes (bit for bit without the Stokes solver, to its tolerance with it, as any
+resume); killed during the extension it is an interrupted run like any other. The attempt that copied it names the donor in ``attempts.jsonl``
 (:func:`extended_from`); the costs there are the extension's, the donor's stay with it.
 """
 from __future__ import annotations
@@ -133,8 +133,14 @@ def finished_runs(roots: Sequence[Path]) -> dict[str, list[Donor]]:
 def find_donor(folder: Path, index: Mapping[str, list[Donor]]) -> Donor | None:
     """The donor of the run in ``folder`` among ``index`` (:func:`finished_runs`): of the runs
     :func:`pyfold.extend.plan` lets its scene (``folder/scene.toml``, as ``pyfold run``
-    reads it) extend, the one with the largest ``t_end``; None when there is none."""
-    from pyfold.extend import plan
+    reads it) extend, the one with the largest ``t_end``; None when there is none.
+
+    A donor must also have the output, snapshot and checkpoint intervals the scene resolves to
+    by itself: an extension keeps the donor's, and defaults that scale with ``t_end`` would
+    otherwise give one run id two different files (finer records when extended than when run
+    in one go), which ``pyfold sweep gather`` refuses to put in one ensemble."""
+    from pyfold.extend import INTERVALS, plan
+    from pyfold.run_input import read_setup
     from pyfold.scene import load_scene
 
     scene = folder / store.SCENE
@@ -144,8 +150,12 @@ def find_donor(folder: Path, index: Mapping[str, list[Donor]]) -> Donor | None:
         return None
     candidates = [d for d in index.get(scene_key(json.loads(resolved.scene_json())), [])
                   if d.t_end < resolved.t_end]
+    own = {name: int(resolved.resolved_datasets()[name][0]) for name in INTERVALS}
     for donor in sorted(candidates, key=lambda d: -d.t_end):  # stable: the sweep folder first on a tie
         try:
+            recorded = read_setup(donor.run_file).resolved
+            if any(int(recorded[name]) != own[name] for name in INTERVALS):
+                continue
             if plan(donor.run_file, resolved, scene).extends:
                 return donor
         except NOT_A_DONOR:
@@ -209,9 +219,10 @@ def start_from_donor(folder: Path) -> Donor | None:
         return None
     out, partial = folder / store.RUN_FILE, folder / store.PARTIAL
     copy = folder / (store.PARTIAL + ".copy")
-    with acquire(out, "-o", command=f"pyfold sweep: copying {donor.run_file}"):
+    with acquire(out, "the sweep run's file", command=f"pyfold sweep: copying {donor.run_file}"):
         if os.path.lexists(out) or os.path.lexists(partial):
             return None
+        copy.unlink(missing_ok=True)  # a copy cut short by a signal before its clean-up ran
         try:
             shutil.copyfile(donor.run_file, copy)
             os.replace(copy, partial)  # whole or not at all: a copy cut short is no interrupted run

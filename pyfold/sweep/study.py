@@ -67,7 +67,7 @@ def run_sweep(spec: SweepSpec, root: Path, executor: str = "local", ranks: int |
         spec = dataclasses.replace(spec, resources=dataclasses.replace(spec.resources, np=ranks))
     runs = plan(spec)
     if not analyse_only:
-        donor_folders = check_sweep_folders(extend_from)
+        donor_folders = check_sweep_folders(extend_from, option="extend_from")
         data = store.prepare(root, spec, runs)
         ids = [rid for rid in store.unique_runs(data)
                if store.run_state(store.run_folder(root, rid)).state != "done"]

@@ -57,9 +57,14 @@ def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
     entry = {"start": start, "executor": executor, "host": socket.gethostname(), "job": slurm_job(),
              "np": ranks, "from": state.state}
     rc = 1
+    if state.state == "queued":
+        # no donor, or another process made the run meanwhile: act on what is there now
+        state = _start_from_donor(folder, entry) or store.run_state(folder)
+        if state.state in ("done", "failed", "running"):
+            print(f"pyfold sweep: {folder.name}: {state.state} by another process meanwhile, left as it is",
+                  file=sys.stderr if state.state != "done" else sys.stdout, flush=True)
+            return 0 if state.state == "done" else 1
     try:
-        if state.state == "queued":
-            state = _start_from_donor(folder, entry) or state
         if state.state == "interrupted":
             rc = cli_main(argv + ["--resume", "--force"])
             if rc == 2 and store.run_state(folder).state == "interrupted":

@@ -200,10 +200,12 @@ def resolution_errors(path: Path) -> tuple[float, float]:
 
 
 def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_shift: dict,
-               resolution: tuple[float, float] = (math.nan, math.nan), beta: float = BETA) -> list[dict]:
-    """One row per closure and estimator of an ensemble report. A resolution error that was not
-    measured (NaN) stays NaN in its column and is left out of the total, and the row says so
-    (``resolution_in_total``)."""
+               resolution: tuple[float, float] = (math.nan, math.nan), beta: float = BETA,
+               resolution_unmeasured: bool = False) -> list[dict]:
+    """One row per closure and estimator of an ensemble report. ``resolution_unmeasured``: no
+    resolution study exists for this β, so a NaN resolution error is left out of the total and
+    the row says so (``resolution_in_total`` = 0); otherwise a NaN one (its file missing) makes
+    the total NaN, as an unknown error must."""
     from pyfold.correlations import phi_beta, volume_fraction
 
     rows = []
@@ -228,7 +230,7 @@ def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_s
             shape_err = abs(xi_shift.get((c, est), 0.0)) if fluid else 0.0
             res_err = (resolution[0] if est == "steady" else resolution[1]) if fluid else 0.0
             stat = e.error
-            known = math.isfinite(res_err)
+            known = math.isfinite(res_err) or not resolution_unmeasured
             rows.append({**base, "closure": "closure-free" if c == "exact" else c, "estimator": est,
                          "ci": e.mean, "stat_err": stat, "settings_err": set_err, "shape_err": shape_err,
                          "resolution_err": res_err,
@@ -311,8 +313,8 @@ def markdown(rows, reps, cost, beta_e_grid, beta: float = BETA, grid: str = "42�
              f"Single fibre on the {grid} grid: β_e = {beta_e_grid:.3f} from its orbit period "
              f"(Cox: {float(equivalent_aspect_ratio(beta)):.2f}).", ""]
     if any(not r["resolution_in_total"] for r in rows if r["model"] == "stokes"):
-        lines += ["The resolution error was measured for β = 5 only (ci_resolution.py): at this β it is "
-                  "*not measured*, and the total below leaves it out.", ""]
+        lines += [f"The resolution error was measured for β = {BETA:g} only (ci_resolution.py): at β = {beta:g} "
+                  "it is *not measured*, and the total below leaves it out.", ""]
     if beta != BETA:
         lines += [f"The settings error is the one measured on β = {BETA:g} fibres in the same regime "
                   "(pyfold.scene.study_preset.EVIDENCE), not at this β.", ""]
@@ -351,16 +353,20 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
 
     # the resolution study measured the β = 5 semi-dilute scene: its bias is not carried to another β
     resolution = resolution_errors(resolution_file) if beta == BETA else (math.nan, math.nan)
-    if write_data and beta != BETA:
-        raise SystemExit(f"--write-data: the shipped table holds beta = {BETA:g} only (the resolution error is "
-                         f"measured there); beta = {beta:g} is analysed into --out")
+    if beta == BETA and not all(math.isfinite(v) for v in resolution):
+        print(f"--resolution: {resolution_file} is missing: the total errors are NaN (run ci_resolution.py)",
+              file=sys.stderr)
     if write_data and not all(math.isfinite(v) for v in resolution):
         raise SystemExit(f"--write-data: the shipped table needs the resolution error; run "
                          f"studies/interaction_coefficient/ci_resolution.py first ({resolution_file} is missing)")
     points = sorted({n for (n, _m), _s in done})
     reps, rows, cost, pairs = {}, [], {}, []
     out.mkdir(parents=True, exist_ok=True)
-    first_stokes = next(p for ((_n, m), _s), p in done.items() if m == "stokes")
+    complete = [n for n in points if sum(all(((n, m), s) in done for m in MODELS) for s in seeds) >= 2]
+    if not complete:
+        raise SystemExit(f"no concentration has two finished pairs of runs in the sweep yet (seeds {seeds}); "
+                         "`pyfold sweep status` shows where the runs are")
+    first_stokes = next(p for ((n, m), _s), p in done.items() if m == "stokes" and n in complete)
     beta_e_grid, xi_grid = grid_xi(out, first_stokes, beta)
     for n_l3 in points:
         have = [s for s in seeds if all(((n_l3, m), s) in done for m in MODELS)]
@@ -375,7 +381,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
             reps[n_l3, model] = rep
             cost[n_l3, model] = float(np.mean([cpu_of(p) for p in paths]))
             shift = xi_sensitivity(rep, xi_grid) if model == "stokes" else {}
-            rows += table_rows(n_l3, model, rep, settings, shift, resolution, beta)
+            rows += table_rows(n_l3, model, rep, settings, shift, resolution, beta, resolution_unmeasured=beta != BETA)
             print(f"n L^3 {n_l3:g} {model}: analysed {len(paths)} runs", flush=True)
         f, j = reps[n_l3, "stokes"], reps[n_l3, "jeffery"]
         d = paired_difference([r.ci["exact"] for r in f.runs], [r.ci["exact"] for r in j.runs])
@@ -386,15 +392,13 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
             line += f"; IBOF trajectory fit {d.mean:+.2e} ± {d.stderr:.1e} (p = {d.p:.2g})"
         pairs.append(line + f"; paired over {d.n} seeds")
     out.mkdir(parents=True, exist_ok=True)
-    if not rows:
-        raise SystemExit(f"no concentration has two finished pairs of runs in the sweep yet (seeds {seeds})")
     grid = "x".join(map(str, grid_of(first_stokes)))
     first = scene_of(5.0, "jeffery", 1, 1.0, beta)
     attrs = {"title": f"Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = {beta:g} fibres",
              "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py "
                         + ("--write-data" if beta == BETA else f"--beta {beta:g}"),
              "scene": f"pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = "
-                      f"{ALPHA_OVER_D / beta:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
+                      f"{first.dt:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
                       f"Stokes grid {grid}",
              "stokes_numerics": f"{STOKES}, ab2 (setting {SETTING} of studies/speed_accuracy/ci_stokes_settings.py)",
              "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
@@ -431,9 +435,13 @@ def main() -> None:
                          "fluid_series_beta<beta> for another beta)")
     ap.add_argument("--resolution", type=Path,
                     default=Path("out/interaction_coefficient/resolution/ci_resolution.json"),
-                    help="the resolution study's summary (ci_resolution.py): the resolution error of the C_I")
+                    help="the resolution study's summary (ci_resolution.py): the resolution error of the C_I "
+                         "(beta = 5 only: at another beta it is not measured and not read)")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
+    if args.write_data and args.beta != BETA:
+        ap.error(f"--write-data: the shipped table holds beta = {BETA:g} only (its resolution error is measured "
+                 f"there); --beta {args.beta:g} is analysed into --out")
     if args.out is None:
         args.out = Path("out/interaction_coefficient") / ("fluid_series" if args.beta == BETA
                                                           else f"fluid_series_beta{args.beta:g}")

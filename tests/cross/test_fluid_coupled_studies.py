@@ -159,7 +159,8 @@ def test_the_shipped_table_covers_three_concentrations_with_all_errors():
 
 def test_an_unmeasured_resolution_error_is_left_out_of_the_total_and_flagged():
     """At β = 10 the resolution study has not run: the rows keep NaN in its column, the total is
-    the other parts in quadrature, and ``resolution_in_total`` says which total is which."""
+    the other parts in quadrature, and ``resolution_in_total`` says which total is which; at β = 5
+    a missing resolution file leaves the total unknown (NaN), not smaller."""
     from types import SimpleNamespace
 
     from pyfold.ensemble import EnsembleMean
@@ -170,8 +171,11 @@ def test_an_unmeasured_resolution_error_is_left_out_of_the_total_and_flagged():
     rep = SimpleNamespace(runs=[run] * 4, n=4, n_l3=6.3657, ci={"exact": e}, ci_fit={"ibof": e},
                           closures=("exact",), judged=("ibof",))
     shift = {("exact", "steady"): 1e-4, ("ibof", "trajectory"): 2e-4}
-    unknown = series.table_rows(6.3657, "stokes", rep, (4e-4, 5e-4), shift, beta=10.0)
+    unknown = series.table_rows(6.3657, "stokes", rep, (4e-4, 5e-4), shift, beta=10.0, resolution_unmeasured=True)
     known = series.table_rows(6.3657, "stokes", rep, (4e-4, 5e-4), shift, (7e-4, 8e-4), beta=10.0)
+    missing = series.table_rows(6.3657, "stokes", rep, (4e-4, 5e-4), shift, beta=5.0)
+    assert len(unknown) == len(known) == len(missing) == 2
+    assert all(math.isnan(m["total_err"]) and m["resolution_in_total"] == 1 for m in missing)
     for u, k in zip(unknown, known):
         assert math.isnan(u["resolution_err"]) and u["resolution_in_total"] == 0 and k["resolution_in_total"] == 1
         parts = (u["stat_err"], u["settings_err"], u["shape_err"])

@@ -31,12 +31,14 @@ T1, T2 = 2.0, 4.0
 
 
 def _sweep(folder: Path, t_end: float, name: str = "tiny", seeds: tuple[int, ...] = (1, 2),
-           interval: float = 0.1) -> Path:
+           interval: float = 0.1, checkpoint: float | None = 0.5, scene: Path = EXAMPLE_SCENE) -> Path:
     """16 fibres of the bundled example scene, explicit intervals (so that a run of T1
-    extended to T2 and a run of T2 made in one go record alike)."""
-    return write_sweep(folder / f"{name}_{t_end:g}_{interval:g}.toml", f'''[sweep]
+    extended to T2 and a run of T2 made in one go record alike); ``checkpoint`` None leaves
+    the checkpoint interval to ``scene``'s."""
+    checkpoint_line = "" if checkpoint is None else f'"output.checkpoint_interval" = {checkpoint!r}\n'
+    return write_sweep(folder / f"{name}_{t_end:g}_{interval:g}_{checkpoint}.toml", f'''[sweep]
 name = "{name}"
-scene = "{EXAMPLE_SCENE}"
+scene = "{scene}"
 seeds = {list(seeds)}
 
 [arguments]
@@ -44,8 +46,7 @@ seeds = {list(seeds)}
 "numerics.t_end" = {t_end!r}
 "output.interval" = {interval!r}
 "output.snapshot_interval" = 1.0
-"output.checkpoint_interval" = 0.5
-''')
+{checkpoint_line}''')
 
 
 def _run(sweep: Path, out: Path, *extra: str):
@@ -208,3 +209,22 @@ def test_extension_stopped_after_its_copy_resumes(tmp_path, short):
     assert store.run_state(folder).state == "done"
     assert [a["from"] for a in store.attempts(folder)] == ["interrupted"]
     _assert_continues(_by_seed(short)[1] / store.RUN_FILE, folder / store.RUN_FILE)
+
+
+def test_donor_with_another_default_interval_is_not_used(tmp_path):
+    # the checkpoint interval left to its default (t_end/20) differs between the two ends: an
+    # extension would keep the donor's, so one run id could hold two different files (and
+    # pyfold sweep gather refuse the ensemble); the run starts at t = 0 instead
+    scene = tmp_path / "default_checkpoints.toml"
+    text = EXAMPLE_SCENE.read_text(encoding="utf-8")
+    scene.write_text("\n".join(line for line in text.splitlines() if not line.startswith("checkpoint_interval")),
+                     encoding="utf-8")
+    assert "checkpoint_interval" not in scene.read_text(encoding="utf-8") and "checkpoint_interval" in text
+    root = tmp_path / "defaults"
+    _run(_sweep(tmp_path, T1, seeds=(1,), checkpoint=None, scene=scene), root)
+    proc = _run(_sweep(tmp_path, T2, seeds=(1,), checkpoint=None, scene=scene), root)
+    assert "extended from" not in proc.stdout
+    (folder,) = _by_seed(root).values()
+    assert [a["from"] for a in store.attempts(folder)] == ["queued"]
+    with h5py.File(folder / store.RUN_FILE, "r") as f:
+        assert f["time"][-1] == T2 and int(f["setup/resolved/checkpoint_every"][()]) == round(T2 / 20 / 0.01)
