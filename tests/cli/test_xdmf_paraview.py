@@ -93,7 +93,9 @@ def _tool(exe: str, package: str) -> str:
 def display():
     """An X display of its own (Xvfb), for ParaView's rendering and for its reader's process."""
     xvfb = _tool("Xvfb", "xvfb")
-    server = subprocess.Popen([xvfb, "-displayfd", "1", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+    # -noreset: without it the server regenerates when its last client leaves, and a client that
+    # connects during that reset (one pvpython right after another, on a loaded machine) is refused
+    server = subprocess.Popen([xvfb, "-displayfd", "1", "-screen", "0", "1280x1024x24", "-nolisten", "tcp", "-noreset"],
                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         number = server.stdout.readline().strip()  # written once the server accepts connections
