@@ -8,6 +8,9 @@ Layout of ``DIR``::
     runs/<id>/run.h5      its run file (run.h5.partial while it runs; run.xmf beside it)
     runs/<id>/attempts.jsonl   one line per attempt (start, end, exit status, executor,
                           host, Slurm job), the source of the costs in sweep.nc
+    runs/<id>/attempt.<host>.<pid>.open.json   the attempt under way, renewed by its worker
+                          every few seconds (:func:`attempts`: one that stopped being renewed
+                          was killed, and counts with the costs of its last renewal)
     runs/<id>/log.txt     what ``pyfold run`` printed (local executor)
     runs/<id>/donor.json  its donor, a finished run of its scene to an earlier end that it
                           starts as a copy of (:mod:`pyfold.sweep.donors`), found while it was queued
@@ -46,6 +49,15 @@ LOCK = RUN_FILE + ".lock"
 ATTEMPTS = "attempts.jsonl"
 LOG = "log.txt"
 DONOR = "donor.json"
+#: An attempt under way (``attempt.<host>.<pid>.open.json``): its entry so far, rewritten by the
+#: worker every ``heartbeat_s`` seconds and removed once its line is in ``attempts.jsonl``.
+OPEN_ATTEMPT = "attempt.{host}.{pid}.open.json"
+OPEN_GLOB = "attempt.*.open.json"
+#: Seconds between two renewals of an open attempt (the worker's default; each entry states its own).
+HEARTBEAT_S = 30.0
+#: An open attempt not renewed for this many of its intervals ended without closing: a SIGKILL, a lost
+#: node, the machine stopped. It is then counted as a ``killed`` attempt with its last renewal's costs.
+STALE_BEATS = 4
 #: Run states, in the order tables show them.
 STATES = ("done", "running", "interrupted", "queued", "failed")
 
@@ -167,24 +179,51 @@ def record_attempt(folder: Path, entry: dict[str, Any]) -> None:
         f.write(json.dumps(entry) + "\n")
 
 
-def attempts(folder: Path) -> list[dict[str, Any]]:
-    """The run's attempts (lines that cannot be read, e.g. cut by a kill, are skipped)."""
+def open_attempt(folder: Path, host: str, pid: int) -> Path:
+    """The open-attempt file of the worker ``pid`` on ``host`` for the run in ``folder``."""
+    return folder / OPEN_ATTEMPT.format(host=host, pid=pid)
+
+
+def _key(entry: dict[str, Any]) -> tuple:
+    return entry.get("host"), entry.get("pid"), entry.get("start")
+
+
+def attempts(folder: Path, now: float | None = None) -> list[dict[str, Any]]:
+    """The run's attempts in the order they started: the lines of ``attempts.jsonl`` (lines that
+    cannot be read, e.g. cut by a kill, are skipped) and the *killed* ones, open attempts whose
+    worker stopped renewing them more than :data:`STALE_BEATS` intervals before ``now``
+    (``state`` "killed", ``end`` the last renewal, ``wall_s`` and ``cpu_s`` as of then: the
+    CPU time of at most one interval per process is missing). An attempt under way is not
+    listed, as before its end."""
     try:
         lines = (folder / ATTEMPTS).read_text(encoding="utf-8").splitlines()
     except OSError:
-        return []
+        lines = []
     out = []
     for line in lines:
         try:
             out.append(json.loads(line))
         except ValueError:
             continue
-    return out
+    closed = {_key(a) for a in out}
+    now = time.time() if now is None else now
+    for path in sorted(folder.glob(OPEN_GLOB)):
+        try:
+            entry = json.loads(path.read_text(encoding="utf-8"))
+            beat = float(entry.get("beat", entry["start"]))
+            stale = now - beat > STALE_BEATS * float(entry.get("heartbeat_s", HEARTBEAT_S))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        if stale and _key(entry) not in closed:  # not also closed (killed between its line and the removal)
+            out.append(dict(entry, state="killed", end=beat, rc=None))
+    return sorted(out, key=lambda a: float(a.get("start", 0.0)))
 
 
 def cpu_seconds(folder: Path) -> float:
-    """CPU time of the run in ``folder`` over all its attempts [s] (a resumed run pays for each);
-    NaN without a recorded attempt, or when one lacks its CPU time."""
+    """CPU time of the run in ``folder`` over all its attempts [s] (a resumed run pays for each; a
+    killed one, :func:`attempts`, as of its last renewal); NaN without a recorded attempt, or when
+    one lacks its CPU time (e.g. killed before its first renewal, or where the worker cannot read
+    its children's CPU time)."""
     recorded = attempts(folder)
     return float(sum(a.get("cpu_s", math.nan) for a in recorded)) if recorded else math.nan
 

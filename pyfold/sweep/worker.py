@@ -16,10 +16,12 @@ fold_run and keeps the partial file for the next attempt.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import socket
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -39,8 +41,73 @@ def _cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
-    """Complete the run in ``folder`` (see the module docstring); returns an exit status."""
+def descendants_cpu_seconds(pid: int | None = None) -> float | None:
+    """CPU time of the live descendants of ``pid`` (this process by default) and of their own
+    finished children [s], from ``/proc`` (Linux); None where ``/proc`` cannot be read. The
+    finished children of ``pid`` itself are not included (``RUSAGE_CHILDREN`` has them)."""
+    pid = os.getpid() if pid is None else pid
+    tick = os.sysconf("SC_CLK_TCK")
+    parent, ticks = {}, {}
+    try:
+        entries = [e for e in os.listdir("/proc") if e.isdigit()]
+    except OSError:
+        return None
+    for name in entries:
+        try:
+            with open(f"/proc/{name}/stat", "rb") as f:
+                text = f.read().decode("ascii", "replace")
+        except OSError:  # ended meanwhile, or not ours to read
+            continue
+        fields = text[text.rindex(")") + 2:].split()  # after "pid (comm) ": state ppid ...
+        parent[int(name)] = int(fields[1])
+        ticks[int(name)] = sum(int(x) for x in fields[11:15])  # utime stime cutime cstime
+    children: dict[int, list[int]] = {}
+    for child, ppid in parent.items():
+        children.setdefault(ppid, []).append(child)
+    total, stack = 0, list(children.get(pid, []))
+    while stack:
+        p = stack.pop()
+        total += ticks.get(p, 0)
+        stack.extend(children.get(p, []))
+    return total / tick
+
+
+class _Heartbeat:
+    """Rewrites the open-attempt file ``path`` with ``entry`` and the attempt's wall and CPU
+    seconds so far every ``interval`` seconds, until :meth:`stop`."""
+
+    def __init__(self, path: Path, entry: dict, cpu0: float, interval: float) -> None:
+        self.path, self.entry, self.cpu0, self.interval = path, entry, cpu0, interval
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="pyfold-sweep-heartbeat", daemon=True)
+
+    def beat(self) -> None:
+        now = time.time()
+        entry = dict(self.entry, beat=now, wall_s=now - self.entry["start"], heartbeat_s=self.interval)
+        live = descendants_cpu_seconds()
+        if live is not None:
+            entry["cpu_s"] = _cpu_seconds() + live - self.cpu0
+        try:
+            store.write_atomic(self.path, json.dumps(entry))
+        except OSError:  # pragma: no cover - a full disk: the run itself says what fails
+            pass
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.interval):
+            self.beat()
+
+    def start(self) -> None:
+        self.beat()
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+def run_folder(folder: Path, ranks: int, executor: str = "local", heartbeat: float = store.HEARTBEAT_S) -> int:
+    """Complete the run in ``folder`` (see the module docstring), renewing its open attempt every
+    ``heartbeat`` seconds; returns an exit status."""
     from pyfold.cli import main as cli_main
 
     state = store.run_state(folder)
@@ -54,16 +121,22 @@ def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
             "--oversubscribe"]
     start = time.time()
     cpu0 = _cpu_seconds()
-    entry = {"start": start, "executor": executor, "host": socket.gethostname(), "job": slurm_job(),
-             "np": ranks, "from": state.state}
+    entry = {"start": start, "executor": executor, "host": socket.gethostname(), "pid": os.getpid(),
+             "job": slurm_job(), "np": ranks, "from": state.state}
     rc = 1
+    opened = store.open_attempt(folder, entry["host"], entry["pid"])
+    pulse = _Heartbeat(opened, entry, cpu0, heartbeat)
+    pulse.start()
     if state.state == "queued":
         # no donor, or another process made the run meanwhile: act on what is there now
         state = _start_from_donor(folder, entry) or store.run_state(folder)
         if state.state in ("done", "failed", "running"):
+            pulse.stop()
+            opened.unlink(missing_ok=True)  # no attempt of this worker's
             print(f"pyfold sweep: {folder.name}: {state.state} by another process meanwhile, left as it is",
                   file=sys.stderr if state.state != "done" else sys.stdout, flush=True)
             return 0 if state.state == "done" else 1
+        pulse.beat()  # the donor it started from, at once
     try:
         if state.state == "interrupted":
             rc = cli_main(argv + ["--resume", "--force"])
@@ -77,11 +150,13 @@ def run_folder(folder: Path, ranks: int, executor: str = "local") -> int:
         else:  # --force: only a stale run.xmf can be here (its run.h5 was removed); the lock guards the rest
             rc = cli_main(argv + ["--force"])
     finally:
+        pulse.stop()
         entry.update(end=time.time(), rc=rc, state=store.run_state(folder).state)
         entry["wall_s"] = entry["end"] - start
         entry["cpu_s"] = _cpu_seconds() - cpu0
         try:
             store.record_attempt(folder, entry)
+            opened.unlink(missing_ok=True)
         except OSError:  # pragma: no cover - the run's own result is what counts
             pass
     return rc
@@ -111,8 +186,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("folder", type=Path)
     parser.add_argument("--np", type=int, default=1)
     parser.add_argument("--executor", default="local")
+    parser.add_argument("--heartbeat", type=float, default=store.HEARTBEAT_S,
+                        help="seconds between two renewals of the open attempt (default %(default)g)")
     args = parser.parse_args(argv)
-    return run_folder(args.folder, args.np, args.executor)
+    if not args.heartbeat > 0:
+        parser.error(f"--heartbeat: {args.heartbeat:g} s; must be > 0")
+    return run_folder(args.folder, args.np, args.executor, args.heartbeat)
 
 
 if __name__ == "__main__":  # pragma: no cover
