@@ -125,9 +125,12 @@ def settings_errors(n_l3: float, beta: float = BETA) -> tuple[float, float]:
     return ev.settings_error(m)
 
 
-def xi_sensitivity(rep, xi_grid: float) -> dict[tuple[str, str], float]:
+def xi_sensitivity(rep, xi_grid: float, fits_out: dict[str, list[float]] | None = None
+                   ) -> dict[tuple[str, str], float]:
     """Change of each ensemble C_I when the Jeffery term uses ``xi_grid`` instead of the runs' xi:
-    (closure, "steady") for the rate regressions, (closure, "trajectory") for the fits."""
+    (closure, "steady") for the rate regressions, (closure, "trajectory") for the fits. The
+    per-run trajectory fits with ``xi_grid`` go to ``fits_out[closure]`` (in the order of
+    ``rep.runs``, NaN where the report has no fit)."""
     from pyfold.ci_estimators import ci_rate_regression
     from pyfold.closures import get_closure
     from pyfold.fast_fit import fit_ci_rk4
@@ -150,6 +153,11 @@ def xi_sensitivity(rep, xi_grid: float) -> dict[tuple[str, str], float]:
         fits = [fit_ci_rk4(c, rep.runs[k].t, rep.runs[k].a2, rep.L, xi_grid, t_end=rep.fit_window[1]).ci
                 for k in kept]
         out[c, "trajectory"] = float(np.mean(fits)) - float(np.mean([rep.ci_fit_runs[c][k] for k in kept]))
+        if fits_out is not None:
+            per_run = [math.nan] * len(rep.runs)
+            for k, v in zip(kept, fits):
+                per_run[k] = v
+            fits_out[c] = per_run
     return out
 
 
@@ -374,13 +382,14 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
             print(f"n L^3 {n_l3:g}: {len(have)} finished pair(s) of runs; left out")
             continue
         settings = settings_errors(n_l3, beta)
+        grid_fits: dict[str, list[float]] = {}  # the Stokes runs' trajectory fits with the grid fibre's ξ
         for model in MODELS:
             paths = [done[(n_l3, model), s] for s in have]
             rep = build_report(paths, None, progress=lambda text: None)
             write_report(rep, out / f"nl3_{n_l3:g}" / model)
             reps[n_l3, model] = rep
             cost[n_l3, model] = float(np.mean([cpu_of(p) for p in paths]))
-            shift = xi_sensitivity(rep, xi_grid) if model == "stokes" else {}
+            shift = xi_sensitivity(rep, xi_grid, grid_fits) if model == "stokes" else {}
             rows += table_rows(n_l3, model, rep, settings, shift, resolution, beta, resolution_unmeasured=beta != BETA)
             print(f"n L^3 {n_l3:g} {model}: analysed {len(paths)} runs", flush=True)
         f, j = reps[n_l3, "stokes"], reps[n_l3, "jeffery"]
@@ -390,6 +399,12 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
         if "ibof" in f.ci_fit_runs and "ibof" in j.ci_fit_runs:
             d = paired_difference(f.ci_fit_runs["ibof"], j.ci_fit_runs["ibof"])
             line += f"; IBOF trajectory fit {d.mean:+.2e} ± {d.stderr:.1e} (p = {d.p:.2g})"
+        if "ibof" in grid_fits and "ibof" in j.ci_fit_runs:
+            # the twins turn exactly as Jeffery's fibre of Cox's ξ, the Stokes runs' fibres as the grid's:
+            # each fitted with the ξ of the fibres it simulates, the difference is the interactions' alone
+            d = paired_difference(grid_fits["ibof"], j.ci_fit_runs["ibof"])
+            line += (f"; IBOF trajectory fit of the Stokes runs with the grid fibre's ξ (β_e {beta_e_grid:.2f}, "
+                     f"C_I {np.nanmean(grid_fits['ibof']):.2e}) {d.mean:+.2e} ± {d.stderr:.1e} (p = {d.p:.2g})")
         pairs.append(line + f"; paired over {d.n} seeds")
     out.mkdir(parents=True, exist_ok=True)
     grid = "x".join(map(str, grid_of(first_stokes)))
