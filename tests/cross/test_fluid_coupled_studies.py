@@ -182,3 +182,27 @@ def test_an_unmeasured_resolution_error_is_left_out_of_the_total_and_flagged():
         assert u["total_err"] == pytest.approx(math.sqrt(sum(p * p for p in parts)), rel=1e-12)
         assert k["total_err"] == pytest.approx(math.hypot(u["total_err"], k["resolution_err"]), rel=1e-12)
         assert u["phi_beta"] == pytest.approx(0.5, abs=1e-4) and u["beta"] == 10.0
+
+
+def test_grid_fibre_shape_interpolates_the_diameter_between_bracketing_measurements():
+    """grid_fibre_shape.diameter_for: exact on a linear β_e(d), in any input order; NaN outside the
+    measured range; on a convex curve, between the bracketing pair's diameters."""
+    shape = import_study("interaction_coefficient", "grid_fibre_shape")
+    d = [0.125, 0.1, 0.111, 0.118]
+    linear = [20.0 - 100.0 * x for x in d]
+    assert shape.diameter_for(8.5, d, linear) == pytest.approx(0.115, rel=1e-12)
+    assert math.isnan(shape.diameter_for(20.0, d, linear))
+    convex = [1.0 / x ** 2 for x in d]
+    got = shape.diameter_for(1.0 / 0.105 ** 2, d, convex)
+    assert 0.1 < got < 0.111 and got != pytest.approx(0.105, rel=1e-6)
+
+
+def test_grid_fibre_shape_refuses_a_bad_aspect_ratio_naming_it(tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, str(STUDIES / "interaction_coefficient" / "grid_fibre_shape.py"),
+                           "--betas", "9", "1", "--out", str(tmp_path / "out")], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 2 and "--betas: 1; aspect ratios must be > 1" in proc.stderr
+    assert not (tmp_path / "out").exists()
