@@ -41,17 +41,14 @@ def _cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def descendants_cpu_seconds(pid: int | None = None) -> float | None:
-    """CPU time of the live descendants of ``pid`` (this process by default) and of their own
-    finished children [s], from ``/proc`` (Linux); None where ``/proc`` cannot be read. The
-    finished children of ``pid`` itself are not included (``RUSAGE_CHILDREN`` has them)."""
-    pid = os.getpid() if pid is None else pid
-    tick = os.sysconf("SC_CLK_TCK")
-    parent, ticks = {}, {}
+def process_table() -> dict[int, tuple[int, int]] | None:
+    """pid -> (parent pid, CPU clock ticks of the process and of its finished children) of every
+    process ``/proc`` shows (Linux); None where ``/proc`` cannot be read."""
     try:
         entries = [e for e in os.listdir("/proc") if e.isdigit()]
     except OSError:
         return None
+    table = {}
     for name in entries:
         try:
             with open(f"/proc/{name}/stat", "rb") as f:
@@ -59,17 +56,32 @@ def descendants_cpu_seconds(pid: int | None = None) -> float | None:
         except OSError:  # ended meanwhile, or not ours to read
             continue
         fields = text[text.rindex(")") + 2:].split()  # after "pid (comm) ": state ppid ...
-        parent[int(name)] = int(fields[1])
-        ticks[int(name)] = sum(int(x) for x in fields[11:15])  # utime stime cutime cstime
+        table[int(name)] = (int(fields[1]), sum(int(x) for x in fields[11:15]))  # utime stime cutime cstime
+    return table
+
+
+def descendants(pid: int, table: dict[int, tuple[int, int]]) -> list[int]:
+    """The live descendants of ``pid`` in ``table`` (:func:`process_table`)."""
     children: dict[int, list[int]] = {}
-    for child, ppid in parent.items():
+    for child, (ppid, _ticks) in table.items():
         children.setdefault(ppid, []).append(child)
-    total, stack = 0, list(children.get(pid, []))
+    out, stack = [], list(children.get(pid, []))
     while stack:
         p = stack.pop()
-        total += ticks.get(p, 0)
+        out.append(p)
         stack.extend(children.get(p, []))
-    return total / tick
+    return out
+
+
+def descendants_cpu_seconds(pid: int | None = None) -> float | None:
+    """CPU time of the live descendants of ``pid`` (this process by default) and of their own
+    finished children [s], from ``/proc`` (Linux); None where ``/proc`` cannot be read. The
+    finished children of ``pid`` itself are not included (``RUSAGE_CHILDREN`` has them)."""
+    table = process_table()
+    if table is None:
+        return None
+    pid = os.getpid() if pid is None else pid
+    return sum(table[p][1] for p in descendants(pid, table)) / os.sysconf("SC_CLK_TCK")
 
 
 class _Heartbeat:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import signal
 import stat
 import subprocess
@@ -53,37 +54,18 @@ def _burner(tmp_path: Path) -> tuple[Path, Path]:
     clock = tmp_path / "burner_cpu.txt"
     script = tmp_path / "bin" / "fold_run"
     script.parent.mkdir()
-    script.write_text(f"""#!/bin/sh
-exec {sys.executable} -c '
-import os, time
+    code = """import os, sys, time
 n = 0
 while True:
     n += 1
     if n % 200000 == 0:
-        with open("{clock}.tmp", "w") as f:
+        with open(sys.argv[1] + ".tmp", "w") as f:
             f.write(repr(time.process_time()))
-        os.replace("{clock}.tmp", "{clock}")
-'
-""")
+        os.replace(sys.argv[1] + ".tmp", sys.argv[1])
+"""
+    script.write_text(f"#!/bin/sh\nexec {shlex.join([sys.executable, '-c', code, str(clock)])}\n")
     script.chmod(script.stat().st_mode | stat.S_IXUSR)
     return script, clock
-
-
-def _descendants(pid: int) -> list[int]:
-    parent = {}
-    for name in os.listdir("/proc"):
-        try:
-            text = Path(f"/proc/{name}/stat").read_text()
-            parent[int(name)] = int(text[text.rindex(")") + 2:].split()[1])
-        except (OSError, ValueError):
-            continue
-    out, stack = [], [pid]
-    while stack:
-        p = stack.pop()
-        kids = [c for c, pp in parent.items() if pp == p]
-        out += kids
-        stack += kids
-    return out
 
 
 def test_descendants_cpu_time_is_the_childs_own_clock(tmp_path):
@@ -126,7 +108,7 @@ def test_killed_attempt_counts_with_its_cpu_time(tmp_path):
     finally:
         # the worker and all its descendants at once (pyfold run starts fold_run in a session of its
         # own), as a stopped machine does: no clean-up
-        for pid in [proc.pid, *_descendants(proc.pid)]:
+        for pid in [proc.pid, *worker.descendants(proc.pid, worker.process_table())]:
             try:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
