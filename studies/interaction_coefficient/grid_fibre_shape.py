@@ -83,19 +83,19 @@ def main() -> None:
         ap.error(f"--side: {args.side:g}; the cell must be longer than the fibre (> 1)")
     args.out.mkdir(parents=True, exist_ok=True)
     betas = sorted(set(args.betas))
+    diameters = [1.0 / b for b in betas]
+    voxels = [args.grid / args.side * d for d in diameters]  # voxels per diameter
     measured = []
-    for b in betas:
+    for b, d, v in zip(betas, diameters, voxels):
         be = series.beta_e_on([args.grid] * 3, args.side, args.out / f"single_fibre_b{b:g}.nc", b)
         measured.append(be)
-        print(f"b = {b:g} (d = {1 / b:.4f} L, {args.grid / args.side / b:.2f} voxels per diameter): "
-              f"beta_e = {be:.3f}", flush=True)
-    diameters = [1.0 / b for b in betas]
+        print(f"b = {b:g} (d = {d:.4f} L, {v:.2f} voxels per diameter): beta_e = {be:.3f}", flush=True)
     targets = {rule: float(equivalent_aspect_ratio(args.beta, rule)) for rule in ("cox", "zhang")}
     found = {rule: diameter_for(t, diameters, measured) for rule, t in targets.items()}
     ds = xr.Dataset(
         {"beta_e": (("b",), measured, {"units": "1", "long_name": "equivalent aspect ratio of the grid fibre"}),
          "diameter": (("b",), diameters, {"units": "L", "long_name": "voxelised fibre diameter"}),
-         "voxels_per_diameter": (("b",), [args.grid / args.side / b for b in betas], {"units": "1"})},
+         "voxels_per_diameter": (("b",), voxels, {"units": "1"})},
         coords={"b": ("b", betas, {"units": "1", "long_name": "L/d of the voxelised fibre"})},
         attrs={"title": f"beta_e of one fibre on the {args.grid}^3 grid of a {args.side:g} L cell against its diameter",
                "command": "studies/interaction_coefficient/grid_fibre_shape.py " + " ".join(sys.argv[1:]),
@@ -105,7 +105,7 @@ def main() -> None:
     ds.to_dataframe().to_csv(args.out / "grid_fibre_shape.csv")
     lines = [f"# β_e of one fibre on the {args.grid}³ grid ({args.side:g} L cell) against its diameter", "",
              "| L/d | d [L] | voxels per diameter | β_e of the grid fibre |", "|---|---|---|---|"]
-    lines += [f"| {b:g} | {1 / b:.4f} | {args.grid / args.side / b:.2f} | {be:.3f} |" for b, be in zip(betas, measured)]
+    lines += [f"| {b:g} | {d:.4f} | {v:.2f} | {be:.3f} |" for b, d, v, be in zip(betas, diameters, voxels, measured)]
     lines.append("")
     for rule, t in targets.items():
         d = found[rule]
