@@ -24,8 +24,8 @@ contains
    end subroutine velocity_out
 
    function make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, &
-                          plan_effort, rigidity) result(set)
-      real(dp), intent(in) :: eta_f, kappa, tol
+                          plan_effort, rigidity, fibre_radius_scale) result(set)
+      real(dp), intent(in) :: eta_f, kappa, tol, fibre_radius_scale
       integer(ip), intent(in) :: max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, plan_effort
       !> fold_settings FOLD_RIGIDITY_*
       integer(ip), intent(in) :: rigidity
@@ -35,7 +35,7 @@ contains
       set = stokes_settings_t(eta_f=eta_f, kappa=kappa, tol=tol, max_iter=max_iter, derivative=derivative, &
                               mixing=mixing, subsamples=subsamples, fibre_ends=fibre_ends, &
                               warm_start=warm_start /= 0, guess=max(1_ip, min(int(warm_start, ip), 2_ip)), &
-                              plan_effort=plan_effort, rigidity=rigidity)
+                              plan_effort=plan_effort, rigidity=rigidity, fibre_radius_scale=fibre_radius_scale)
    end function make_settings
 end module fold_stokes_bind_util
 
@@ -67,8 +67,9 @@ subroutine fold_stokes_solve_chi(dim, n1, n2, n3, lattice, g, chi, eta_f, kappa,
    residual = 0.0_dp
    history = 0.0_dp
    iterations = 0
+   ! chi is given: the voxelisation settings (subsamples, ends, radius scale) are unused
    call stokes_serial_create(make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, 1_ip, 0_ip, 0_ip, &
-                                           plan_effort, rigidity_code), dim, [n1, n2, n3], s, stat, errmsg)
+                                           plan_effort, rigidity_code, 1.0_dp), dim, [n1, n2, n3], s, stat, errmsg)
    if (stat /= FOLD_OK) return
    call s%set_lattice(lattice, stat, errmsg)
    if (stat /= FOLD_OK) return
@@ -91,7 +92,7 @@ end subroutine fold_stokes_solve_chi
 
 subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offset, g, shape, radius, length, xi, x, p, &
                                        eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, &
-                                       plan_effort, rigidity_code, chi, u, v, omega, rigidity, stress, sigma_p, scalars, &
+                                       fibre_radius_scale, plan_effort, rigidity_code, chi, u, v, omega, rigidity, stress, sigma_p, scalars, &
                                        iterations, history, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
@@ -103,7 +104,8 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    integer(ip), intent(in) :: dim, n1, n2, n3, np, max_iter, derivative, mixing, subsamples, fibre_ends, plan_effort, rigidity_code
    integer(ip), intent(in) :: shape(np)
    real(dp), intent(in) :: lengths(3), shear_offset, g(3, 3), radius(np), length(np), xi(np), x(dim, np), p(dim, np)
-   real(dp), intent(in) :: eta_f, kappa, tol
+   !> radius of the voxelised fibres over their geometric radius (fold_voxelise)
+   real(dp), intent(in) :: eta_f, kappa, tol, fibre_radius_scale
    real(dp), intent(out) :: chi(n1, n2, n3), u(n1, n2, n3, dim), v(dim, np), omega(3, np), rigidity(np)
    !> scalars: residual, eta_eff, eta_dissipation, solid_strain, solid_fraction
    real(dp), intent(out) :: stress(3, 3), sigma_p(3, 3), scalars(5), history(max_iter + 1)
@@ -131,7 +133,8 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    call particles_init(parts, dim, np, stat, errmsg, x=x, p=p, shape=shape, radius=radius, length=length, xi=xi)
    if (stat /= FOLD_OK) return
    call stokes_context_init(ctx, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
-                                               fibre_ends, 0_ip, plan_effort, rigidity_code), dim, [n1, n2, n3], &
+                                               fibre_ends, 0_ip, plan_effort, rigidity_code, fibre_radius_scale), &
+                            dim, [n1, n2, n3], &
                             stat, errmsg)
    if (stat /= FOLD_OK) return
    call stokes_rigid_velocities(ctx, cell, parts, rec, stat, errmsg)
@@ -153,7 +156,7 @@ end subroutine fold_stokes_solve_particles
 
 subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, scheme, shape, radius, length, xi, &
                              x0, p0, eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, &
-                             warm_start, plan_effort, rigidity_code, x_hist, p_hist, records, stat, errmsg)
+                             fibre_radius_scale, warm_start, plan_effort, rigidity_code, x_hist, p_hist, records, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK
    use fold_cell, only: cell_t, cell_init
@@ -164,7 +167,8 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    integer(ip), intent(in) :: dim, n1, n2, n3, np, nsteps, scheme, max_iter, derivative, mixing, subsamples
    integer(ip), intent(in) :: fibre_ends, warm_start, plan_effort, rigidity_code, shape(np)
    real(dp), intent(in) :: lengths(3), g(3, 3), t0, dt, radius(np), length(np), xi(np), x0(dim, np), p0(dim, np)
-   real(dp), intent(in) :: eta_f, kappa, tol
+   !> radius of the voxelised fibres over their geometric radius (fold_voxelise)
+   real(dp), intent(in) :: eta_f, kappa, tol, fibre_radius_scale
    real(dp), intent(out) :: x_hist(dim, np, nsteps + 1), p_hist(dim, np, nsteps + 1)
    !> records(:, step): iterations, residual, rigidity_max, eta_eff, solid_strain, solid_fraction,
    !> residual of the initial guess
@@ -185,7 +189,8 @@ subroutine fold_stokes_march(dim, n1, n2, n3, np, nsteps, lengths, g, t0, dt, sc
    call particles_init(parts, dim, np, stat, errmsg, x=x0, p=p0, shape=shape, radius=radius, length=length, xi=xi)
    if (stat /= FOLD_OK) return
    call stokes_context_init(ctx, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
-                                               fibre_ends, warm_start, plan_effort, rigidity_code), dim, &
+                                               fibre_ends, warm_start, plan_effort, rigidity_code, &
+                                               fibre_radius_scale), dim, &
                             [n1, n2, n3], stat, errmsg)
    if (stat /= FOLD_OK) return
    allocate (recs(max(nsteps, 1)))

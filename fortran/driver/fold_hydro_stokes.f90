@@ -119,6 +119,9 @@ contains
             nranks, " rank(s), kappa ", setup%stokes%kappa, ", tol ", setup%stokes%tol, ", ", &
             trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
       end if
+      if (setup%stokes%fibre_radius_scale /= 1.0_dp) write (output_unit, '(a,f6.3,a)') &
+         "fold_run: fibres voxelised at ", setup%stokes%fibre_radius_scale, &
+         " times their radius (contacts keep the geometric radius)"
    end subroutine announce
 
    !> The time scheme's velocity of the step from t (every rank computes all particles).

@@ -52,7 +52,7 @@ module fold_voxelise
 contains
 
    !> Voxelise every particle of parts on grid; vox keeps its storage between calls.
-   subroutine voxelise(grid, parts, subsamples, ends, vox, stat, errmsg, walls)
+   subroutine voxelise(grid, parts, subsamples, ends, vox, stat, errmsg, walls, fibre_radius_scale)
       type(grid_t), intent(in) :: grid
       type(particle_set_t), intent(in) :: parts
       !> Sub-samples per voxel edge (1 .. 8)
@@ -67,15 +67,21 @@ contains
       !> crossed it, which the contact step reports) is outside the fluid domain and
       !> is dropped instead of wrapping onto the opposite wall
       logical, intent(in), optional :: walls
+      !> Radius of the voxelised fibre over its geometric radius (default 1): a fibre on a
+      !> coarse grid turns like a more slender one, so a radius calibrated to the grid can be
+      !> given here; spheres and spheroids keep their radius (docs/fluid_coupled_ci.md)
+      real(dp), intent(in), optional :: fibre_radius_scale
 
       integer(ip) :: k, dim, ns, s1, s2, s3, is, m(3), lo(3), hi(3), g(3), l(3), i1, i2, i3, nsub
       integer(i8) :: cnt
       real(dp), allocatable :: dr(:, :)
-      real(dp) :: xk(3), pk(3), c(3), ext(3), span(3), r(3), w, margin, phi, f, hseg
+      real(dp) :: xk(3), pk(3), c(3), ext(3), span(3), r(3), w, margin, phi, f, hseg, rk, fscale
       logical :: inside_slab, bounded_y
 
       bounded_y = .false.
       if (present(walls)) bounded_y = walls
+      fscale = 1.0_dp
+      if (present(fibre_radius_scale)) fscale = fibre_radius_scale
       stat = FOLD_INPUT_ERROR
       errmsg = ""
       dim = grid%dim
@@ -85,6 +91,10 @@ contains
       end if
       if (subsamples < 1 .or. subsamples > 8) then
          write (errmsg, '(a,i0)') "voxelise: subsamples must be in 1..8, got ", subsamples
+         return
+      end if
+      if (.not. (fscale > 0.0_dp)) then
+         write (errmsg, '(a,es10.3)') "voxelise: fibre_radius_scale must be > 0, got ", fscale
          return
       end if
       if (ends /= FOLD_ENDS_FLAT .and. ends /= FOLD_ENDS_CAPPED) then
@@ -122,8 +132,10 @@ contains
          pk = 0.0_dp
          xk(1:dim) = parts%x(:, k)
          pk(1:dim) = parts%p(:, k)/norm2(parts%p(:, k))
-         hseg = particle_half_segment(parts%shape(k), parts%radius(k), parts%length(k))
-         ext = aabb_half_extent(parts%shape(k), parts%radius(k), parts%length(k), pk)
+         rk = parts%radius(k)
+         if (parts%shape(k) == FOLD_FIBRE) rk = fscale*rk
+         hseg = particle_half_segment(parts%shape(k), rk, parts%length(k))
+         ext = aabb_half_extent(parts%shape(k), rk, parts%length(k), pk)
          if (dim == 2) ext(3) = 0.0_dp
          ! extent in voxel units along each lattice direction
          span = real(grid%n, dp)*matmul(abs(grid%Ainv), ext)
@@ -151,14 +163,14 @@ contains
                   inside_slab = all(g >= grid%off .and. g < grid%off + grid%nl)
                   if (.not. inside_slab) cycle
                   r = grid_point(grid, m, 0.5_dp) - xk
-                  phi = signed_distance(parts%shape(k), ends, parts%radius(k), parts%length(k), hseg, pk, r)
+                  phi = signed_distance(parts%shape(k), ends, rk, parts%length(k), hseg, pk, r)
                   if (phi > margin) cycle
                   if (phi < -margin) then
                      f = 1.0_dp
                   else
                      f = 0.0_dp
                      do is = 1, nsub
-                        phi = signed_distance(parts%shape(k), ends, parts%radius(k), parts%length(k), hseg, pk, &
+                        phi = signed_distance(parts%shape(k), ends, rk, parts%length(k), hseg, pk, &
                                               r + dr(:, is))
                         f = f + smooth_step(0.5_dp - phi/w)
                      end do

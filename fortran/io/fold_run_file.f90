@@ -8,7 +8,8 @@
 !> The Stokes settings (`stokes_grid`, `stokes_backend`, `stokes_tolerance`,
 !> `stokes_max_iterations`, `stokes_kappa`, `stokes_derivative`, `stokes_fft_plan`,
 !> `stokes_mixing`, `stokes_subsamples`, `stokes_fibre_ends`, `stokes_warm_start`,
-!> `time_scheme`; optional `stokes_initial_guess`, `stokes_solve_every`, `stokes_fft_precision`) are read
+!> `time_scheme`; optional `stokes_initial_guess`, `stokes_solve_every`, `stokes_fft_precision`,
+!> `stokes_fibre_radius_scale`) are read
 !> only when `hydrodynamics` = 1, so Jeffery run files need not carry them; every
 !> setting that changes results is read, none is left at a default of the solver.
 !> Any problem is returned as FOLD_INPUT_ERROR (wrong content) or FOLD_IO_ERROR
@@ -31,6 +32,8 @@ module fold_run_file
                             FOLD_LO_STOKES_TOLERANCE, FOLD_HI_STOKES_TOLERANCE, &
                             FOLD_LO_STOKES_MAX_ITERATIONS, FOLD_HI_STOKES_MAX_ITERATIONS, &
                             FOLD_LO_STOKES_KAPPA, FOLD_HI_STOKES_KAPPA, FOLD_LO_STOKES_DERIVATIVE, FOLD_HI_STOKES_DERIVATIVE, &
+                            FOLD_LO_STOKES_FIBRE_RADIUS_SCALE, FOLD_HI_STOKES_FIBRE_RADIUS_SCALE, &
+                            FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE, &
                             FOLD_LO_STOKES_FFT_PLAN, FOLD_HI_STOKES_FFT_PLAN, FOLD_LO_STOKES_MIXING, FOLD_HI_STOKES_MIXING, &
                             FOLD_LO_STOKES_SUBSAMPLES, FOLD_HI_STOKES_SUBSAMPLES, &
                             FOLD_LO_STOKES_FIBRE_ENDS, FOLD_HI_STOKES_FIBRE_ENDS, &
@@ -285,6 +288,10 @@ contains
       call get_int(file, R//"stokes_solve_every", FOLD_LO_STOKES_SOLVE_EVERY, FOLD_HI_STOKES_SOLVE_EVERY, iv, &
                    stat, errmsg, if_absent=FOLD_DEF_STOKES_SOLVE_EVERY); if (stat /= FOLD_OK) return
       s%stokes_solve_every = int(iv, ip)
+      ! optional: run files written before the setting existed voxelised the geometric radius
+      call get_real(file, R//"stokes_fibre_radius_scale", FOLD_LO_STOKES_FIBRE_RADIUS_SCALE, &
+                    FOLD_HI_STOKES_FIBRE_RADIUS_SCALE, s%stokes%fibre_radius_scale, stat, errmsg, &
+                    if_absent=FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE); if (stat /= FOLD_OK) return
    end subroutine read_stokes
 
    subroutine read_initial(file, s, parts, stat, errmsg)
@@ -391,14 +398,25 @@ contains
       end if
    end subroutine get_int
 
-   !> Real scalar dataset within [lo, hi] (NaN is always out of range).
-   subroutine get_real(file, name, lo, hi, val, stat, errmsg)
+   !> Real scalar dataset within [lo, hi] (NaN is always out of range); with if_absent, an
+   !> optional one.
+   subroutine get_real(file, name, lo, hi, val, stat, errmsg, if_absent)
       integer(hid_t), intent(in) :: file
       character(len=*), intent(in) :: name
       real(dp), intent(in) :: lo, hi
       real(dp), intent(out) :: val
       integer, intent(out) :: stat
       character(len=msg_len), intent(out) :: errmsg
+      !> The value when the dataset is absent (a setting older run files lack)
+      real(dp), intent(in), optional :: if_absent
+      if (present(if_absent)) then
+         if (.not. h5_exists(file, name)) then
+            val = if_absent
+            stat = FOLD_OK
+            errmsg = ""
+            return
+         end if
+      end if
       call h5_read_real(file, name, val, stat, errmsg)
       if (stat /= FOLD_OK) return
       if (.not. (val >= lo .and. val <= hi)) then

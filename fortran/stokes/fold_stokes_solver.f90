@@ -36,6 +36,8 @@ module fold_stokes_solver
                             FOLD_LO_STOKES_DERIVATIVE, FOLD_HI_STOKES_DERIVATIVE, &
                             FOLD_LO_STOKES_MIXING, FOLD_HI_STOKES_MIXING, &
                             FOLD_LO_STOKES_FIBRE_ENDS, FOLD_HI_STOKES_FIBRE_ENDS, &
+                            FOLD_LO_STOKES_FIBRE_RADIUS_SCALE, FOLD_HI_STOKES_FIBRE_RADIUS_SCALE, &
+                            FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE, &
                             FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, &
                             FOLD_LO_STOKES_INITIAL_GUESS, FOLD_HI_STOKES_INITIAL_GUESS, &
                             FOLD_DEF_STOKES_KAPPA, FOLD_DEF_STOKES_TOLERANCE, FOLD_DEF_STOKES_MAX_ITERATIONS, &
@@ -84,6 +86,9 @@ module fold_stokes_solver
       integer(ip) :: subsamples = FOLD_DEF_STOKES_SUBSAMPLES
       !> Fibre ends for voxelisation (FOLD_ENDS_*)
       integer(ip) :: fibre_ends = FOLD_DEF_STOKES_FIBRE_ENDS
+      !> Radius of the voxelised fibre over its geometric radius: a hydrodynamic radius
+      !> calibrated to the grid (the contacts keep the geometric one) [-]
+      real(dp) :: fibre_radius_scale = FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE
       !> FFTW planning effort (fold_fft_transport FOLD_PLAN_ESTIMATE / FOLD_PLAN_MEASURE)
       integer :: plan_effort = FOLD_DEF_STOKES_FFT_PLAN
       !> Mixing rule of the viscosity in partially covered voxels (FOLD_MIX_*)
@@ -279,6 +284,10 @@ contains
             set%mixing
       else if (set%fibre_ends < FOLD_LO_STOKES_FIBRE_ENDS .or. set%fibre_ends > FOLD_HI_STOKES_FIBRE_ENDS) then
          write (errmsg, '(a,i0)') "stokes settings: fibre_ends must be 0 (flat) or 1 (capped), got ", set%fibre_ends
+      else if (.not. (set%fibre_radius_scale >= FOLD_LO_STOKES_FIBRE_RADIUS_SCALE .and. &
+                      set%fibre_radius_scale <= FOLD_HI_STOKES_FIBRE_RADIUS_SCALE)) then
+         write (errmsg, '(a,f4.2,a,f4.2,a,es10.3)') "stokes settings: fibre_radius_scale must be in [", &
+            FOLD_LO_STOKES_FIBRE_RADIUS_SCALE, ", ", FOLD_HI_STOKES_FIBRE_RADIUS_SCALE, "], got ", set%fibre_radius_scale
       else if (set%rigidity < FOLD_LO_STOKES_RIGIDITY .or. set%rigidity > FOLD_HI_STOKES_RIGIDITY) then
          write (errmsg, '(a,i0,a,i0,a,i0)') "stokes settings: rigidity must be ", FOLD_LO_STOKES_RIGIDITY, " ... ", &
             FOLD_HI_STOKES_RIGIDITY, " ("//code_legend(FOLD_RIGIDITY_NAME, int(FOLD_LO_STOKES_RIGIDITY, ip))// &

@@ -150,7 +150,7 @@ contains
       call ctx%solver%set_lattice(shear_lattice(cell%lengths, cell%shear_offset), stat, errmsg)
       if (stat /= FOLD_OK) return
       call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
-                    stat, errmsg, walls=cell%walls)
+                    stat, errmsg, walls=cell%walls, fibre_radius_scale=ctx%solver%set%fibre_radius_scale)
       if (stat /= FOLD_OK) return
       call ctx%solver%solve(ctx%vox%chi, cell%G, solve_stat, solve_msg)
       if (solve_stat /= FOLD_OK .and. solve_stat /= FOLD_NOT_CONVERGED) then

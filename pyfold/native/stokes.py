@@ -112,7 +112,8 @@ def stress_check(eta_eff: float, eta_f: float, voxels: int, kappa: float, tol: f
 #: (a view of the settings registry, which the scene schema reads too).
 DEFAULTS = {key: _registry.default(f"numerics.stokes.{key}")
             for key in ("backend", "tolerance", "max_iterations", "kappa", "derivative", "mixing", "subsamples",
-                        "fibre_ends", "warm_start", "initial_guess", "fft_plan", "fft_precision", "rigidity")}
+                        "fibre_ends", "fibre_radius_scale", "warm_start", "initial_guess", "fft_plan", "fft_precision",
+                        "rigidity")}
 
 
 @dataclass(frozen=True)
@@ -135,6 +136,8 @@ class StokesSettings:
         ``"geometric"``.
     subsamples : sub-samples per voxel edge for the partial-volume χ, 1..8.
     fibre_ends : ``"flat"`` cylinder (default) or ``"capped"`` (the contact capsule).
+    fibre_radius_scale : radius of the voxelised fibres over their geometric radius (a
+        hydrodynamic radius calibrated to the grid); spheres and spheroids keep theirs.
     warm_start : start CG from the previous step's solution (time marching only).
     guess : initial guess of a warm start: ``"previous"`` (the last solution) or
         ``"extrapolate"`` (2 x_n − x_(n−1) of the last two).
@@ -156,6 +159,7 @@ class StokesSettings:
     mixing: str = DEFAULTS["mixing"]
     subsamples: int = DEFAULTS["subsamples"]
     fibre_ends: str = DEFAULTS["fibre_ends"]
+    fibre_radius_scale: float = DEFAULTS["fibre_radius_scale"]
     warm_start: bool = DEFAULTS["warm_start"]
     guess: str = DEFAULTS["initial_guess"]
     measure_plans: bool = DEFAULTS["fft_plan"] == "measure"
@@ -167,7 +171,7 @@ class StokesSettings:
             raise InputError(f"eta_f: must be > 0, got {self.eta_f}")
         # the ranges of the scene's numerics.stokes keys (the registry's), under the bindings' names
         for key, path in (("kappa", "kappa"), ("tol", "tolerance"), ("max_iter", "max_iterations"),
-                          ("subsamples", "subsamples")):
+                          ("subsamples", "subsamples"), ("fibre_radius_scale", "fibre_radius_scale")):
             if not _registry.in_range(f"numerics.stokes.{path}", getattr(self, key)):
                 raise InputError(f"{key}: must be in {_registry.range_text(f'numerics.stokes.{path}')}, "
                                  f"got {getattr(self, key)}")
@@ -349,7 +353,7 @@ def solve_particles(particles: Particles, cell_lengths, grid, shear_rate: float 
         n[0], n[1], n[2], L, float(shear_offset), G, particles.shape, particles.radius, particles.length,
         particles.xi, np.asfortranarray(particles.x.T), np.asfortranarray(particles.p.T), c["eta_f"], c["kappa"],
         c["tol"], c["max_iter"], c["derivative"], c["mixing"], int(s.subsamples), FIBRE_ENDS[s.fibre_ends],
-        c["plan_effort"], c["rigidity"])
+        float(s.fibre_radius_scale), c["plan_effort"], c["rigidity"])
     checked(stat, msg)
     return FlowSolution(u=u, stress=stress, eta_eff=float(scal[1]), eta_dissipation=float(scal[2]),
                         iterations=int(it), residual=float(scal[0]), history=hist[: int(it) + 1].copy(), chi=chi,
@@ -377,7 +381,8 @@ def march(particles: Particles, cell_lengths, grid, dt: float, nsteps: int, shea
         n[0], n[1], n[2], int(nsteps), L, G, float(t0), float(dt), SCHEMES[scheme], particles.shape,
         particles.radius, particles.length, particles.xi, np.asfortranarray(particles.x.T),
         np.asfortranarray(particles.p.T), c["eta_f"], c["kappa"], c["tol"], c["max_iter"], c["derivative"],
-        c["mixing"], int(s.subsamples), FIBRE_ENDS[s.fibre_ends], GUESSES[s.guess] if s.warm_start else 0,
+        c["mixing"], int(s.subsamples), FIBRE_ENDS[s.fibre_ends], float(s.fibre_radius_scale),
+        GUESSES[s.guess] if s.warm_start else 0,
         c["plan_effort"], c["rigidity"])
     checked(stat, msg)
     return MarchResult(t=t0 + dt * np.arange(nsteps + 1), x=np.transpose(xh, (2, 1, 0)),

@@ -129,6 +129,10 @@ class Setting:
     file: bool = False
     #: regular expression a text matches
     pattern: str | None = None
+    #: a setting added after sweeps had named their runs: at its default it is left out of a run's
+    #: identity (pyfold.sweep.plan.run_id), so the runs named before it existed keep their names
+    #: (its default reproduces what those runs simulated)
+    identity_at_default: bool = True
 
     @property
     def key(self) -> str:
@@ -426,6 +430,12 @@ SETTINGS: tuple[Setting, ...] = (
             physics=_STOKES, resolved="stokes_fibre_ends", legend="fibre ends of the voxelisation: 0 flat, 1 capped",
             fortran="STOKES_FIBRE_ENDS", fortran_codes="FOLD_ENDS_",
             help='fibre ends of the voxelised particle: "flat" cylinder or "capped" (the contact capsule)'),
+    Setting("numerics.stokes.fibre_radius_scale", "real", 1.0, lo=0.5, hi=2.0, physics=_STOKES,
+            resolved="stokes_fibre_radius_scale", optional=True, identity_at_default=False,
+            legend="radius of the voxelised fibre over its geometric radius", fortran="STOKES_FIBRE_RADIUS_SCALE",
+            help="radius of the voxelised fibre (its hydrodynamic radius on the grid) over its geometric radius; "
+                 "contacts, volume fraction and the Jeffery shape factor keep the geometric one "
+                 "(docs/fluid_coupled_ci.md#a-hydrodynamic-radius-calibrated-to-the-grid)"),
     Setting("numerics.stokes.warm_start", "bool", True, physics=_STOKES, resolved="stokes_warm_start",
             legend="1: each CG solve starts from the previous solution, 0: from zero", fortran="STOKES_WARM_START",
             help="start each CG solve from the previous solution (see initial_guess) or from zero"),

@@ -235,6 +235,10 @@ class StokesSettings(_Table):
     subsamples: _registered("numerics.stokes.subsamples") = _default("numerics.stokes.subsamples")
     #: fibre ends of the voxelised particle: "flat" cylinder or "capped" (the contact capsule)
     fibre_ends: _registered("numerics.stokes.fibre_ends") = _default("numerics.stokes.fibre_ends")
+    #: radius of the voxelised fibre over its geometric radius (a hydrodynamic radius calibrated
+    #: to the grid, studies/interaction_coefficient/grid_fibre_shape.py); contacts, volume
+    #: fraction and the Jeffery shape factor keep the geometric radius [-]
+    fibre_radius_scale: _registered("numerics.stokes.fibre_radius_scale") = _default("numerics.stokes.fibre_radius_scale")
     #: start each CG solve from the previous solution (see initial_guess) or from zero
     warm_start: _registered("numerics.stokes.warm_start") = _default("numerics.stokes.warm_start")
     #: FFTW planning: "measure" (faster transforms, plans timed at start-up; repeated runs

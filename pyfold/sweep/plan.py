@@ -44,10 +44,22 @@ class PlannedRun:
 
 def run_id(resolved) -> str:
     """The identity of a run: SHA-256 (first :data:`ID_LENGTH` hex digits) of its normalised
-    scene (a :class:`pyfold.scene.ResolvedScene`) as canonical JSON, without :data:`COSMETIC_KEYS`."""
+    scene (a :class:`pyfold.scene.ResolvedScene`) as canonical JSON, without :data:`COSMETIC_KEYS`
+    and without the settings added later that are at their default (the registry's
+    ``identity_at_default = False``: a run named before such a setting existed keeps its name)."""
+    from pyfold.scene import registry
+
     data = resolved.scene.model_dump(mode="json", exclude_none=True)
     for key in COSMETIC_KEYS:
         data.pop(key, None)
+    for s in registry.SETTINGS:
+        if not s.identity_at_default:
+            *tables, name = s.path.split(".")
+            node = data
+            for t in tables:
+                node = node.get(t, {}) if isinstance(node, dict) else {}
+            if isinstance(node, dict) and name in node and node[name] == s.default:
+                del node[name]
     text = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=True)
     return hashlib.sha256(text.encode()).hexdigest()[:ID_LENGTH]
 

@@ -139,17 +139,17 @@ def run_folder(folder: Path, ranks: int, executor: str = "local", heartbeat: flo
     opened = store.open_attempt(folder, entry["host"], entry["pid"])
     pulse = _Heartbeat(opened, entry, cpu0, heartbeat)
     pulse.start()
-    if state.state == "queued":
-        # no donor, or another process made the run meanwhile: act on what is there now
-        state = _start_from_donor(folder, entry) or store.run_state(folder)
-        if state.state in ("done", "failed", "running"):
-            pulse.stop()
-            opened.unlink(missing_ok=True)  # no attempt of this worker's
-            print(f"pyfold sweep: {folder.name}: {state.state} by another process meanwhile, left as it is",
-                  file=sys.stderr if state.state != "done" else sys.stdout, flush=True)
-            return 0 if state.state == "done" else 1
-        pulse.beat()  # the donor it started from, at once
-    try:
+    attempted = True  # False: another process made the run meanwhile, no attempt of this worker's
+    try:  # from here on every exit, an exception in the donor step included, records the attempt
+        if state.state == "queued":
+            # no donor, or another process made the run meanwhile: act on what is there now
+            state = _start_from_donor(folder, entry) or store.run_state(folder)
+            if state.state in ("done", "failed", "running"):
+                attempted = False
+                print(f"pyfold sweep: {folder.name}: {state.state} by another process meanwhile, left as it is",
+                      file=sys.stderr if state.state != "done" else sys.stdout, flush=True)
+                return 0 if state.state == "done" else 1
+            pulse.beat()  # the donor it started from, at once
         if state.state == "interrupted":
             rc = cli_main(argv + ["--resume", "--force"])
             if rc == 2 and store.run_state(folder).state == "interrupted":
@@ -163,15 +163,24 @@ def run_folder(folder: Path, ranks: int, executor: str = "local", heartbeat: flo
             rc = cli_main(argv + ["--force"])
     finally:
         pulse.stop()
-        entry.update(end=time.time(), rc=rc, state=store.run_state(folder).state)
-        entry["wall_s"] = entry["end"] - start
-        entry["cpu_s"] = _cpu_seconds() - cpu0
-        try:
-            store.record_attempt(folder, entry)
+        if attempted:
+            _close_attempt(folder, entry, opened, rc, start, cpu0)
+        else:
             opened.unlink(missing_ok=True)
-        except OSError:  # pragma: no cover - the run's own result is what counts
-            pass
     return rc
+
+
+def _close_attempt(folder: Path, entry: dict, opened: Path, rc: int, start: float, cpu0: float) -> None:
+    """Record the finished attempt ``entry`` (end, exit status, state, wall and CPU time) in the run's
+    attempts log and remove its open file."""
+    entry.update(end=time.time(), rc=rc, state=store.run_state(folder).state)
+    entry["wall_s"] = entry["end"] - start
+    entry["cpu_s"] = _cpu_seconds() - cpu0
+    try:
+        store.record_attempt(folder, entry)
+        opened.unlink(missing_ok=True)
+    except OSError:  # pragma: no cover - the run's own result is what counts
+        pass
 
 
 def _start_from_donor(folder: Path, entry: dict) -> store.RunState | None:

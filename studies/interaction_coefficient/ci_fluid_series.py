@@ -168,10 +168,10 @@ def grid_of(path: Path) -> list[int]:
     return [int(g) for g in np.ravel(read_setup(path).resolved["stokes_grid"])]
 
 
-def beta_e_on(grid: list[int], side: float, cache: Path, beta: float = BETA) -> float:
+def beta_e_on(grid: list[int], side: float, cache: Path, beta: float = BETA, fibre_radius_scale: float = 1.0) -> float:
     """β_e of one fibre on ``grid`` in the cell ``side`` at the series' κ and tolerance: the orbit
     period of ci_hydrodynamics.py's single-fibre check (the solver's ω(θ) at fixed orientations),
-    cached in ``cache``."""
+    with its voxelised radius ``fibre_radius_scale`` times the geometric one; cached in ``cache``."""
     import dataclasses
 
     sys.path.insert(0, str(ROOT / "studies" / "interaction_coefficient"))
@@ -179,7 +179,7 @@ def beta_e_on(grid: list[int], side: float, cache: Path, beta: float = BETA) -> 
 
     study = dataclasses.replace(ch.SMALL, beta=beta, tolerance=STOKES["tolerance"], kappa=STOKES["kappa"],
                                 check_refinements=(1,), max_grid_points=max(ch.SMALL.max_grid_points, math.prod(grid)))
-    ds = ch.single_fibre_check(study, grid, side, cache)
+    ds = ch.single_fibre_check(study, grid, side, cache, fibre_radius_scale)
     return float(ds["beta_e_measured"].sel(shape="fibre").values[0])
 
 

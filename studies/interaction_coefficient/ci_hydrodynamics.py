@@ -227,22 +227,27 @@ def analyse_run(path: Path) -> dict:
     return out
 
 
-def single_fibre_check(study: Study, grid: list[int], side: float, cache: Path) -> xr.Dataset:
+def single_fibre_check(study: Study, grid: list[int], side: float, cache: Path,
+                       fibre_radius_scale: float = 1.0) -> xr.Dataset:
     """Orbit period of one fibre and one beta spheroid on the study's cell and grid (and refined).
 
     T = int_0^{2 pi} dtheta / |omega(theta)| from the solver's omega at fixed orientations in
     the flow-gradient plane (Stokes flow has no memory); a cylinder's measured beta_e solves
-    T gamma_dot / (2 pi) = beta_e + 1/beta_e. Cached in ``cache`` (keyed by its settings).
+    T gamma_dot / (2 pi) = beta_e + 1/beta_e. ``fibre_radius_scale``: the voxelised fibre's
+    radius over its geometric one (numerics.stokes.fibre_radius_scale). Cached in ``cache``
+    (keyed by its settings).
     """
     from pyfold.native.stokes import Particles, StokesSettings, solve_particles
 
     key = {"beta": study.beta, "side": side, "grid": grid, "refinements": list(study.check_refinements),
            "ntheta": CHECK_ORIENTATIONS, "tol": study.tolerance, "kappa": study.kappa}
+    if fibre_radius_scale != 1.0:  # absent at 1: the caches written before the setting existed stay valid
+        key["fibre_radius_scale"] = fibre_radius_scale
     if cache.exists():
         ds = xr.open_dataset(cache, engine="h5netcdf").load()
         if json.loads(ds.attrs["key"]) == key:
             return ds
-    settings = StokesSettings(kappa=study.kappa, tol=study.tolerance)
+    settings = StokesSettings(kappa=study.kappa, tol=study.tolerance, fibre_radius_scale=fibre_radius_scale)
     thetas = np.pi * np.arange(CHECK_ORIENTATIONS) / CHECK_ORIENTATIONS
     radius, length = 0.5 / study.beta, 1.0
     shapes = ("fibre", "spheroid")

@@ -6,7 +6,9 @@ Question
     is refined to 4 and 5 voxels per diameter, by how much against its statistical error,
     with what observed order, and what does a Richardson extrapolation give? Does
     subtracting the Jeffery term with the rotation rate the solver gives one fibre on each
-    grid (its measured β_e) instead of Cox's β_e take out the grid dependence?
+    grid (its measured β_e) instead of Cox's β_e take out the grid dependence? And
+    (``--calibrated``) does voxelising each grid's fibres at the radius that makes one of them
+    turn like the converged cylinder (numerics.stokes.fibre_radius_scale) take it out?
 
 Method
     The semi-dilute scene of ci_fluid_series.py (β = 5, n L³ = 4.98, 98 fibres, cell 2.7 L,
@@ -27,9 +29,18 @@ Method
     3-voxel value, C₃ − C∞, paired over the seeds: ci_fluid_series.py takes that bias
     (|mean| and its s.e. in quadrature) as the resolution error of its 3-voxel C_I, the
     closure-free one for its rate regressions and the IBOF one for its trajectory fits.
+    ``--calibrated``: the same runs (studies/sweeps/ci_resolution_calibrated.toml: same scene,
+    grids and seeds, hence the same initial states) with the fibres voxelised at s R, s of each
+    grid the one at which the single-fibre check gives Zhang et al. (2011)'s β_e = 4.112, the
+    converged cylinder's (docs/jeffery_orbits.md), within CALIBRATION_TOLERANCE; the study
+    measures β_e at the sweep file's scales before it runs and stops if one misses.
+    ``--calibrate`` finds the scales (:func:`calibrate_scale`: secant on β_e(s) from s = 1, 1.1)
+    and prints the sweep file's [[points]].
 
 Command
     .venv/bin/python studies/interaction_coefficient/ci_resolution.py [--executor slurm] [--seeds 1 2]
+    .venv/bin/python studies/interaction_coefficient/ci_resolution.py --calibrated
+    .venv/bin/python studies/interaction_coefficient/ci_resolution.py --calibrate   # the scales only
     (two serial runs at a time; finished runs are re-used; --analyse-only analyses what is there)
 
 Cost (2 cores)
@@ -38,7 +49,8 @@ Cost (2 cores)
     single-fibre checks 76 CPU-s; the analysis about 2 CPU-min. The CPU time of every run
     is in the outputs.
 
-Outputs (under out/interaction_coefficient/resolution/, ``--out``)
+Outputs (under out/interaction_coefficient/resolution/ or, with --calibrated,
+out/interaction_coefficient/resolution_calibrated/ [calibration/: its single-fibre checks]; ``--out``)
     sweep/                  the runs (pyfold sweep folder)
     ci_resolution.nc        per grid and seed: C_I by both estimators, with Cox's and the grid's ξ, CPU s
     ci_resolution.md        per grid: ensemble C_I, paired change against the finest grid, order, Richardson
@@ -69,13 +81,55 @@ XI = ("cox", "grid")  # the Jeffery term with Cox's beta_e / with the grid fibre
 #: Order assumed when none is observed: the fictitious domain's surface error is first order in h
 #: (the smallest plausible order, so the largest extrapolation)
 ASSUMED_ORDER = 1.0
+#: Relative mismatch of β_e at which a calibrated radius is accepted: below the single-fibre
+#: check's own quadrature error (~0.3 % on the period at 24 orientations, ci_hydrodynamics.py)
+#: doubled, since dβ_e/β_e ≈ dT/T · β_e²/(β_e² − 1) (docs/jeffery_orbits.md)
+CALIBRATION_TOLERANCE = 0.006
 
 
-def scene_of(cells_per_diameter: int, seed: int, t_end: float):
-    """The sweep's builder: the series' semi-dilute Stokes scene at ``cells_per_diameter``."""
+def scene_of(cells_per_diameter: int, seed: int, t_end: float, fibre_radius_scale: float = 1.0):
+    """The sweep's builder: the series' semi-dilute Stokes scene at ``cells_per_diameter``, its
+    fibres voxelised with ``fibre_radius_scale`` times their radius."""
     stokes = {**series.STOKES, "cells_per_diameter": int(cells_per_diameter), "max_grid_points": 1_000_000}
+    if fibre_radius_scale != 1.0:  # only then: the scenes (and run ids) of the geometric sweep stay as they were
+        stokes["fibre_radius_scale"] = float(fibre_radius_scale)
     return sheared_fibres(series.BETA, N_L3, seed, t_end, alpha_over_d=series.ALPHA_OVER_D, hydrodynamics="stokes",
                           stokes=stokes, time_scheme="ab2")
+
+
+def calibrate_scale(grid: list[int], side: float, target: float, cache: Path, beta: float = series.BETA,
+                    tolerance: float = CALIBRATION_TOLERANCE, max_checks: int = 6) -> tuple[float, float, list]:
+    """The fibre radius scale s (numerics.stokes.fibre_radius_scale) at which one fibre on ``grid``
+    turns like a fibre of β_e = ``target``: secant iteration on the measured β_e(s) (the
+    single-fibre check, :func:`ci_fluid_series.beta_e_on`; β_e falls as s grows) from s = 1 and
+    1.1, until |β_e(s) − target| ≤ ``tolerance`` · target. Returns (s, β_e(s), [(s, β_e), ...]);
+    s is rounded to 3 decimals and measured there, so the returned β_e is that of the scale a
+    scene would use. Raises SystemExit naming the grid when ``max_checks`` checks do not reach it."""
+    from pyfold.scene import registry
+
+    bounds = registry.setting("numerics.stokes.fibre_radius_scale")
+    cache.mkdir(parents=True, exist_ok=True)
+
+    def measure(scale: float) -> float:
+        return series.beta_e_on(grid, side, cache / f"single_fibre_{grid[0]}_s{scale:.3f}.nc", beta, scale)
+
+    pts = [(1.0, measure(1.0)), (1.1, measure(1.1))]
+    while abs(pts[-1][1] - target) > tolerance * target:
+        if len(pts) >= max_checks:
+            raise SystemExit(f"calibrate_scale: grid {grid[0]}^3: beta_e {pts[-1][1]:.4f} at s = {pts[-1][0]:.3f} "
+                             f"after {len(pts)} checks, target {target:.4f}; checks: {pts}")
+        (s0, b0), (s1, b1) = pts[-2], pts[-1]
+        if b1 == b0:
+            raise SystemExit(f"calibrate_scale: grid {grid[0]}^3: beta_e does not change between s = {s0} and {s1}")
+        s_new = round(min(max(s1 + (target - b1) * (s1 - s0) / (b1 - b0), bounds.lo), bounds.hi), 3)
+        if any(abs(s_new - s) < 5e-4 for s, _ in pts):
+            break
+        pts.append((s_new, measure(s_new)))
+    best = min(pts, key=lambda q: abs(q[1] - target))
+    if abs(best[1] - target) > tolerance * target:  # the iteration stalled at a bound of the scale's range
+        raise SystemExit(f"calibrate_scale: grid {grid[0]}^3: no scale in [{bounds.lo:g}, {bounds.hi:g}] gives beta_e {target:.4f}; "
+                         f"checks: {pts}")
+    return best[0], best[1], pts
 
 
 def cox_xi(path: Path) -> float:
@@ -129,7 +183,9 @@ def observed_order(c: list[float], h: list[float]) -> float:
         return math.nan
 
 
-def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
+def analyse(done: dict, seeds: tuple[int, ...], out: Path, scales: dict[int, float] | None = None) -> str:
+    """Tables, Richardson estimates, NetCDF and figure of the finished runs ``done`` ({(cells per
+    diameter, seed): run file}); ``scales``: the fibre radius scale of each grid (default 1)."""
     import xarray as xr
 
     from pyfold.ensemble import ensemble_mean, paired_difference
@@ -142,7 +198,9 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
     side = scene_of(cpds[0], have[0], 1.0).side
     grids = {c: series.grid_of(done[c, have[0]]) for c in cpds}
     h = {c: side / grids[c][0] / (1.0 / series.BETA) for c in cpds}  # voxel size / diameter
-    beta_e = {c: series.beta_e_on(grids[c], side, out / f"single_fibre_check_{grids[c][0]}.nc") for c in cpds}
+    scales = {c: (scales or {}).get(c, 1.0) for c in cpds}
+    beta_e = {c: series.beta_e_on(grids[c], side, out / f"single_fibre_check_{grids[c][0]}.nc",
+                                  fibre_radius_scale=scales[c]) for c in cpds}
     rows = {}
     for c in cpds:
         for s in have:
@@ -150,9 +208,11 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
             rows[c, s] = analyse_run(done[c, s], xis)
             print(f"cells_per_diameter {c}, seed {s}: analysed", flush=True)
     fine = cpds[-1]
-    lines = ["# Fluid-coupled C_I against the Stokes grid (β = 5, n L³ = 4.98, strain 20)", "",
-             "| cells/d | grid | h/d | β_e of one fibre | CPU s/run | estimator | ξ | C_I ± stat. | "
-             "change vs finest ± s.e. | change / stat. |", "|---|---|---|---|---|---|---|---|---|---|"]
+    calibrated = any(v != 1.0 for v in scales.values())
+    lines = ["# Fluid-coupled C_I against the Stokes grid (β = 5, n L³ = 4.98, strain 20"
+             + (", fibres voxelised at the calibrated radius)" if calibrated else ")"), "",
+             "| cells/d | grid | h/d | radius scale | β_e of one fibre | CPU s/run | estimator | ξ | C_I ± stat. | "
+             "change vs finest ± s.e. | change / stat. |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     data = {}
     richardson = []
     summary: dict[str, dict] = {}
@@ -166,11 +226,10 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
                 d = paired_difference(vals, [rows[fine, s][est, xi][0] for s in have])
                 means.append(e.mean)
                 cpu = float(np.mean([rows[c, s]["cpu_s"] for s in have]))
-                lines.append(f"| {c} | {grids[c][0]}³ | {h[c]:.3f} | {beta_e[c]:.3f} | {cpu:.0f} | {est} | {xi} | "
-                             f"{e.mean:+.2e} ± {e.error:.1e} | {d.mean:+.2e} ± {d.stderr:.1e} | "
-                             f"{abs(d.mean) / e.error:.2f} |" if c != fine else
-                             f"| {c} | {grids[c][0]}³ | {h[c]:.3f} | {beta_e[c]:.3f} | {cpu:.0f} | {est} | {xi} | "
-                             f"{e.mean:+.2e} ± {e.error:.1e} | (finest) | |")
+                head = f"| {c} | {grids[c][0]}³ | {h[c]:.3f} | {scales[c]:.3f} | {beta_e[c]:.3f} | {cpu:.0f} | {est} | {xi} | "
+                lines.append(head + (f"{e.mean:+.2e} ± {e.error:.1e} | {d.mean:+.2e} ± {d.stderr:.1e} | "
+                                     f"{abs(d.mean) / e.error:.2f} |" if c != fine else
+                                     f"{e.mean:+.2e} ± {e.error:.1e} | (finest) | |"))
                 data[est, xi, c] = (vals, errs, e.mean, e.error)
             # Richardson per seed (the grids of a seed share the initial state): C_inf_s from the two
             # finest grids, and the bias of the coarsest grid's value C_coarse_s - C_inf_s, paired
@@ -208,7 +267,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path) -> str:
          for est in ESTIMATORS for xi in XI},
         coords={"cells_per_diameter": cpds, "seed": list(have),
                 "h_over_d": ("cells_per_diameter", [h[c] for c in cpds]),
-                "beta_e_grid": ("cells_per_diameter", [beta_e[c] for c in cpds])})
+                "beta_e_grid": ("cells_per_diameter", [beta_e[c] for c in cpds]),
+                "fibre_radius_scale": ("cells_per_diameter", [scales[c] for c in cpds])})
     for est in ESTIMATORS:
         for xi in XI:
             ds[f"ci_{est}_{xi}_stderr"] = (("cells_per_diameter", "seed"), [data[est, xi, c][1] for c in cpds])
@@ -248,16 +308,71 @@ def main() -> None:
     ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
     ap.add_argument("--np", type=int, default=None, help="MPI ranks per run (default: the sweep file's, 1)")
     ap.add_argument("--seeds", type=int, nargs="+", help="override the sweep's seeds")
-    ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/resolution"))
+    ap.add_argument("--calibrated", action="store_true",
+                    help="the runs of studies/sweeps/ci_resolution_calibrated.toml: each grid's fibres voxelised "
+                         "at the radius calibrated to the converged cylinder's β_e (default --out: "
+                         "out/interaction_coefficient/resolution_calibrated)")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="measure the calibrated radius scale of each grid of the calibrated sweep, print the "
+                         "[[points]] of its sweep file, run nothing else")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="output folder (default out/interaction_coefficient/resolution[_calibrated])")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
-    spec = sweep_study.load_form(SWEEPS, "ci_resolution", False, seeds=tuple(args.seeds) if args.seeds else None)
+    calibrated = args.calibrated or args.calibrate
+    out = args.out or Path("out/interaction_coefficient/" + ("resolution_calibrated" if calibrated else "resolution"))
+    name = "ci_resolution_calibrated" if calibrated else "ci_resolution"
+    spec = sweep_study.load_form(SWEEPS, name, False, seeds=tuple(args.seeds) if args.seeds else None)
     start = time.perf_counter()
-    done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor, args.np,
+    scales = {}
+    if calibrated:
+        scales = check_calibration(spec, out / "calibration", recalibrate=args.calibrate)
+        if args.calibrate:
+            return
+    done = sweep_study.run_sweep(spec, args.sweep_dir or out / "sweep", args.executor, args.np,
                                  analyse_only=args.analyse_only)
     keyed = {(int(values[0]), seed): p for (values, seed), p in done.items()}
-    print(analyse(keyed, tuple(spec.seeds), args.out))
-    print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
+    print(analyse(keyed, tuple(spec.seeds), out, scales))
+    print(f"written: {out} ({time.perf_counter() - start:.0f} s)")
+
+
+def calibration_target() -> float:
+    """β_e the calibrated fibres turn with: the converged flat-ended cylinder's, which the solver's
+    converged cylinder follows (Zhang et al. 2011's rule, docs/jeffery_orbits.md)."""
+    from pyfold.kinematics import equivalent_aspect_ratio
+
+    return float(equivalent_aspect_ratio(series.BETA, "zhang"))
+
+
+def check_calibration(spec, cache: Path, recalibrate: bool = False) -> dict[int, float]:
+    """The fibre radius scale of each point of the calibrated sweep ``spec``, checked: one fibre at
+    that scale on the point's grid turns with β_e within CALIBRATION_TOLERANCE of
+    :func:`calibration_target` (SystemExit naming the grid otherwise). ``recalibrate``: measure each
+    grid's scale anew (:func:`calibrate_scale`) and print the sweep file's [[points]] instead."""
+    from pyfold.scene import parse_scene
+
+    target = calibration_target()
+    scales = {}
+    for point in spec.points:
+        c, s = int(point["cells_per_diameter"]), float(point["fibre_radius_scale"])
+        probe = scene_of(c, spec.seeds[0], 1.0, s)
+        grid, side = [int(g) for g in parse_scene(probe.toml).stokes_grid], probe.side
+        if recalibrate:
+            s_new, be, pts = calibrate_scale(grid, side, target, cache)
+            print(f"[[points]]\ncells_per_diameter = {c}         # {grid[0]}^3: beta_e {be:.3f} at this scale "
+                  f"(target {target:.3f}; checks {', '.join(f'{a:.3f}: {b:.3f}' for a, b in pts)})\n"
+                  f"fibre_radius_scale = {s_new:.3f}\n")
+            scales[c] = s_new
+            continue
+        be = series.beta_e_on(grid, side, cache / f"single_fibre_{grid[0]}_s{s:.3f}.nc", series.BETA, s)
+        if abs(be - target) > CALIBRATION_TOLERANCE * target:
+            raise SystemExit(f"fibre_radius_scale = {s:.3f} of cells_per_diameter = {c} ({grid[0]}^3): one fibre "
+                             f"turns with beta_e {be:.4f} on this machine, target {target:.4f} (allowed "
+                             f"± {CALIBRATION_TOLERANCE:.1%}); recalibrate with --calibrate")
+        print(f"calibrated radius, {grid[0]}^3: scale {s:.3f}, beta_e {be:.4f} (target {target:.4f})", flush=True)
+        scales[c] = s
+    return scales
+
 
 
 if __name__ == "__main__":

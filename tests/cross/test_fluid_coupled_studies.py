@@ -21,6 +21,7 @@ resolution = import_study("interaction_coefficient", "ci_resolution")
 
 @pytest.mark.parametrize("name, builder", [("ci_fluid_series", series.scene_of),
                                            ("ci_resolution", resolution.scene_of),
+                                           ("ci_resolution_calibrated", resolution.scene_of),
                                            ("steady_state_strain", series.scene_of)])
 def test_every_point_of_the_sweeps_is_a_valid_scene_of_the_intended_model(name, builder):
     spec = load_form(STUDIES / "sweeps", name, False)
@@ -32,6 +33,40 @@ def test_every_point_of_the_sweeps_is_a_valid_scene_of_the_intended_model(name, 
             st = checked.scene.numerics.stokes
             assert (st.tolerance, st.solve_every, st.kappa) == (1e-3, 4, 1e3)
         assert scene.side == pytest.approx(2.7) and abs(scene.n_l3 - point.get("n_l3", 5.0)) < 0.05
+
+
+def test_the_calibrated_resolution_runs_are_the_resolution_runs_with_a_fatter_voxelised_fibre():
+    """ci_resolution_calibrated.toml: the grids and seeds of ci_resolution.toml (so the same initial
+    states), each with a radius scale above 1 that shrinks as the grid is refined, written to the
+    run file as stokes_fibre_radius_scale."""
+    plain, cal = (load_form(STUDIES / "sweeps", n, False) for n in ("ci_resolution", "ci_resolution_calibrated"))
+    assert cal.seeds == plain.seeds and cal.arguments == plain.arguments
+    assert [p["cells_per_diameter"] for p in cal.points] == list(plain.axes["cells_per_diameter"])
+    scales = [p["fibre_radius_scale"] for p in cal.points]
+    assert all(a > b > 1.0 for a, b in zip(scales, scales[1:]))
+    for point in cal.points:
+        checked = parse_scene(resolution.scene_of(**point, seed=1, **cal.arguments).toml)
+        assert checked.resolved_datasets()["stokes_fibre_radius_scale"][0] == point["fibre_radius_scale"]
+
+
+def test_calibrate_scale_finds_the_scale_of_the_target_and_refuses_a_target_out_of_reach(monkeypatch, tmp_path):
+    """The secant iteration on a smooth falling β_e(s) (a stand-in for the single-fibre check,
+    β_e = 4.7 s^-1.2) reaches the target within the tolerance, and returns the measured scale
+    rounded to the 3 decimals a sweep file holds; a target no scale in [0.5, 2] reaches stops
+    with the grid named."""
+    calls = []
+
+    def fake(grid, side, cache, beta, scale):
+        calls.append(scale)
+        return 4.7 * scale ** -1.2
+
+    monkeypatch.setattr(resolution.series, "beta_e_on", fake)
+    s, be, pts = resolution.calibrate_scale([42] * 3, 2.7, 4.112, tmp_path)
+    assert abs(be - 4.112) <= resolution.CALIBRATION_TOLERANCE * 4.112
+    assert s == round(s, 3) and abs(s - (4.7 / 4.112) ** (1 / 1.2)) < 0.01
+    assert pts[:2] == [(1.0, fake([], 0, 0, 0, 1.0)), (1.1, fake([], 0, 0, 0, 1.1))]
+    with pytest.raises(SystemExit, match="grid 42"):
+        resolution.calibrate_scale([42] * 3, 2.7, 0.5, tmp_path)
 
 
 def test_the_beta10_series_is_the_beta5_series_at_twice_the_aspect_ratio():

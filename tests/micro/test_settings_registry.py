@@ -109,6 +109,8 @@ BOUNDS = [
     ("subsamples", "stokes_subsamples", registry.setting("numerics.stokes.subsamples").lo),
     ("subsamples", "stokes_subsamples", registry.setting("numerics.stokes.subsamples").hi),
     ("solve_every", "stokes_solve_every", registry.setting("numerics.stokes.solve_every").hi),
+    ("fibre_radius_scale", "stokes_fibre_radius_scale", registry.setting("numerics.stokes.fibre_radius_scale").lo),
+    ("fibre_radius_scale", "stokes_fibre_radius_scale", registry.setting("numerics.stokes.fibre_radius_scale").hi),
 ]
 
 

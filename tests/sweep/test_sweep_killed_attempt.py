@@ -157,3 +157,21 @@ def test_open_attempts_stale_fresh_and_closed(tmp_path):
     assert [a["pid"] for a in store.attempts(folder, now=now)] == [1, 2, 3]
     assert donors.extended_from(folder) == donor
     assert donors.describe(folder, "interrupted") == f" (extended from abc at t = 2)"
+
+
+def test_an_error_in_the_donor_step_is_recorded_as_an_attempt(tmp_path, monkeypatch):
+    """An exception while a queued run is started from its donor propagates, and the attempt is
+    closed with exit status 1: its line is written and no open file is left behind to be taken
+    for a killed attempt."""
+    folder = _one_run(tmp_path)
+
+    def broken(folder, entry):
+        raise RuntimeError("donor copy failed")
+
+    monkeypatch.setattr(worker, "_start_from_donor", broken)
+    with pytest.raises(RuntimeError, match="donor copy failed"):
+        worker.run_folder(folder, 1, heartbeat=HEARTBEAT)
+    assert not list(folder.glob("attempt.*.open.json"))
+    lines = [json.loads(x) for x in (folder / store.ATTEMPTS).read_text().splitlines()]
+    assert len(lines) == 1 and lines[0]["rc"] == 1 and lines[0]["from"] == "queued"
+    assert [a["state"] for a in store.attempts(folder)] == [lines[0]["state"]]

@@ -147,3 +147,25 @@ def test_same_sweep_narrowed_takes_the_folder_over(tmp_path):
     assert [r["id"] for r in data["runs"]] == [r.run_id for r in runs if r.seed == 1]
     assert store.read_manifest(tmp_path / "out")["seeds"] == [1]
     assert len(list((tmp_path / "out" / "runs").iterdir())) == 4  # the other runs' folders stay
+
+
+#: The names of the example sweep's runs (data/sweeps/example.toml), fixed when it was written: a
+#: setting added to the scene schema later must leave them as they are (the registry's
+#: ``identity_at_default = False``), or every sweep folder made before it would start afresh.
+EXAMPLE_IDS = ["6af34cd3a8a47f85", "515500aaa3e461b6", "3a72d51ceaff1714", "fed7639bf2f1876d"]
+
+
+def test_runs_named_before_a_later_setting_keep_their_names_and_the_setting_counts_when_set(tmp_path):
+    assert [r.run_id for r in plan(read_sweep(EXAMPLE))] == EXAMPLE_IDS
+    text = EXAMPLE_SCENE.read_text()
+    assert "[numerics.stokes]" not in text
+
+    def ids(extra: str) -> list[str]:
+        scene = tmp_path / "scene.toml"
+        scene.write_text(text + extra)
+        sweep = write_sweep(tmp_path / "s.toml", f'[sweep]\nscene = "{scene}"\nseeds = [1, 2]\n[axes]\n'
+                                                 f'"particles[0].count" = [24, 48]\n')
+        return [r.run_id for r in plan(read_sweep(sweep))]
+
+    assert ids("\n[numerics.stokes]\nfibre_radius_scale = 1.0\n") == EXAMPLE_IDS
+    assert set(ids("\n[numerics.stokes]\nfibre_radius_scale = 1.2\n")).isdisjoint(EXAMPLE_IDS)
