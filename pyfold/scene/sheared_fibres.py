@@ -62,9 +62,11 @@ def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_o
                    interval: float = 0.2, min_side: float = 2.2, collisions: str = "strategy",
                    dt: float | None = None, title: str | None = None, hydrodynamics: str = "jeffery",
                    stokes: Mapping[str, int | float | str] | None = None,
-                   time_scheme: str | None = None) -> ShearedFibres:
+                   time_scheme: str | None = None, equivalent_aspect_ratio: str | None = None) -> ShearedFibres:
     """Build the scene (see the module docstring). ``collisions = "none"`` gives the no-contact twin,
-    ``hydrodynamics = "stokes"`` the fluid-coupled twin (``stokes``: its ``[numerics.stokes]`` keys)."""
+    ``hydrodynamics = "stokes"`` the fluid-coupled twin (``stokes``: its ``[numerics.stokes]`` keys);
+    ``equivalent_aspect_ratio``: the rule of the fibres' Jeffery β_e (particles.equivalent_aspect_ratio;
+    None: the scene default)."""
     if not beta >= 1.0:
         raise InputError(f"beta: must be >= 1, got {beta}")
     if not n_l3 > 0.0:
@@ -97,7 +99,7 @@ def sheared_fibres(beta: float, n_l3: float, seed: int, t_end: float, *, alpha_o
                                t_end=t_end, seed=int(seed), interval=interval, snapshot_interval=t_end,
                                hydrodynamics=hydrodynamics, collisions=collisions, alpha=alpha,
                                stokes=(stokes or {}) if hydrodynamics == "stokes" else None,
-                               time_scheme=time_scheme)
+                               time_scheme=time_scheme, equivalent_aspect_ratio=equivalent_aspect_ratio)
     return ShearedFibres(toml=toml, beta=float(beta), n_l3=count / side ** 3, count=count, side=side,
                          alpha=alpha, dt=step, t_end=t_end, seed=int(seed), hydrodynamics=hydrodynamics)
 
@@ -107,7 +109,7 @@ def sheared_fibres_toml(*, title: str, side: float, count: int, radius: float, d
                         snapshot_interval: float | None = None, checkpoint_interval: float | None = None,
                         hydrodynamics: str | None = None, collisions: str | None = None,
                         alpha: float | None = None, stokes: Mapping[str, int | float | str] | None = None,
-                        time_scheme: str | None = None) -> str:
+                        time_scheme: str | None = None, equivalent_aspect_ratio: str | None = None) -> str:
     """The scene text of ``count`` fibres (``length``, ``radius``) in a cubic cell of ``side``
     in simple shear at rate 1, as given (no sizing: :func:`sheared_fibres` sizes it from beta
     and n L^3). Keys given as ``None`` are left out (the scene defaults apply); ``stokes``
@@ -137,7 +139,7 @@ length = {length!r}
 radius = {radius!r}
 count = {count}
 orientation = "isotropic"
-
+{_toml_keys(equivalent_aspect_ratio=equivalent_aspect_ratio)}
 [model]
 {model}
 [numerics]

@@ -42,6 +42,11 @@ Method
     applied to every concentration). The total error is the four in quadrature. At β = 10 the
     settings error is the β = 5 regime's (not measured at β = 10) and the resolution error is not
     measured: its column is NaN, ``resolution_in_total`` = 0 and the total leaves it out.
+    ``--beta 10 --calibrated`` (ci_fluid_series_beta10_calibrated.toml): the same scenes and
+    seeds, the Stokes runs' fibres voxelised at 1.212 times their radius (one fibre on 72³ then
+    turns with β_e 7.63, the converged cylinder's, ci_resolution.py's calibrate_scale) and both
+    models recording Zhang's β_e, so every fit uses the ξ of the fibres simulated; the shape
+    column is then the calibration's residual (the grid fibre's measured β_e at that scale).
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
     run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
     its drift reported).
@@ -51,6 +56,7 @@ Command
         [--write-data]     # also write data/ci_fluid_coupled.{nc,csv} (the shipped table)
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10   # the β = 10 sweep
         (analysed once a concentration has two finished pairs of runs; no --write-data)
+    .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10 --calibrated
     (the sweep runs two serial simulations at a time; finished runs are re-used, a killed one
     is resumed from its checkpoint; --analyse-only analyses what is there)
 
@@ -62,7 +68,8 @@ Cost (2 cores)
     β = 10: about 33 CPU-s per unit strain per Stokes run at φβ = 0.5 (7 000 CPU-s per run,
     ~7 CPU-hours per point of 4 seeds; docs/fluid_coupled_ci.md#cost), contacts-only twins ~1 CPU-min.
 
-Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/; ``--out``)
+Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/ [_calibrated/];
+``--out``)
     sweep/                        the runs (pyfold sweep folder)
     nl3_<n>/stokes/, .../jeffery/ the report of each ensemble (pyfold report's files)
     ci_fluid_series.nc, .csv      the table (one row per n L³, model, closure and estimator)
@@ -102,14 +109,20 @@ DATA = ROOT / "data" / "ci_fluid_coupled"
 
 
 def scene_of(n_l3: float, model: str, seed: int, t_end: float, beta: float = BETA,
-             max_grid_points: int | None = None):
+             max_grid_points: int | None = None, fibre_radius_scale: float = 1.0,
+             equivalent_aspect_ratio: str | None = None):
     """The sweep's builder: ``beta`` fibres at ``n_l3``, ``model`` "stokes" or "jeffery", seed ``seed``
-    (``max_grid_points``: the Stokes grid bound, for the finer grids of slender fibres)."""
+    (``max_grid_points``: the Stokes grid bound, for the finer grids of slender fibres;
+    ``fibre_radius_scale``: the Stokes runs' voxelised radius over the geometric one;
+    ``equivalent_aspect_ratio``: the rule of the Jeffery β_e both models record, None the default)."""
     if model == "jeffery":
-        return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D)
+        return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D,
+                              equivalent_aspect_ratio=equivalent_aspect_ratio)
     stokes = STOKES if max_grid_points is None else {**STOKES, "max_grid_points": int(max_grid_points)}
+    if fibre_radius_scale != 1.0:
+        stokes = {**stokes, "fibre_radius_scale": float(fibre_radius_scale)}
     return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D, hydrodynamics="stokes",
-                          stokes=stokes, time_scheme="ab2")
+                          stokes=stokes, time_scheme="ab2", equivalent_aspect_ratio=equivalent_aspect_ratio)
 
 
 def settings_errors(n_l3: float, beta: float = BETA) -> tuple[float, float]:
@@ -184,10 +197,14 @@ def beta_e_on(grid: list[int], side: float, cache: Path, beta: float = BETA, fib
 
 
 def grid_xi(out: Path, run: Path, beta: float = BETA) -> tuple[float, float]:
-    """(β_e, xi) of one fibre on the grid of the Stokes run ``run`` (:func:`beta_e_on`)."""
+    """(β_e, xi) of one fibre on the grid of the Stokes run ``run``, voxelised at the run's fibre
+    radius scale (:func:`beta_e_on`)."""
     from pyfold.kinematics import aspect_ratio_to_xi
+    from pyfold.run_input import read_setup
 
-    beta_e = beta_e_on(grid_of(run), scene_of(5.0, "stokes", 1, 1.0, beta).side, out / "single_fibre_check.nc", beta)
+    scale = float(np.ravel(read_setup(run).resolved.get("stokes_fibre_radius_scale", 1.0))[0])
+    cache = out / ("single_fibre_check.nc" if scale == 1.0 else f"single_fibre_check_s{scale:.3f}.nc")
+    beta_e = beta_e_on(grid_of(run), scene_of(5.0, "stokes", 1, 1.0, beta).side, cache, beta, scale)
     return beta_e, float(aspect_ratio_to_xi(beta_e))
 
 
@@ -445,9 +462,13 @@ def main() -> None:
     ap.add_argument("--write-data", action="store_true", help="also write the shipped table data/ci_fluid_coupled.*")
     ap.add_argument("--beta", type=float, default=BETA, choices=sorted(SERIES),
                     help="fibre aspect ratio: the sweep of that beta (SERIES)")
+    ap.add_argument("--calibrated", action="store_true",
+                    help="the series with the Stokes runs' fibres voxelised at the radius calibrated to the "
+                         "converged cylinder, both models recording Zhang's beta_e (SERIES[beta]_calibrated.toml; "
+                         "beta = 10)")
     ap.add_argument("--out", type=Path, default=None,
                     help="output folder (default out/interaction_coefficient/fluid_series, "
-                         "fluid_series_beta<beta> for another beta)")
+                         "fluid_series_beta<beta> for another beta, + _calibrated)")
     ap.add_argument("--resolution", type=Path,
                     default=Path("out/interaction_coefficient/resolution/ci_resolution.json"),
                     help="the resolution study's summary (ci_resolution.py): the resolution error of the C_I "
@@ -457,10 +478,14 @@ def main() -> None:
     if args.write_data and args.beta != BETA:
         ap.error(f"--write-data: the shipped table holds beta = {BETA:g} only (its resolution error is measured "
                  f"there); --beta {args.beta:g} is analysed into --out")
+    name = SERIES[args.beta] + ("_calibrated" if args.calibrated else "")
+    if not (SWEEPS / f"{name}.toml").is_file():
+        ap.error(f"--calibrated: no calibrated series at beta = {args.beta:g} (studies/sweeps/{name}.toml)")
     if args.out is None:
-        args.out = Path("out/interaction_coefficient") / ("fluid_series" if args.beta == BETA
-                                                          else f"fluid_series_beta{args.beta:g}")
-    spec = sweep_study.load_form(SWEEPS, SERIES[args.beta], False, seeds=tuple(args.seeds) if args.seeds else None)
+        args.out = Path("out/interaction_coefficient") / (("fluid_series" if args.beta == BETA
+                                                           else f"fluid_series_beta{args.beta:g}")
+                                                          + ("_calibrated" if args.calibrated else ""))
+    spec = sweep_study.load_form(SWEEPS, name, False, seeds=tuple(args.seeds) if args.seeds else None)
     start = time.perf_counter()
     sweep_dir = args.sweep_dir or args.out / "sweep"
     done = sweep_study.run_sweep(spec, sweep_dir, args.executor, args.np, analyse_only=args.analyse_only)

@@ -93,6 +93,32 @@ def test_the_beta10_series_is_the_beta5_series_at_twice_the_aspect_ratio():
     assert "max_grid_points" not in series.scene_of(5.0, "stokes", 1, 200.0).toml
 
 
+def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_radius_and_zhangs_beta_e():
+    """ci_fluid_series_beta10_calibrated.toml: the points and seeds of the geometric β = 10 series;
+    each scene differs from its geometric one only by the Stokes runs' fibre radius scale (> 1) and
+    the β_e rule both models record (Zhang's, what the calibration aims the grid fibre at), so the
+    initial states and the numerics are the same; and the calibration it quotes is that of
+    docs/fluid_coupled_ci.md's table (1.212 on 72³)."""
+    import tomllib
+
+    from pyfold.kinematics import equivalent_aspect_ratio
+
+    plain, cal = (load_form(STUDIES / "sweeps", n, False)
+                  for n in ("ci_fluid_series_beta10", "ci_fluid_series_beta10_calibrated"))
+    assert cal.points == plain.points and cal.seeds == plain.seeds
+    assert cal.arguments == {**plain.arguments, "fibre_radius_scale": 1.212, "equivalent_aspect_ratio": "zhang"}
+    for point in cal.points:
+        a = tomllib.loads(series.scene_of(**point, seed=2, **cal.arguments).toml)
+        b = tomllib.loads(series.scene_of(**point, seed=2, **plain.arguments).toml)
+        assert a["particles"][0].pop("equivalent_aspect_ratio") == "zhang"
+        if point["model"] == "stokes":
+            assert a["numerics"]["stokes"].pop("fibre_radius_scale") == 1.212
+        assert a == b
+        checked = parse_scene(series.scene_of(**point, seed=2, **cal.arguments).toml)
+        assert checked.families[0].equivalent_aspect_ratio == pytest.approx(
+            float(equivalent_aspect_ratio(10.0, "zhang")))
+
+
 def test_the_series_and_its_twins_share_the_initial_state_and_step():
     """A seed's Stokes run and contacts-only twin differ in the model only (paired comparison)."""
     import tomllib
