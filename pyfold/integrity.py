@@ -321,6 +321,10 @@ def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity, whole
             report.damage.append(Damage(name, "no Fletcher32 checksum filter (a checksummed file has one on "
                                               "every result dataset)"))
             return
+        problem = _dimension_problem(ds) if checksummed and name.count("/") == 1 else None
+        if problem:
+            report.damage.append(Damage(name, problem))
+            return
         try:
             _read_all(ds)
         except Exception as exc:  # noqa: BLE001
@@ -338,6 +342,29 @@ def _check_dataset(ds: h5py.Dataset, checksummed: bool, report: Integrity, whole
         report.damage.extend(exc.damage)
     except Exception as exc:  # noqa: BLE001
         report.damage.append(Damage(name, _cause(exc)))
+
+
+def _dimension_problem(ds: h5py.Dataset) -> str | None:
+    """What is wrong with the dimension scales of a result dataset fold_run writes, or None: each axis
+    carries exactly one scale, no scale twice, and a scale is as long as its axis (the growing time
+    or snapshot axis excepted: a running run's readers may see it mid-record). The scale references
+    are metadata no chunk checksum covers; a damaged one would make a reader lay the data out on
+    the wrong dimensions (a2_family(time, i, i, j) instead of (time, family, i, j)) silently."""
+    if ds.is_scale or ds.ndim == 0:
+        return None
+    names = []
+    for axis, dim in enumerate(ds.dims):
+        if len(dim) != 1:
+            return f"axis {axis} has {len(dim)} dimension scales attached (one expected; damaged DIMENSION_LIST)"
+        scale = dim[0]
+        names.append(scale.name)
+        grows = axis == 0 and scale.name.lstrip("/") in COUNT_ATTRS
+        if not grows and scale.shape != (ds.shape[axis],):
+            return (f"axis {axis} has length {ds.shape[axis]} but its dimension scale {scale.name} has shape "
+                    f"{scale.shape} (damaged DIMENSION_LIST)")
+    if len(set(names)) != len(names):
+        return f"its dimension scales {names} name one twice (damaged DIMENSION_LIST)"
+    return None
 
 
 def _walk(group: h5py.Group, checksummed: bool, report: Integrity, whole: dict[str, int]) -> None:

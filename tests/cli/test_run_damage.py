@@ -270,3 +270,17 @@ def test_xdmf_of_a_damaged_snapshot_time_is_a_message_and_no_file(finished, tmp_
     with pytest.raises(PyfoldError, match="/snapshot_time is damaged"):
         write_xdmf(path, tmp_path / "run.xmf")
     assert not list(tmp_path.glob("*.xmf")) and not list(tmp_path.glob(".pyfold-tmp-*"))
+
+
+def test_a_result_laid_on_the_wrong_dimension_scale_is_refused(finished, tmp_path):
+    """Dimension-scale references are metadata no chunk checksum covers: a2_family's family axis
+    re-attached to the scale i (what one flipped bit of its DIMENSION_LIST can do) would read as
+    (time, i, i, j), its values broadcast; it is refused naming the dataset and the axis."""
+    path = tmp_path / "dims.h5"
+    shutil.copy(finished[1], path)
+    with h5py.File(path, "a") as f:
+        ds = f["a2_family"]
+        ds.dims[1].detach_scale(f["family"])
+        ds.dims[1].attach_scale(f["i"])
+    with pytest.raises(DamagedRunError, match=r"a2_family.*axis 1 has length 1 but its dimension scale /i"):
+        open_run(path)
