@@ -1101,6 +1101,16 @@ def _normalise(scene: Scene, source: str, base_dir: str | Path | None) -> Resolv
                 f"{STOKES_QUANTITATIVE_CELLS_PER_DIAMETER}: the effective viscosity and rotation rates are biased "
                 f"(5-9 % at 1-2 voxels per diameter); use cells_per_diameter = 4-8 for quantitative results "
                 f"(docs/physics.md#resolution)")
+        scale = scene.numerics.stokes.fibre_radius_scale
+        uncalibrated = [f.name for f in good if scene.particles[f.index].shape == "fibre"
+                        and scene.particles[f.index].equivalent_aspect_ratio is None]
+        if scale != 1.0 and uncalibrated:
+            warnings.append(
+                f"numerics.stokes.fibre_radius_scale = {scale:g}: the Stokes solve turns the fibres like fibres of "
+                f"another beta_e than their geometric shape's, but the beta_e the run records for "
+                f"{', '.join(uncalibrated)} (Folgar-Tucker fits, contacts-only twins) is the default rule's "
+                f"({EQUIVALENT_ASPECT_RATIO_DEFAULT!r}); set particles.equivalent_aspect_ratio to the rule the scale "
+                f"was calibrated to (docs/fluid_coupled_ci.md#a-hydrodynamic-radius-calibrated-to-the-grid)")
 
     fam_tables = []
     for f in good:

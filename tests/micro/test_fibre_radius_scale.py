@@ -106,3 +106,21 @@ def test_contacts_keep_the_geometric_radius(tmp_path):
     assert np.all(corrections == 0)
     # fibres along the flow at the same height barely move apart: 5 steps of 0.01 at shear rate 1
     assert np.all(np.abs(min_gap - gap) < 0.1 * gap), min_gap
+
+
+def test_a_scaled_scene_that_records_the_default_beta_e_is_warned():
+    """A scene whose fibres the solve turns at a calibrated radius but whose runs record the default
+    rule's β_e gets a warning naming both keys; naming the rule (what the calibration aimed at)
+    silences it, and so does the geometric radius."""
+    from pyfold.scene import parse_scene
+    from pyfold.scene.sheared_fibres import sheared_fibres
+
+    def warned(scale, rule):
+        stokes = {"cells_per_diameter": 3} | ({"fibre_radius_scale": scale} if scale != 1.0 else {})
+        scene = sheared_fibres(5.0, 5.0, 1, 1.0, hydrodynamics="stokes", stokes=stokes,
+                               equivalent_aspect_ratio=rule)
+        return [w for w in parse_scene(scene.toml).warnings if "fibre_radius_scale" in w]
+
+    (text,) = warned(1.129, None)
+    assert "particles.equivalent_aspect_ratio" in text and "'cox'" in text
+    assert warned(1.129, "zhang") == [] and warned(1.0, None) == []
