@@ -1102,8 +1102,8 @@ def _normalise(scene: Scene, source: str, base_dir: str | Path | None) -> Resolv
                 f"(5-9 % at 1-2 voxels per diameter); use cells_per_diameter = 4-8 for quantitative results "
                 f"(docs/physics.md#resolution)")
         scale = scene.numerics.stokes.fibre_radius_scale
-        uncalibrated = [f.name for f in good if scene.particles[f.index].shape == "fibre"
-                        and scene.particles[f.index].equivalent_aspect_ratio is None]
+        uncalibrated = [f.name for f in good
+                        if f.shape == "fibre" and scene.particles[f.index].equivalent_aspect_ratio is None]
         if scale != 1.0 and uncalibrated:
             warnings.append(
                 f"numerics.stokes.fibre_radius_scale = {scale:g}: the Stokes solve turns the fibres like fibres of "

@@ -97,6 +97,12 @@ def scene_of(cells_per_diameter: int, seed: int, t_end: float, fibre_radius_scal
                           stokes=stokes, time_scheme="ab2")
 
 
+def scaled_beta_e(grid: list[int], side: float, scale: float, cache: Path, beta: float = series.BETA) -> float:
+    """β_e of one fibre on ``grid`` voxelised at ``scale`` times its radius (the single-fibre check,
+    cached as ``cache``/single_fibre_<n>_s<scale>.nc, the calibration's checks)."""
+    return series.beta_e_on(grid, side, cache / f"single_fibre_{grid[0]}_s{scale:.3f}.nc", beta, scale)
+
+
 def calibrate_scale(grid: list[int], side: float, target: float, cache: Path, beta: float = series.BETA,
                     tolerance: float = CALIBRATION_TOLERANCE, max_checks: int = 6) -> tuple[float, float, list]:
     """The fibre radius scale s (numerics.stokes.fibre_radius_scale) at which one fibre on ``grid``
@@ -111,7 +117,7 @@ def calibrate_scale(grid: list[int], side: float, target: float, cache: Path, be
     cache.mkdir(parents=True, exist_ok=True)
 
     def measure(scale: float) -> float:
-        return series.beta_e_on(grid, side, cache / f"single_fibre_{grid[0]}_s{scale:.3f}.nc", beta, scale)
+        return scaled_beta_e(grid, side, scale, cache, beta)
 
     pts = [(1.0, measure(1.0)), (1.1, measure(1.1))]
     while abs(pts[-1][1] - target) > tolerance * target:
@@ -364,7 +370,7 @@ def check_calibration(spec, cache: Path, recalibrate: bool = False) -> dict[int,
                   f"fibre_radius_scale = {s_new:.3f}\n")
             scales[c] = s_new
             continue
-        be = series.beta_e_on(grid, side, cache / f"single_fibre_{grid[0]}_s{s:.3f}.nc", series.BETA, s)
+        be = scaled_beta_e(grid, side, s, cache)
         if abs(be - target) > CALIBRATION_TOLERANCE * target:
             raise SystemExit(f"fibre_radius_scale = {s:.3f} of cells_per_diameter = {c} ({grid[0]}^3): one fibre "
                              f"turns with beta_e {be:.4f} on this machine, target {target:.4f} (allowed "
