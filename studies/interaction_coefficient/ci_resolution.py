@@ -33,7 +33,10 @@ Method
     grids and seeds, hence the same initial states) with the fibres voxelised at s R, s of each
     grid the one at which the single-fibre check gives Zhang et al. (2011)'s β_e = 4.112, the
     converged cylinder's (docs/jeffery_orbits.md), within CALIBRATION_TOLERANCE; the study
-    measures β_e at the sweep file's scales before it runs and stops if one misses.
+    measures β_e at the sweep file's scales before it runs and stops if one misses. The
+    calibrated sweep also runs a 2-voxel grid (27³, 2.8 times cheaper than 42³), to measure
+    whether the calibration lets the series go below 3 voxels per diameter; Richardson still
+    uses the three finest grids, and the summary the 3-voxel grid's bias.
     ``--calibrate`` finds the scales (:func:`calibrate_scale`: secant on β_e(s) from s = 1, 1.1)
     and prints the sweep file's [[points]].
 
@@ -81,6 +84,9 @@ XI = ("cox", "grid")  # the Jeffery term with Cox's beta_e / with the grid fibre
 #: Order assumed when none is observed: the fictitious domain's surface error is first order in h
 #: (the smallest plausible order, so the largest extrapolation)
 ASSUMED_ORDER = 1.0
+#: The grid of the fluid-coupled series (ci_fluid_series.STOKES): its bias is the one the summary
+#: (ci_resolution.json) gives, whichever coarser grids the sweep also runs
+SERIES_CELLS = int(series.STOKES["cells_per_diameter"])
 #: Relative mismatch of β_e at which a calibrated radius is accepted: below the single-fibre
 #: check's own quadrature error (~0.3 % on the period at 24 orientations, ci_hydrodynamics.py)
 #: doubled, since dβ_e/β_e ≈ dT/T · β_e²/(β_e² − 1) (docs/jeffery_orbits.md)
@@ -240,13 +246,16 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, scales: dict[int, flo
             # Richardson per seed (the grids of a seed share the initial state): C_inf_s from the two
             # finest grids, and the bias of the coarsest grid's value C_coarse_s - C_inf_s, paired
             p = observed_order(means[-3:], [h[c] for c in cpds[-3:]]) if len(cpds) >= 3 else math.nan
-            mid, coarse = cpds[-2], cpds[0]
+            # the coarse grid whose bias the summary carries: the series' grid where it was run
+            mid = cpds[-2]
+            coarse = SERIES_CELLS if SERIES_CELLS in cpds[:-1] else cpds[0]
             p_used = p if math.isfinite(p) else ASSUMED_ORDER
             r = (h[mid] / h[fine]) ** p_used
             v_fine, v_mid, v_coarse = (np.array(data[est, xi, c][0]) for c in (fine, mid, coarse))
             c_inf = v_fine + (v_fine - v_mid) / (r - 1.0)
             e_inf = ensemble_mean(c_inf)
             bias = paired_difference(v_coarse, c_inf)
+            coarser = [(c, paired_difference(np.array(data[est, xi, c][0]), c_inf)) for c in cpds[:-2] if c != coarse]
             summary[f"{est}_{xi}"] = {"coarse_cells_per_diameter": coarse, "coarse": float(np.mean(v_coarse)),
                                       "richardson": e_inf.mean, "richardson_err": e_inf.error,
                                       "coarse_bias": bias.mean, "coarse_bias_stderr": bias.stderr,
@@ -263,7 +272,9 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, scales: dict[int, flo
                 order = f"no observed order ({why}), order {ASSUMED_ORDER:g} assumed"
             richardson.append(f"* {est}, ξ {xi}: {order}; Richardson C∞ = {e_inf.mean:+.2e} ± {e_inf.error:.1e}; "
                               f"the {coarse}-voxel value's bias C({coarse}) − C∞ = {bias.mean:+.2e} ± "
-                              f"{bias.stderr:.1e} (paired over {bias.n} seeds, p-value {bias.p:.2g})")
+                              f"{bias.stderr:.1e} (paired over {bias.n} seeds, p-value {bias.p:.2g})"
+                              + "".join(f"; C({c}) − C∞ = {b.mean:+.2e} ± {b.stderr:.1e} (p-value {b.p:.2g})"
+                                        for c, b in coarser))
     text = "\n".join(lines + ["", "## Order and Richardson extrapolation", ""] + richardson) + "\n"
     out.mkdir(parents=True, exist_ok=True)
     (out / "ci_resolution.md").write_text(text, encoding="utf-8")

@@ -37,11 +37,13 @@ def test_every_point_of_the_sweeps_is_a_valid_scene_of_the_intended_model(name, 
 
 def test_the_calibrated_resolution_runs_are_the_resolution_runs_with_a_fatter_voxelised_fibre():
     """ci_resolution_calibrated.toml: the grids and seeds of ci_resolution.toml (so the same initial
-    states), each with a radius scale above 1 that shrinks as the grid is refined, written to the
-    run file as stokes_fibre_radius_scale."""
+    states), and one coarser grid, each with a radius scale above 1 that shrinks as the grid is
+    refined, written to the run file as stokes_fibre_radius_scale."""
     plain, cal = (load_form(STUDIES / "sweeps", n, False) for n in ("ci_resolution", "ci_resolution_calibrated"))
     assert cal.seeds == plain.seeds and cal.arguments == plain.arguments
-    assert [p["cells_per_diameter"] for p in cal.points] == list(plain.axes["cells_per_diameter"])
+    cells = [p["cells_per_diameter"] for p in cal.points]
+    assert cells == sorted(cells) and cells[-3:] == list(plain.axes["cells_per_diameter"])
+    assert resolution.SERIES_CELLS in cells[:-2]
     scales = [p["fibre_radius_scale"] for p in cal.points]
     assert all(a > b > 1.0 for a, b in zip(scales, scales[1:]))
     for point in cal.points:
