@@ -26,11 +26,19 @@ Method
     --fluid-t-end with ``pyfold run --resume`` (pyfold.extend: the same steps as a run made in
     one go), and the same question is asked of every prefix. Without --fluid the
     contacts-only strain is only the estimate the fluid-coupled cost is planned with.
+    Warm start (--warm N_L3 ...): the series' Stokes scene of each seed, its fibres placed
+    at the centres and axes of the last snapshot of that seed's contacts-only run of this
+    study (strain 1000, where the sheared lattice is back at its unsheared offset, so the
+    state is one of a cell at t = 0), run to --warm-t-end; the same question is asked of its
+    prefixes 50, 100, ... Does a fluid-coupled run started near the contacts-only steady state
+    reach its own steady state within a strain the trajectory runs already pay, and does its
+    closure-free C_I equal the one the extended isotropic-start runs (--fluid) find?
 
 Command
     .venv/bin/python studies/interaction_coefficient/steady_state_strain.py [--executor slurm]
         [--seeds 1 2] [--t-end 1000] [--analyse-only]
         [--fluid 8 --fluid-t-end 400]   # also extend the series' Stokes runs at n L³ 8 to strain 400
+        [--warm 8 --warm-t-end 150]     # also run n L³ 8 from the contacts-only runs' end state
     (--fluid needs the series' finished runs: ci_fluid_series.py, its --out or --series-dir)
 
 Cost (2 cores)
@@ -46,6 +54,8 @@ Outputs (under out/interaction_coefficient/steady_state_strain/, ``--out``)
     steady_state_strain.png    a2_xx(t) of every run with its onsets, and C_I against the prefix strain
     fluid/nl3_<n>/seed<k>/     the extended fluid-coupled runs (scene.toml, run.h5, cost.json)
     fluid.md, fluid.nc, fluid.png  their table, data and figure (--fluid)
+    warm/nl3_<n>/seed<k>/      the warm-started runs (scene.toml, positions.npy, orientations.npy, run.h5, cost.json)
+    warm.md, warm.nc, warm.png     their table, data and figure (--warm)
 """
 from __future__ import annotations
 
@@ -87,8 +97,10 @@ def analyse_run(path: Path, prefixes) -> dict:
         ss = detect_steady_state(t[keep], a2[keep])
         drift = ss.drift_slope.reshape(3, 3)
         reg = ci_rate_regression(t[keep], a2[keep], a4[keep], L, xi, window=(ss.onset_time, T))
+        window = keep & (t >= ss.onset_time)
         out[T] = {"stationary": bool(ss.stationary), "onset": float(ss.onset_time),
-                  "drift": float(max(abs(drift[i, j]) for i, j in DIAGONAL)), "ci": reg.ci, "stderr": reg.stderr}
+                  "drift": float(max(abs(drift[i, j]) for i, j in DIAGONAL)), "ci": reg.ci, "stderr": reg.stderr,
+                  "a2_diag": [float(a2[window, i, i].mean()) for i in range(3)]}
     return out
 
 
@@ -116,11 +128,7 @@ def extend_fluid(concentrations, seeds, t_end: float, series_dir: Path, out: Pat
     """Copy the series' finished Stokes runs at ``concentrations`` into ``out`` and extend each to
     ``t_end`` (two ``pyfold run --resume`` at a time; a finished extension is kept). Returns
     ``{(n_l3, seed): run file}`` and writes each run's CPU and wall time to its cost.json."""
-    import json
-    import os
     import shutil
-    import subprocess
-    import time
 
     from pyfold.sweep import study as sweep_study
 
@@ -144,14 +152,27 @@ def extend_fluid(concentrations, seeds, t_end: float, series_dir: Path, out: Pat
                 shutil.copyfile(source, run)
             scene.write_text(text)
             waiting.append(folder)
+    run_folders(waiting, parallel, resume=True)
+    return result
+
+
+def run_folders(waiting: list[Path], parallel: int, resume: bool) -> None:
+    """``pyfold run`` of each folder's scene.toml to its run.h5 (``--resume`` when ``resume``), ``parallel``
+    at a time, each run's CPU and wall time to its cost.json; SystemExit naming the folder on a failure."""
+    import json
+    import os
+    import subprocess
+    import time
+
     pyfold = str(Path(sys.executable).with_name("pyfold"))
     live: dict = {}
+    waiting = list(waiting)
     while waiting or live:
         while waiting and len(live) < parallel:
             folder = waiting.pop(0)
             log = open(folder / "log.txt", "a")
-            proc = subprocess.Popen([pyfold, "run", str(folder / "scene.toml"), "-o", str(folder / "run.h5"),
-                                     "--resume"], stdout=log, stderr=subprocess.STDOUT)
+            proc = subprocess.Popen([pyfold, "run", str(folder / "scene.toml"), "-o", str(folder / "run.h5")]
+                                    + (["--resume"] if resume else []), stdout=log, stderr=subprocess.STDOUT)
             live[proc.pid] = (proc, folder, log, time.perf_counter())
         pid, status, usage = os.wait4(-1, 0)
         if pid not in live:
@@ -159,11 +180,66 @@ def extend_fluid(concentrations, seeds, t_end: float, series_dir: Path, out: Pat
         proc, folder, log, start = live.pop(pid)
         log.close()
         if os.waitstatus_to_exitcode(status) != 0:
-            raise SystemExit(f"{folder}: pyfold run --resume failed (exit {os.waitstatus_to_exitcode(status)}); "
+            raise SystemExit(f"{folder}: pyfold run failed (exit {os.waitstatus_to_exitcode(status)}); "
                              f"see {folder / 'log.txt'}; rerun to continue it")
         (folder / "cost.json").write_text(json.dumps({"cpu_s": usage.ru_utime + usage.ru_stime,
                                                       "wall_s": time.perf_counter() - start}))
-        print(f"extended {folder}", flush=True)
+        print(f"finished {folder}", flush=True)
+
+
+def warm_scene(n_l3: float, seed: int, t_end: float) -> str:
+    """The series' Stokes scene of ``n_l3`` and ``seed`` to ``t_end``, its fibres placed at the
+    given centres and axes of positions.npy / orientations.npy (beside the scene file)."""
+    import re
+
+    text = series.scene_of(n_l3, "stokes", seed, t_end).toml
+    text, n = re.subn(r'(?m)^orientation = "isotropic"$',
+                      'orientation = "given"\norientations = "orientations.npy"\npositions = "positions.npy"', text)
+    if n != 1:
+        raise SystemExit(f"the series' scene has {n} isotropic orientation lines, expected one")
+    return text
+
+
+def twin_end_state(path: Path, side: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Centres (wrapped into the cubic cell of ``side``) and axes of the last snapshot of the contacts-only run
+    ``path``, and its strain. The snapshot must lie at a strain where the sheared lattice is
+    back to its unsheared offset (γ̇ t L_y a multiple of L_x), so that the centres are a state
+    of a cell starting at t = 0."""
+    from pyfold import run_checks
+    from pyfold.run_results import open_run
+
+    ds = open_run(path)
+    try:
+        t = float(ds["snapshot_time"].values[-1])
+        x, p = ds["x"].values[-1], ds["p"].values[-1]
+    finally:
+        ds.close()
+    L = run_checks.velocity_gradient_of(path)
+    shift = L[0, 1] * t  # lattice offset over L_x in the cubic cell
+    if abs(shift - round(shift)) > 1e-9 or np.count_nonzero(L) != 1:
+        raise SystemExit(f"{path}: its last snapshot (strain {t:g}) is not at an unsheared lattice offset")
+    return np.mod(x, side), p, t
+
+
+def warm_fluid(n_l3: float, seeds, t_end: float, twins: dict, out: Path, parallel: int = 2) -> dict:
+    """Stokes runs of the series' scene at ``n_l3`` started from the end state of each seed's
+    contacts-only twin (``twins``: {seed: run file}) and run to ``t_end`` (a finished run is kept).
+    Returns ``{(n_l3, seed): run file}``."""
+    waiting, result = [], {}
+    for seed in seeds:
+        folder = out / "warm" / f"nl3_{n_l3:g}" / f"seed{seed}"
+        folder.mkdir(parents=True, exist_ok=True)
+        x, p, t0 = twin_end_state(twins[seed], series.scene_of(n_l3, "stokes", seed, t_end).side)
+        text = warm_scene(n_l3, seed, t_end)
+        result[n_l3, seed] = folder / "run.h5"
+        if (folder / "cost.json").exists() and (folder / "scene.toml").read_text() == text:
+            continue
+        np.save(folder / "positions.npy", x)
+        np.save(folder / "orientations.npy", p)
+        (folder / "scene.toml").write_text(text)
+        (folder / "started_from.txt").write_text(f"{twins[seed]} at strain {t0:g}\n")
+        waiting.append(folder)
+    run_folders(waiting, parallel, resume=False)
     return result
 
 
@@ -176,7 +252,7 @@ def analyse(done: dict, seeds: list[int], out: Path, prefixes=PREFIXES, name: st
     shape = (len(concentrations), len(prefixes), len(seeds))
     fields = {k: np.full(shape, np.nan) for k in ("stationary", "onset", "drift", "ci", "ci_stderr")}
     lines = ["| n L³ | strain T | stationary runs | onsets (strain) | largest end drift [1/strain] | "
-             "C_I closure-free over [onset, T] ± s.e. |", "|---|---|---|---|---|---|"]
+             "C_I closure-free over [onset, T] ± s.e. | a2 xx, yy, zz over [onset, T] |", "|---|---|---|---|---|---|---|"]
     for i, n in enumerate(concentrations):
         for j, T in enumerate(prefixes):
             have = [s for s in seeds if (n, s) in runs and T in runs[n, s]]
@@ -190,7 +266,8 @@ def analyse(done: dict, seeds: list[int], out: Path, prefixes=PREFIXES, name: st
             ens = ensemble_mean([r["ci"] for r in rows], [r["stderr"] for r in rows])
             lines.append(f"| {n:g} | {T:g} | {sum(r['stationary'] for r in rows)}/{len(rows)} | "
                          f"{', '.join(format(r['onset'], '.0f') for r in rows)} | {max(r['drift'] for r in rows):.1e} | "
-                         f"{ens.mean:+.2e} ± {ens.error:.1e} |")
+                         f"{ens.mean:+.2e} ± {ens.error:.1e} | "
+                         + ", ".join(f"{np.mean([r['a2_diag'][i] for r in rows]):.3f}" for i in range(3)) + " |")
     dims = ("n_l3", "strain", "seed")
     units = {"stationary": "1", "onset": "1", "drift": "1", "ci": "1", "ci_stderr": "1"}
     names = {"stationary": "1 when detect_steady_state finds the prefix stationary",
@@ -251,6 +328,10 @@ def main() -> None:
     ap.add_argument("--fluid-t-end", type=float, default=400.0, help="strain of the extended fluid-coupled runs")
     ap.add_argument("--series-dir", type=Path, default=Path("out/interaction_coefficient/fluid_series/sweep"),
                     help="the fluid-coupled series' sweep folder")
+    ap.add_argument("--warm", type=float, nargs="+", metavar="N_L3",
+                    help="also run the series' Stokes scene at these n L^3 from the end state of each seed's "
+                         "contacts-only twin of this study (see the docstring)")
+    ap.add_argument("--warm-t-end", type=float, default=150.0, help="strain of the warm-started Stokes runs")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
     spec = sweep_study.load_form(series.SWEEPS, "steady_state_strain", False,
@@ -268,6 +349,17 @@ def main() -> None:
         done_fluid = {((n, "stokes"), seed): path for (n, seed), path in runs.items()}
         print(analyse(done_fluid, list(spec.seeds), args.out, prefixes, "fluid",
                       "Stokes-coupled with contacts (the series' runs extended)"))
+    if args.warm:
+        runs = {}
+        for n in args.warm:
+            twins = {seed: path for ((n_l3, _m), seed), path in done.items() if n_l3 == n}
+            if set(twins) != set(spec.seeds):
+                raise SystemExit(f"--warm {n:g}: this study has no contacts-only run of n L^3 {n:g} for every seed")
+            runs.update(warm_fluid(n, list(spec.seeds), args.warm_t_end, twins, args.out))
+        prefixes = tuple(T for T in np.arange(50.0, args.warm_t_end + 1e-9, 50.0))
+        done_warm = {((n, "stokes"), seed): path for (n, seed), path in runs.items()}
+        print(analyse(done_warm, list(spec.seeds), args.out, prefixes, "warm",
+                      "Stokes-coupled with contacts, started from the contacts-only twins' end state"))
 
 
 if __name__ == "__main__":

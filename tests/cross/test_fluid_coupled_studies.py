@@ -161,6 +161,34 @@ def test_an_extended_fluid_run_differs_from_the_series_run_by_its_end_only():
     assert longer == recorded
 
 
+def test_a_warm_started_fluid_run_is_the_series_run_with_given_centres_and_axes(tmp_path):
+    """steady_state_strain.py --warm: the series' Stokes scene, its fibres at the centres and axes
+    of the files beside it (here 157 fibres along x on a lattice 1.35 L by 0.225 L by 0.225 L, gaps
+    0.35 L and 1.25 α), which load_scene places exactly."""
+    import tomllib
+
+    from pyfold.scene import load_scene
+
+    steady = import_study("interaction_coefficient", "steady_state_strain")
+    text = steady.warm_scene(8.0, 2, 150.0)
+    warm, plain = tomllib.loads(text), tomllib.loads(series.scene_of(8.0, "stokes", 2, 150.0).toml)
+    family = warm["particles"][0]
+    assert (family.pop("orientation"), family.pop("orientations"), family.pop("positions")) == (
+        "given", "orientations.npy", "positions.npy")
+    assert plain["particles"][0].pop("orientation") == "isotropic" and warm == plain
+    n = plain["particles"][0]["count"]
+    g = np.stack(np.meshgrid(np.arange(2), np.arange(12), np.arange(12), indexing="ij"), -1).reshape(-1, 3)[:n]
+    x = (g + 0.5) * np.array([1.35, 0.225, 0.225])
+    np.save(tmp_path / "positions.npy", x)
+    np.save(tmp_path / "orientations.npy", np.tile([1.0, 0.0, 0.0], (n, 1)))
+    (tmp_path / "scene.toml").write_text(text)
+    resolved = load_scene(tmp_path / "scene.toml")
+    assert resolved.hydrodynamics == "stokes"
+    fam = resolved.families[0]
+    assert fam.orientation == "given" and np.array_equal(fam.positions, x)
+    assert np.array_equal(fam.axes, np.tile([1.0, 0.0, 0.0], (n, 1)))
+
+
 @pytest.mark.parametrize("p", [0.7, 1.0, 2.0, 3.5])
 def test_observed_order_and_richardson_recover_a_power_law(p):
     """c(h) = c_inf + k h^p on the study's three grids: the order is p (brentq to its tolerance)."""
