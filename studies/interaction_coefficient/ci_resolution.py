@@ -49,7 +49,8 @@ Command
 Cost (2 cores)
     Measured per run (two serial runs at a time on the shared 2-core machine): 84–88 /
     173–190 / 392–443 CPU-s on the three grids, 0.77 CPU-hour for the 12 runs; the
-    single-fibre checks 76 CPU-s; the analysis about 2 CPU-min. The CPU time of every run
+    single-fibre checks 76 CPU-s; the analysis about 2 CPU-min. --calibrated: 90 / 196 / 461
+    CPU-s per run on 42³ / 54³ / 70³ and 32 on the 2-voxel 27³ grid, about 0.95 CPU-hour. The CPU time of every run
     is in the outputs.
 
 Outputs (under out/interaction_coefficient/resolution/ or, with --calibrated,

@@ -46,6 +46,8 @@ Cost (2 cores)
     per run at n L³ 2.49 / 4.98 / 7.98), about 8 min wall two at a time; the analysis about a
     CPU-minute. --fluid 8 --fluid-t-end 400: 812–843 CPU-s per Stokes run for its extra strain
     200, 3315 CPU-s for the four (about 28 min wall two at a time on the idle machine).
+    --warm 8 --warm-t-end 150: 652–678 CPU-s per Stokes run, 2656 CPU-s for the four (about
+    24 min wall two at a time).
 
 Outputs (under out/interaction_coefficient/steady_state_strain/, ``--out``)
     sweep/                     the runs (pyfold sweep folder)
