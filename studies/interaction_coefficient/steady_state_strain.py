@@ -159,8 +159,9 @@ def extend_fluid(concentrations, seeds, t_end: float, series_dir: Path, out: Pat
 
 
 def run_folders(waiting: list[Path], parallel: int, resume: bool) -> None:
-    """``pyfold run`` of each folder's scene.toml to its run.h5 (``--resume`` when ``resume``), ``parallel``
-    at a time, each run's CPU and wall time to its cost.json; SystemExit naming the folder on a failure."""
+    """``pyfold run`` of each folder's scene.toml to its run.h5 (``--resume`` when ``resume`` or when a
+    killed run left its run.h5.partial), ``parallel`` at a time, each run's CPU and wall time to its
+    cost.json; SystemExit naming the folder on a failure."""
     import json
     import os
     import subprocess
@@ -174,7 +175,8 @@ def run_folders(waiting: list[Path], parallel: int, resume: bool) -> None:
             folder = waiting.pop(0)
             log = open(folder / "log.txt", "a")
             proc = subprocess.Popen([pyfold, "run", str(folder / "scene.toml"), "-o", str(folder / "run.h5")]
-                                    + (["--resume"] if resume else []), stdout=log, stderr=subprocess.STDOUT)
+                                    + (["--resume"] if resume or (folder / "run.h5.partial").exists() else []),
+                                    stdout=log, stderr=subprocess.STDOUT)
             live[proc.pid] = (proc, folder, log, time.perf_counter())
         pid, status, usage = os.wait4(-1, 0)
         if pid not in live:
