@@ -121,6 +121,30 @@ def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_rad
             float(equivalent_aspect_ratio(10.0, "zhang")))
 
 
+def test_the_time_step_runs_are_the_calibrated_beta10_stokes_runs_at_twice_the_step():
+    """studies/speed_accuracy/time_step_beta10.py compares its runs with the calibrated β = 10
+    series' runs seed by seed: its scenes differ from the series' φβ = 0.5 Stokes scenes only by
+    the step (twice α/(γ̇L)), the end and the snapshot interval, and it finds the series' run of
+    each of its seeds by the series' own run ids."""
+    import tomllib
+
+    study = import_study("speed_accuracy", "time_step_beta10")
+    spec, cal = (load_form(STUDIES / "sweeps", n, False)
+                 for n in ("time_step_beta10", "ci_fluid_series_beta10_calibrated"))
+    assert spec.seeds == cal.seeds
+    args = {k: v for k, v in spec.arguments.items() if k not in study.POINT and k != "t_end"}
+    assert args == {k: v for k, v in cal.arguments.items() if k != "t_end"}
+    assert study.POINT in [dict(p) for p in cal.points]
+    for point in spec.points:
+        a = tomllib.loads(series.scene_of(**point, seed=3, **spec.arguments).toml)
+        b = tomllib.loads(series.scene_of(**study.POINT, seed=3, **cal.arguments).toml)
+        assert a["numerics"].pop("dt") == pytest.approx(2 * b["numerics"].pop("dt")) == 0.02
+        assert a["numerics"].pop("t_end") == study.STRAIN
+        b["numerics"].pop("t_end")
+        a["output"].pop("snapshot_interval"), b["output"].pop("snapshot_interval")
+        assert a == b
+
+
 def test_the_series_and_its_twins_share_the_initial_state_and_step():
     """A seed's Stokes run and contacts-only twin differ in the model only (paired comparison)."""
     import tomllib
