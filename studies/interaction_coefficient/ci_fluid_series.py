@@ -47,6 +47,8 @@ Method
     turns with β_e 7.63, the converged cylinder's, ci_resolution.py's calibrate_scale) and both
     models recording Zhang's β_e, so every fit uses the ξ of the fibres simulated; the shape
     column is then the calibration's residual (the grid fibre's measured β_e at that scale).
+    It steps at Δt = 2α/(γ̇L) = 0.02, twice the geometric series' step, both models (the
+    change of C_I measured by studies/speed_accuracy/time_step_beta10.py).
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
     run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
     its drift reported).
@@ -66,7 +68,8 @@ Cost (2 cores)
     CPU-hour per point of 4 seeds; contacts-only twins 5–20 CPU-s. The sweep took 115 min
     wall sharing the machine with the resolution study; the analysis about 6 CPU-min.
     β = 10: about 33 CPU-s per unit strain per Stokes run at φβ = 0.5 (7 000 CPU-s per run,
-    ~7 CPU-hours per point of 4 seeds; docs/fluid_coupled_ci.md#cost), contacts-only twins ~1 CPU-min.
+    ~7 CPU-hours per point of 4 seeds; docs/fluid_coupled_ci.md#cost), contacts-only twins ~1 CPU-min;
+    calibrated, at twice the step: 18–19 CPU-s per unit strain (time_step_beta10.py), ~4 CPU-hours per point.
 
 Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/ [_calibrated/];
 ``--out``)

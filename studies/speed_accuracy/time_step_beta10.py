@@ -25,7 +25,9 @@ Method
 
 Command
     .venv/bin/python studies/speed_accuracy/time_step_beta10.py [--analyse-only] [--series-dir DIR]
-    (needs the series' Stokes runs at φβ = 0.5 past strain 20: ci_fluid_series.py --beta 10 --calibrated)
+    (needs the series' Stokes runs at φβ = 0.5 at Δt = α/(γ̇L) past strain 20, finished or interrupted:
+    they are the runs of ci_fluid_series.py --beta 10 --calibrated before its step was doubled; a run
+    still being written is locked by HDF5, so analyse after it stops, or with HDF5_USE_FILE_LOCKING=FALSE)
 
 Cost (2 cores)
     The 4 runs at Δt = 0.02: 360–383 CPU-s each (two at a time, the machine shared with two
@@ -62,7 +64,8 @@ def series_runs(series_dir: Path, seeds) -> dict[int, Path]:
     from pyfold.sweep.plan import plan
     from pyfold.sweep.study import load_form
 
-    spec = load_form(ROOT / "studies" / "sweeps", SERIES, False, seeds=tuple(seeds))
+    # the series at its original step α/(γ̇L) (dt None), whatever step its sweep file now sets
+    spec = load_form(ROOT / "studies" / "sweeps", SERIES, False, seeds=tuple(seeds), arguments={"dt": None})
     found = {}
     for run in plan(spec):
         if run.point == POINT or all(run.point.get(k) == v for k, v in POINT.items()):

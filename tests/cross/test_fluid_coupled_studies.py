@@ -108,11 +108,13 @@ def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_rad
     plain, cal = (load_form(STUDIES / "sweeps", n, False)
                   for n in ("ci_fluid_series_beta10", "ci_fluid_series_beta10_calibrated"))
     assert cal.points == plain.points and cal.seeds == plain.seeds
-    assert cal.arguments == {**plain.arguments, "fibre_radius_scale": 1.212, "equivalent_aspect_ratio": "zhang"}
+    assert cal.arguments == {**plain.arguments, "fibre_radius_scale": 1.212, "equivalent_aspect_ratio": "zhang",
+                             "dt": 0.02}
     for point in cal.points:
         a = tomllib.loads(series.scene_of(**point, seed=2, **cal.arguments).toml)
         b = tomllib.loads(series.scene_of(**point, seed=2, **plain.arguments).toml)
         assert a["particles"][0].pop("equivalent_aspect_ratio") == "zhang"
+        assert a["numerics"].pop("dt") == 2 * b["numerics"].pop("dt") == 0.02  # time_step_beta10.py
         if point["model"] == "stokes":
             assert a["numerics"]["stokes"].pop("fibre_radius_scale") == 1.212
         assert a == b
@@ -133,11 +135,11 @@ def test_the_time_step_runs_are_the_calibrated_beta10_stokes_runs_at_twice_the_s
                  for n in ("time_step_beta10", "ci_fluid_series_beta10_calibrated"))
     assert spec.seeds == cal.seeds
     args = {k: v for k, v in spec.arguments.items() if k not in study.POINT and k != "t_end"}
-    assert args == {k: v for k, v in cal.arguments.items() if k != "t_end"}
+    assert args == {k: v for k, v in cal.arguments.items() if k not in ("t_end", "dt")}
     assert study.POINT in [dict(p) for p in cal.points]
     for point in spec.points:
         a = tomllib.loads(series.scene_of(**point, seed=3, **spec.arguments).toml)
-        b = tomllib.loads(series.scene_of(**study.POINT, seed=3, **cal.arguments).toml)
+        b = tomllib.loads(series.scene_of(**study.POINT, seed=3, **{**cal.arguments, "dt": None}).toml)
         assert a["numerics"].pop("dt") == pytest.approx(2 * b["numerics"].pop("dt")) == 0.02
         assert a["numerics"].pop("t_end") == study.STRAIN
         b["numerics"].pop("t_end")
