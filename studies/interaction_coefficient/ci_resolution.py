@@ -245,7 +245,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, scales: dict[int, flo
                                      f"{e.mean:+.2e} ± {e.error:.1e} | (finest) | |"))
                 data[est, xi, c] = (vals, errs, e.mean, e.error)
             # Richardson per seed (the grids of a seed share the initial state): C_inf_s from the two
-            # finest grids, and the bias of the coarsest grid's value C_coarse_s - C_inf_s, paired
+            # finest grids, and the bias of a coarse grid's value C_coarse_s - C_inf_s, paired
             p = observed_order(means[-3:], [h[c] for c in cpds[-3:]]) if len(cpds) >= 3 else math.nan
             # the coarse grid whose bias the summary carries: the series' grid where it was run
             mid = cpds[-2]
