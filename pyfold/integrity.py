@@ -472,9 +472,24 @@ def verify_path(path: str | Path) -> Integrity:
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001
+        held = held_by_writer(path, exc)
+        if held is not None:
+            raise held from None
         raise DamagedRunError(f"{path}: not a readable HDF5 file (damaged, or not a run file): "
-                              f"{' '.join(str(exc).split())}",
-                              [Damage(str(path), "cannot open")]) from None
+                              f"{' '.join(str(exc).split())}", [Damage(str(path), "cannot open")]) from None
+
+
+def held_by_writer(path: str | Path, exc: BaseException) -> InputError | None:
+    """The error to raise when opening ``path`` for reading failed with ``exc`` because another
+    process holds HDF5's exclusive file lock on it (a simulation still writing it): nothing is
+    damaged, so the message names the holder instead; None for any other failure."""
+    if "unable to lock file" not in " ".join(str(exc).split()):
+        return None
+    from pyfold.destination import open_elsewhere
+
+    holder = open_elsewhere(Path(path)) or "another process"
+    return InputError(f"{path}: open for writing by {holder} (HDF5's file lock; a simulation still running?): "
+                      "read it once that process has ended")
 
 
 def refuse(path: str | Path, report: Integrity, hint: str) -> None:

@@ -144,6 +144,11 @@ def open_checked_run(run_path: Path, allow_failed: bool = False, command: str = 
             if not isinstance(f.get("initial"), h5py.Group) or "xi" not in f["initial"]:
                 raise InputError(f"{run_path}: no /initial/xi (the particles' Jeffery shape factor the fit needs)")
     except (OSError, RuntimeError, KeyError, ValueError, IndexError, TypeError) as exc:  # damaged metadata
+        from pyfold.integrity import held_by_writer
+
+        held = held_by_writer(run_path, exc)
+        if held is not None:
+            raise held from None
         raise InputError(f"{run_path}: damaged: cannot read it as a run file: {' '.join(str(exc).split())}") from None
 
     ds = open_run(run_path)

@@ -25,7 +25,7 @@ import xarray as xr
 
 from pyfold.errors import DamagedRunWarning, InputError, PyfoldError, UnverifiedRunWarning
 from pyfold.files import atomic_output
-from pyfold.integrity import Damage, DamagedRunError, refuse, tolerating_damage, verify_path
+from pyfold.integrity import Damage, DamagedRunError, held_by_writer, refuse, tolerating_damage, verify_path
 from pyfold.run_input import attr_text as _text
 from pyfold.run_input import check_format, read_setup
 from pyfold.xdmf_files import xdmf_data_path
@@ -189,6 +189,9 @@ def open_run(path: str | Path, allow_damaged: bool | None = None) -> xr.Dataset:
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001 - damaged metadata raises anything
+        held = held_by_writer(path, exc)
+        if held is not None:
+            raise held from None
         raise DamagedRunError(f"{path}: damaged: cannot read it ({' '.join(str(exc).split())})",
                               [Damage(str(path), "cannot read")]) from None
     setup = read_setup(path, allow_damaged=True)

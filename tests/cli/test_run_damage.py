@@ -12,6 +12,7 @@ what is damaged: never a different value, never a traceback.
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import shutil
 import subprocess
@@ -284,3 +285,31 @@ def test_a_result_laid_on_the_wrong_dimension_scale_is_refused(finished, tmp_pat
         ds.dims[1].attach_scale(f["i"])
     with pytest.raises(DamagedRunError, match=r"a2_family.*axis 1 has length 1 but its dimension scale /i"):
         open_run(path)
+
+
+@pytest.mark.skipif(os.environ.get("HDF5_USE_FILE_LOCKING", "").upper() == "FALSE",
+                    reason="HDF5 file locking is switched off in this environment: a reader never meets the lock")
+def test_a_run_file_open_for_writing_elsewhere_is_named_as_such_not_as_damaged(finished, tmp_path, capsys):
+    """A run file a live process holds open for writing (HDF5's exclusive file lock: a
+    simulation still running) is refused with that process named, not reported as damaged."""
+    import sys
+
+    from pyfold.integrity import DamagedRunError
+
+    path = tmp_path / "live.h5"
+    shutil.copyfile(finished[1], path)
+    holder = subprocess.Popen([sys.executable, "-c", "import h5py, sys, time\n"
+                               f"f = h5py.File({str(path)!r}, 'a')\nprint('open', flush=True)\ntime.sleep(60)"],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "open"
+        with pytest.raises(InputError) as err:
+            verify_path(path)
+        assert not isinstance(err.value, DamagedRunError)
+        assert "open for writing by" in str(err.value) and f"pid {holder.pid}" in str(err.value)
+        assert main(["analyse", str(path), "--closures", "exact", "--out", str(tmp_path / "out")]) == 2
+        assert "open for writing by" in capsys.readouterr().err
+    finally:
+        holder.kill()
+        holder.wait()
+    verify_path(path)  # readable again once the writer has gone
