@@ -97,7 +97,7 @@ def measure(path: Path) -> dict:
                "gap": float(ds["min_gap_over_alpha"].values[keep].min())}
     finally:
         ds.close()
-    L = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    L = run_checks.velocity_gradient_of(path)
     reg = ci_rate_regression(t[keep], a2[keep], a4[keep], L, xi)
     fit = fit_ci_rk4("ibof", t[keep], a2[keep], L, xi)
     out["closure_free"], out["ibof_trajectory"] = (reg.ci, reg.stderr), (fit.ci, fit.stderr)
