@@ -22,6 +22,7 @@ module fold_settings
    integer(ip), parameter, public :: FOLD_FFT_DOUBLE = 0, FOLD_FFT_SINGLE = 1  !< codes of numerics.stokes.fft_precision (/setup/resolved/stokes_fft_precision)
    integer(ip), parameter, public :: FOLD_RIGIDITY_PENALTY = 0, FOLD_RIGIDITY_EXACT = 1  !< codes of numerics.stokes.rigidity (/setup/resolved/stokes_rigidity)
    integer(ip), parameter, public :: FOLD_GUESS_PREVIOUS = 1, FOLD_GUESS_EXTRAPOLATE = 2  !< codes of numerics.stokes.initial_guess (/setup/resolved/stokes_initial_guess)
+   integer(ip), parameter, public :: FOLD_REUSE_LINEAR = 1, FOLD_REUSE_JEFFERY = 2  !< codes of numerics.stokes.reuse (/setup/resolved/stokes_reuse)
 
    !> Bounds of the viscosity contrast kappa (registry KAPPA_MIN, KAPPA_MAX)
    real(dp), parameter, public :: FOLD_KAPPA_MIN = 1.0_dp, FOLD_KAPPA_MAX = 1000000000000.0_dp
@@ -55,6 +56,7 @@ module fold_settings
    integer(i8), parameter, public :: FOLD_LO_STOKES_RIGIDITY = 0_i8, FOLD_HI_STOKES_RIGIDITY = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_RIGIDITY = 0_ip  !< numerics.stokes.rigidity -> /setup/resolved/stokes_rigidity (optional)
    integer(i8), parameter, public :: FOLD_LO_STOKES_INITIAL_GUESS = 1_i8, FOLD_HI_STOKES_INITIAL_GUESS = 2_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_INITIAL_GUESS = 1_ip  !< numerics.stokes.initial_guess -> /setup/resolved/stokes_initial_guess (optional)
    integer(i8), parameter, public :: FOLD_LO_STOKES_SOLVE_EVERY = 1_i8, FOLD_HI_STOKES_SOLVE_EVERY = 1000_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_SOLVE_EVERY = 1_ip  !< numerics.stokes.solve_every -> /setup/resolved/stokes_solve_every (optional)
+   integer(i8), parameter, public :: FOLD_LO_STOKES_REUSE = 1_i8, FOLD_HI_STOKES_REUSE = 2_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_REUSE = 1_ip  !< numerics.stokes.reuse -> /setup/resolved/stokes_reuse (optional)
 
    !> Stokes backends (index: the FOLD_STOKES_* code) and their capabilities
    integer(ip), parameter, public :: FOLD_N_BACKENDS = 2

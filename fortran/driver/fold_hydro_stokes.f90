@@ -8,7 +8,10 @@
 !>
 !> The solves are combined in time by fold_time_scheme (explicit Euler or
 !> Adams-Bashforth 2; with solve re-use, stokes_solve_every = k > 1, a solve every
-!> k-th step and the linear extrapolation of the last two between). The solve of the
+!> k-th step and the linear extrapolation of the last two between; with
+!> stokes_reuse = FOLD_REUSE_JEFFERY the extrapolation is of each particle's departure from
+!> its dilute Jeffery velocity, fold_kinematics::jeffery_omega and the cell's mean flow,
+!> which is added back at the step's own state). The solve of the
 !> configuration at t + dt is made at the end of the step, so every record holds the
 !> bulk stress of the configuration at its own time. A solve whose stress is not
 !> trusted (fold_stokes_trust: an effective viscosity below the fluid's) puts nothing
@@ -20,12 +23,13 @@ module fold_hydro_stokes
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_NUMERICAL, FOLD_NOT_CONVERGED
    use fold_particles, only: particle_set_t
-   use fold_cell, only: cell_t
+   use fold_cell, only: cell_t, cell_mean_velocity
+   use fold_kinematics, only: jeffery_omega
    use fold_run_file, only: run_setup_t
    use fold_output, only: run_record_t
    use fold_time_scheme, only: FOLD_AB2
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t, stokes_backend_name
-   use fold_settings, only: FOLD_RIGIDITY_NAME, FOLD_RIGIDITY_USES_KAPPA
+   use fold_settings, only: FOLD_RIGIDITY_NAME, FOLD_RIGIDITY_USES_KAPPA, FOLD_REUSE_JEFFERY
    use fold_stokes_factory, only: stokes_solver_create
    use fold_stokes_step, only: stokes_context_t, stokes_record_t, stokes_context_attach, stokes_context_destroy, &
                                stokes_rigid_velocities, stokes_context_lubrication
@@ -92,7 +96,8 @@ contains
       end if
       call stokes_context_attach(self%ctx, solver)
       call stokes_context_lubrication(self%ctx, setup%lubrication, setup%alpha)
-      call self%scheme%init(setup%time_scheme, setup%stokes_solve_every, parts%dim, parts%n)
+      call self%scheme%init(setup%time_scheme, setup%stokes_solve_every, parts%dim, parts%n, &
+                            departures=setup%stokes_solve_every > 1 .and. setup%stokes_reuse == FOLD_REUSE_JEFFERY)
       if (rank == 0) call announce(setup, parts%dim, nranks)
    end subroutine stokes_init
 
@@ -119,6 +124,10 @@ contains
             nranks, " rank(s), kappa ", setup%stokes%kappa, ", tol ", setup%stokes%tol, ", ", &
             trim(merge("Adams-Bashforth 2", "explicit Euler   ", setup%time_scheme == FOLD_AB2))
       end if
+      if (setup%stokes_solve_every > 1) write (output_unit, '(a,i0,a,a)') "fold_run: a Stokes solve every ", &
+         setup%stokes_solve_every, " steps, between them ", trim(merge("Jeffery + extrapolated departures", &
+                                                                       "the solves extrapolated          ", &
+                                                                       setup%stokes_reuse == FOLD_REUSE_JEFFERY))
       if (setup%stokes%fibre_radius_scale /= 1.0_dp) write (output_unit, '(a,f6.3,a)') &
          "fold_run: fibres voxelised at ", setup%stokes%fibre_radius_scale, &
          " times their radius (contacts keep the geometric radius)"
@@ -131,8 +140,29 @@ contains
       type(particle_set_t), intent(inout) :: parts
       real(dp), intent(in) :: t
       integer(ip), intent(in) :: first, last
-      call self%scheme%step_velocity(t, parts%v, parts%omega)
+      real(dp), allocatable :: v_jeffery(:, :), omega_jeffery(:, :)
+      if (self%scheme%departures) then
+         call dilute_velocities(cell, parts, v_jeffery, omega_jeffery)
+         call self%scheme%step_velocity(t, parts%v, parts%omega, v_jeffery, omega_jeffery)
+      else
+         call self%scheme%step_velocity(t, parts%v, parts%omega)
+      end if
    end subroutine stokes_velocities
+
+   !> Dilute Jeffery velocities of every particle at its current state: the cell's mean
+   !> flow at its centre and Jeffery's angular velocity of its axis with its own xi
+   !> (vorticity/2 for xi = 0), the reference that re-use by departures adds back.
+   pure subroutine dilute_velocities(cell, parts, v, omega)
+      type(cell_t), intent(in) :: cell
+      type(particle_set_t), intent(in) :: parts
+      real(dp), allocatable, intent(out) :: v(:, :), omega(:, :)
+      integer(ip) :: k
+      allocate (v(parts%dim, parts%n), omega(3, parts%n))
+      do k = 1, parts%n
+         v(:, k) = cell_mean_velocity(cell, parts%x(:, k))
+         omega(:, k) = jeffery_omega(parts%dim, cell%G, parts%p(:, k), parts%xi(k))
+      end do
+   end subroutine dilute_velocities
 
    !> The AB2 history (and the re-used solves) cross a sheared face with the same
    !> velocity jump as the particle.
@@ -162,12 +192,17 @@ contains
       character(len=msg_len), intent(out) :: errmsg
       logical, intent(out) :: untrusted
       type(stokes_record_t) :: srec
-      real(dp), allocatable :: v_step(:, :), omega_step(:, :)
+      real(dp), allocatable :: v_step(:, :), omega_step(:, :), v_jeffery(:, :), omega_jeffery(:, :)
 
       v_step = parts%v
       omega_step = parts%omega
       call stokes_rigid_velocities(self%ctx, cell, parts, srec, stat, errmsg)
-      call self%scheme%push_solve(parts%v, parts%omega, t)
+      if (self%scheme%departures) then
+         call dilute_velocities(cell, parts, v_jeffery, omega_jeffery)
+         call self%scheme%push_solve(parts%v - v_jeffery, parts%omega - omega_jeffery, t)
+      else
+         call self%scheme%push_solve(parts%v, parts%omega, t)
+      end if
       parts%v = v_step
       parts%omega = omega_step
       untrusted = .false.

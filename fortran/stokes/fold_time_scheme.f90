@@ -11,8 +11,16 @@
 !> With solve re-use (a solve every k > 1 steps) the hydrodynamic velocity at a
 !> step's time t is the linear extrapolation of the last two solves (times t_a > t_b):
 !>     v(t) = v_a + ((t - t_a)/(t_a - t_b)) (v_a - v_b),
-!> and the last solve itself at t = t_a, or while there is only one. The AB2 history
-!> is that hydrodynamic velocity (before contact corrections). Every stored velocity
+!> and the last solve itself at t = t_a, or while there is only one. With re-use by
+!> departures (numerics.stokes.reuse = "jeffery") the solves stored are instead each
+!> particle's departure from its dilute Jeffery velocity at the solved configuration,
+!>     d = v_solve - v_J(x, p),
+!> and the estimate at t is v_J(x(t), p(t)) + the same extrapolation of d: the rotation a
+!> particle makes in the mean flow between solves (a tumbling fibre's angular velocity
+!> changes by O(1) over a flip) is then followed every step, and only the interactions,
+!> which change with the neighbours' relative positions, are extrapolated. At a solve's
+!> own time both estimates are the solve. The AB2 history is that hydrodynamic velocity
+!> (before contact corrections). Every stored velocity
 !> crosses a sheared face of the Lees-Edwards cell with the particle, with the same
 !> velocity jump (time_scheme_carry_across_wrap), so the combinations stay in one frame.
 module fold_time_scheme
@@ -40,6 +48,8 @@ module fold_time_scheme
       integer(ip) :: scheme = FOLD_EULER
       !> A solve every `solve_every` steps (> 1: the steps between extrapolate)
       integer(ip) :: solve_every = 1
+      !> The stored solves are departures from the Jeffery velocity (re-use by departures)
+      logical :: departures = .false.
       !> Velocities of the last solve and its time [s]
       real(dp), allocatable :: v_solve(:, :), omega_solve(:, :)
       real(dp) :: t_solve = 0.0_dp
@@ -79,15 +89,20 @@ contains
 
    !> Empty state for n particles in dim dimensions (no solve, no history); a state
    !> made before is emptied.
-   subroutine time_scheme_init(self, scheme, solve_every, dim, n)
+   subroutine time_scheme_init(self, scheme, solve_every, dim, n, departures)
       class(time_scheme_state_t), intent(inout) :: self
       !> FOLD_EULER or FOLD_AB2 (checked by the caller)
       integer(ip), intent(in) :: scheme
       !> A solve every solve_every (>= 1) steps
       integer(ip), intent(in) :: solve_every
       integer(ip), intent(in) :: dim, n
+      !> The solves pushed are departures from the Jeffery velocity, and step_velocity gets
+      !> the Jeffery velocity of the step (default: the solves are velocities)
+      logical, intent(in), optional :: departures
       self%scheme = scheme
       self%solve_every = solve_every
+      self%departures = .false.
+      if (present(departures)) self%departures = departures
       if (allocated(self%v_solve)) deallocate (self%v_solve, self%omega_solve, self%v_solve_before, &
                                                self%omega_solve_before, self%history%v, self%history%omega)
       allocate (self%v_solve(dim, n), self%omega_solve(3, n))
@@ -107,8 +122,9 @@ contains
       self%good_history = self%history
    end subroutine time_scheme_init
 
-   !> The velocities of a new solve, of the configuration at time t [s]; with solve
-   !> re-use the previous solve becomes the one before.
+   !> The velocities of a new solve (with re-use by departures: their departures from the
+   !> Jeffery velocity), of the configuration at time t [s]; with solve re-use the previous
+   !> solve becomes the one before.
    subroutine time_scheme_push_solve(self, v, omega, t)
       class(time_scheme_state_t), intent(inout) :: self
       real(dp), intent(in) :: v(:, :), omega(:, :), t
@@ -125,12 +141,16 @@ contains
    end subroutine time_scheme_push_solve
 
    !> The velocities (v, omega) of the step from t [s]: the hydrodynamic velocity at t
-   !> (the last solve, or the extrapolation of the last two) combined by the scheme with
-   !> the history, which then becomes that hydrodynamic velocity.
-   subroutine time_scheme_step_velocity(self, t, v, omega)
+   !> (the last solve, or the extrapolation of the last two; with re-use by departures,
+   !> the Jeffery velocity v_jeffery, omega_jeffery of the particles at t plus that of the
+   !> departures) combined by the scheme with the history, which then becomes that
+   !> hydrodynamic velocity.
+   subroutine time_scheme_step_velocity(self, t, v, omega, v_jeffery, omega_jeffery)
       class(time_scheme_state_t), intent(inout) :: self
       real(dp), intent(in) :: t
       real(dp), intent(out) :: v(:, :), omega(:, :)
+      !> Jeffery velocities (dim, n) and (3, n) of the particles at t (re-use by departures only)
+      real(dp), intent(in), optional :: v_jeffery(:, :), omega_jeffery(:, :)
       real(dp), allocatable :: v_est(:, :), omega_est(:, :)
 
       if (self%solve_every > 1 .and. self%have_solve_before .and. t > self%t_solve) then
@@ -142,6 +162,10 @@ contains
          v_est = self%v_solve
          omega_est = self%omega_solve
       end if
+      if (self%departures) then
+         v_est = v_est + v_jeffery
+         omega_est = omega_est + omega_jeffery
+      end if
       call scheme_velocity(self%scheme, self%history%held, v_est, self%history%v, v)
       call scheme_velocity(self%scheme, self%history%held, omega_est, self%history%omega, omega)
       call move_alloc(v_est, self%history%v)
@@ -151,7 +175,8 @@ contains
 
    !> After the particles at x_before (dim, n) [m] were wrapped into the cell: give the
    !> stored translational velocities of each particle the same Lees-Edwards jump (the
-   !> history; with solve re-use also the two solves).
+   !> history; with solve re-use also the two solves, unless they are departures from the
+   !> Jeffery velocity, which carries the jump itself).
    subroutine time_scheme_carry_across_wrap(self, cell, x_before)
       class(time_scheme_state_t), intent(inout) :: self
       type(cell_t), intent(in) :: cell
@@ -163,7 +188,7 @@ contains
       do k = 1, size(x_before, 2)
          xk(1:d) = x_before(:, k)
          call cell_wrap(cell, xk(1:d), self%history%v(:, k))
-         if (self%solve_every > 1) then
+         if (self%solve_every > 1 .and. .not. self%departures) then
             xk(1:d) = x_before(:, k)
             call cell_wrap(cell, xk(1:d), self%v_solve(:, k))
             xk(1:d) = x_before(:, k)

@@ -34,6 +34,7 @@ DERIVATIVES = _registry.codes("numerics.stokes.derivative")
 MIXINGS = _registry.codes("numerics.stokes.mixing")
 FIBRE_ENDS = _registry.codes("numerics.stokes.fibre_ends")
 GUESSES = _registry.codes("numerics.stokes.initial_guess")
+REUSES = _registry.codes("numerics.stokes.reuse")
 SCHEMES = _registry.codes("numerics.time_scheme")
 FFT_PLANS = _registry.codes("numerics.stokes.fft_plan")
 #: transforms of the CG operator (fold_settings FOLD_FFT_DOUBLE / FOLD_FFT_SINGLE); fold_run only

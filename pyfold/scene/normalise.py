@@ -74,7 +74,7 @@ LATTICE_CHECK_SAMPLES = 1_000_000
 _STOKES_DATASETS = ("stokes_backend", "stokes_tolerance", "stokes_max_iterations", "stokes_kappa", "stokes_derivative",
                     "stokes_fft_plan", "stokes_mixing", "stokes_subsamples", "stokes_fibre_ends", "stokes_warm_start",
                     "stokes_initial_guess", "stokes_fft_precision", "stokes_rigidity", "stokes_solve_every",
-                    "stokes_fibre_radius_scale")
+                    "stokes_fibre_radius_scale", "stokes_reuse")
 
 
 def _dataset(name: str, value) -> tuple[object, str, str]:

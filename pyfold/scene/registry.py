@@ -460,6 +460,16 @@ SETTINGS: tuple[Setting, ...] = (
             resolved="stokes_solve_every", optional=True,
             legend="a Stokes solve every k-th step, velocities extrapolated linearly in between",
             fortran="STOKES_SOLVE_EVERY", help="a Stokes solve every k-th step only"),
+    Setting("numerics.stokes.reuse", "choice", "linear", ("linear", "jeffery"), _codes(linear=1, jeffery=2),
+            physics=_STOKES, resolved="stokes_reuse", optional=True, identity_at_default=False,
+            legend="velocities between solves: 1 linear extrapolation of the last two solves, 2 each particle's "
+                   "Jeffery velocity at its current state plus that extrapolation of its departure from it",
+            fortran="STOKES_REUSE", fortran_codes="FOLD_REUSE_",
+            help='with solve_every > 1, the velocities of the steps between solves: "linear", the linear '
+                 'extrapolation of the last two solves; "jeffery", each particle\'s dilute Jeffery velocity '
+                 'at its current position and axis plus the linear extrapolation of the solves\' departure '
+                 'from it, so that the rotation in the mean flow is followed every step and only the '
+                 'interactions are extrapolated (docs/physics.md#solve-re-use)'),
     # ---- [output]
     Setting("output.interval", "real", None, lo=0, lo_open=True, units="s",
             default_text="t_end / 100, rounded down to a multiple of dt",

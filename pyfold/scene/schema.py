@@ -262,6 +262,8 @@ class StokesSettings(_Table):
     #: extrapolation in time of the last two solves (contacts still every step). A
     #: speed-accuracy setting (benchmarks/bench_stokes_step.py); 1 = a solve every step
     solve_every: _registered("numerics.stokes.solve_every") = _default("numerics.stokes.solve_every")
+    #: velocities between solves: extrapolated solves, or Jeffery plus extrapolated departures
+    reuse: _registered("numerics.stokes.reuse") = _default("numerics.stokes.reuse")
 
 
 class Numerics(_Table):

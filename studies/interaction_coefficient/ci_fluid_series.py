@@ -113,18 +113,24 @@ DATA = ROOT / "data" / "ci_fluid_coupled"
 
 def scene_of(n_l3: float, model: str, seed: int, t_end: float, beta: float = BETA,
              max_grid_points: int | None = None, fibre_radius_scale: float = 1.0,
-             equivalent_aspect_ratio: str | None = None, dt: float | None = None):
+             equivalent_aspect_ratio: str | None = None, dt: float | None = None,
+             solve_every: int | None = None, reuse: str | None = None):
     """The sweep's builder: ``beta`` fibres at ``n_l3``, ``model`` "stokes" or "jeffery", seed ``seed``
     (``max_grid_points``: the Stokes grid bound, for the finer grids of slender fibres;
     ``fibre_radius_scale``: the Stokes runs' voxelised radius over the geometric one;
     ``equivalent_aspect_ratio``: the rule of the Jeffery β_e both models record, None the default;
-    ``dt``: the time step, None for α/(γ̇L))."""
+    ``dt``: the time step, None for α/(γ̇L); ``solve_every``: the Stokes runs' solve interval in
+    steps, None for STOKES'; ``reuse``: numerics.stokes.reuse of the Stokes runs, None its default)."""
     if model == "jeffery":
         return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D,
                               equivalent_aspect_ratio=equivalent_aspect_ratio, dt=dt)
     stokes = STOKES if max_grid_points is None else {**STOKES, "max_grid_points": int(max_grid_points)}
     if fibre_radius_scale != 1.0:
         stokes = {**stokes, "fibre_radius_scale": float(fibre_radius_scale)}
+    if solve_every is not None:
+        stokes = {**stokes, "solve_every": int(solve_every)}
+    if reuse is not None:
+        stokes = {**stokes, "reuse": str(reuse)}
     return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D, hydrodynamics="stokes",
                           stokes=stokes, time_scheme="ab2", equivalent_aspect_ratio=equivalent_aspect_ratio, dt=dt)
 

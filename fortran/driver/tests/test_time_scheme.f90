@@ -2,6 +2,9 @@
 !> * Euler on the first step, then Adams-Bashforth 2: 1.5 v_n - 0.5 v_(n-1);
 !> * solve re-use: between solves, the linear extrapolation of the last two, and the
 !>   history is that extrapolated velocity;
+!> * re-use by departures: the estimate is the Jeffery velocity given plus the linear
+!>   extrapolation of the pushed departures, and the departures do not jump across a
+!>   sheared face (the Jeffery velocity does);
 !> * keep_good / restore_good return the history of the kept state;
 !> * a particle crossing the sheared face (Lees-Edwards) carries the history across with
 !>   the velocity jump -G_xy Ly, the same jump as its own velocity.
@@ -15,6 +18,7 @@ program test_time_scheme
 
    call ab2_after_euler(failures)
    call reuse_extrapolates(failures)
+   call reuse_by_departures(failures)
    call rollback(failures)
    call history_crosses_sheared_face(failures)
    if (failures /= 0) error stop "test_time_scheme: a check failed (FAILED lines above)"
@@ -74,6 +78,47 @@ contains
       call check(all(v == 1.5_dp*v_est - 0.5_dp*vb), "between solves: AB2 of the extrapolation", failures)
       call check(all(s%history%v == v_est), "the history is the extrapolated velocity", failures)
    end subroutine reuse_extrapolates
+
+   subroutine reuse_by_departures(failures)
+      integer, intent(inout) :: failures
+      type(time_scheme_state_t) :: s
+      type(cell_t) :: cell
+      real(dp) :: da(2, 1), wa(3, 1), db(2, 1), wb(3, 1), vj(2, 1), wj(3, 1), v(2, 1), w(3, 1)
+      real(dp) :: d_est(2, 1), w_est(3, 1), G(3, 3), x(2, 1), x_before(2, 1)
+      integer :: stat
+      character(len=msg_len) :: errmsg
+      da(:, 1) = [0.1_dp, -0.2_dp]
+      wa = 0.05_dp
+      db(:, 1) = [0.15_dp, -0.1_dp]
+      wb = 0.02_dp
+      vj(:, 1) = [3.0_dp, 0.0_dp]
+      wj = -0.5_dp
+      call s%init(FOLD_AB2, 4_ip, 2_ip, 1_ip, departures=.true.)
+      call s%push_solve(da, wa, 0.0_dp)
+      call s%push_solve(db, wb, 0.4_dp)
+      call s%step_velocity(0.4_dp, v, w, vj, wj)
+      call check(all(v == vj + db) .and. all(w == wj + wb), "at the last solve's time: Jeffery + its departure", &
+                 failures)
+      call s%step_velocity(0.5_dp, v, w, 2.0_dp*vj, 2.0_dp*wj)
+      d_est = db + ((0.5_dp - 0.4_dp)/(0.4_dp - 0.0_dp))*(db - da)
+      w_est = wb + ((0.5_dp - 0.4_dp)/(0.4_dp - 0.0_dp))*(wb - wa)
+      call check(all(s%history%v == 2.0_dp*vj + d_est) .and. all(s%history%omega == 2.0_dp*wj + w_est), &
+                 "between solves: the Jeffery velocity of the step + the extrapolated departure", failures)
+      call check(all(v == 1.5_dp*(2.0_dp*vj + d_est) - 0.5_dp*(vj + db)), "combined by AB2", failures)
+      ! across the sheared face only the history jumps; the departures are periodic
+      G = 0.0_dp
+      G(1, 2) = 2.0_dp
+      call cell_init(cell, 2_ip, [4.0_dp, 3.0_dp, 1.0_dp], .false., G, stat, errmsg)
+      call check(stat == FOLD_OK, "cell_init: "//trim(errmsg), failures)
+      call cell_set_time(cell, 0.1_dp)
+      x(:, 1) = [1.0_dp, 3.2_dp]
+      x_before = x
+      call cell_wrap(cell, x(:, 1), v(:, 1))
+      call s%carry_across_wrap(cell, x_before)
+      call check(all(s%v_solve == db) .and. all(s%v_solve_before == da), "departures do not jump", failures)
+      call check(s%history%v(1, 1) == 2.0_dp*vj(1, 1) + d_est(1, 1) - 6.0_dp, "the history jumps by -G_xy Ly", &
+                 failures)
+   end subroutine reuse_by_departures
 
    subroutine rollback(failures)
       integer, intent(inout) :: failures
