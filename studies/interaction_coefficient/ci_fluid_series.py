@@ -48,7 +48,10 @@ Method
     models recording Zhang's β_e, so every fit uses the ξ of the fibres simulated; the shape
     column is then the calibration's residual (the grid fibre's measured β_e at that scale).
     It steps at Δt = 2α/(γ̇L) = 0.02, twice the geometric series' step, both models (the
-    change of C_I measured by studies/speed_accuracy/time_step_beta10.py).
+    change of C_I measured by studies/speed_accuracy/time_step_beta10.py), and its Stokes runs
+    solve every 16th step with numerics.stokes.reuse = "jeffery" between solves; the change of
+    C_I that makes, measured by studies/speed_accuracy/solve_reuse_beta10.py (REUSE_EVIDENCE,
+    which the analysis reads), joins the settings error in quadrature.
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
     run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
     its drift reported).
@@ -69,7 +72,8 @@ Cost (2 cores)
     wall sharing the machine with the resolution study; the analysis about 6 CPU-min.
     β = 10: about 33 CPU-s per unit strain per Stokes run at φβ = 0.5 (7 000 CPU-s per run,
     ~7 CPU-hours per point of 4 seeds; docs/fluid_coupled_ci.md#cost), contacts-only twins ~1 CPU-min;
-    calibrated, at twice the step: 18–19 CPU-s per unit strain (time_step_beta10.py), ~4 CPU-hours per point.
+    calibrated, at twice the step and a solve every 16th step: about 4 CPU-s per unit strain
+    (solve_reuse_beta10.py), ~0.9 CPU-hour per point of 4 seeds at φβ = 0.5.
 
 Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/ [_calibrated/];
 ``--out``)
@@ -146,6 +150,33 @@ def settings_errors(n_l3: float, beta: float = BETA) -> tuple[float, float]:
     ev, _ = choice_for(reg)
     m = next(s for s in ev.settings if s.name == SETTING)
     return ev.settings_error(m)
+
+
+#: The solve-reuse study (studies/speed_accuracy/solve_reuse_beta10.py): the measured change of C_I
+#: of each solve interval and estimate between solves against the series' every 4th step
+REUSE_EVIDENCE = Path("out/speed_accuracy/solve_reuse_beta10/solve_reuse_beta10.nc")
+
+
+def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE) -> tuple[float, float] | None:
+    """(closure-free, trajectory) error of a sweep's solve interval and estimate between solves
+    (``arguments`` solve_every, reuse) against STOKES' every 4th step: the paired change and its
+    s.e. in quadrature, as measured by solve_reuse_beta10.py (closure-free; IBOF trajectory for the
+    trajectory fits); None when the sweep keeps STOKES' solves. SystemExit naming the study when
+    its output is missing or lacks the setting."""
+    import xarray as xr
+
+    if "solve_every" not in arguments and "reuse" not in arguments:
+        return None
+    name = f"every {int(arguments.get('solve_every', STOKES['solve_every']))}, {arguments.get('reuse', 'linear')}"
+    if not evidence.is_file():
+        raise SystemExit(f"the sweep solves '{name}': its change of C_I is measured by "
+                         f"studies/speed_accuracy/solve_reuse_beta10.py, whose {evidence} is missing; run it first")
+    with xr.open_dataset(evidence, engine="h5netcdf") as ds:
+        if name not in list(ds["setting"].values):
+            raise SystemExit(f"{evidence} has no setting '{name}' (it has {list(ds['setting'].values)})")
+        row = ds.sel(setting=name)
+        return tuple(math.hypot(float(row[f"change_{est}"]), float(row[f"change_{est}_stderr"]))
+                     for est in ("closure_free", "ibof_trajectory"))
 
 
 def xi_sensitivity(rep, xi_grid: float, fits_out: dict[str, list[float]] | None = None
@@ -381,7 +412,10 @@ def cpu_of(path: Path) -> float:
 
 
 def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path,
-            beta: float = BETA) -> None:
+            beta: float = BETA, reuse: tuple[float, float] | None = None, stokes: dict | None = None) -> None:
+    """The tables, report and figure of the finished runs ``done``; ``reuse``: the (closure-free,
+    trajectory) error of the sweep's solve interval against STOKES' (reuse_errors), added to the
+    settings error in quadrature; ``stokes``: the Stokes numerics the sweep runs (STOKES by default)."""
     from pyfold.correlations import fluid_coupled_table
     from pyfold.ensemble import paired_difference
     from pyfold.report import build_report, write_report
@@ -409,6 +443,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
             print(f"n L^3 {n_l3:g}: {len(have)} finished pair(s) of runs; left out")
             continue
         settings = settings_errors(n_l3, beta)
+        if reuse is not None:
+            settings = tuple(math.hypot(a, b) for a, b in zip(settings, reuse))
         grid_fits: dict[str, list[float]] = {}  # the Stokes runs' trajectory fits with the grid fibre's ξ
         for model in MODELS:
             paths = [done[(n_l3, model), s] for s in have]
@@ -442,10 +478,13 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
              "scene": f"pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = "
                       f"{first.dt:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
                       f"Stokes grid {grid}",
-             "stokes_numerics": f"{STOKES}, ab2 (setting {SETTING} of studies/speed_accuracy/ci_stokes_settings.py)",
+             "stokes_numerics": f"{stokes or STOKES}, ab2 (setting {SETTING} of studies/speed_accuracy/ci_stokes_settings.py"
+                                + (", with the solve interval of studies/speed_accuracy/solve_reuse_beta10.py)"
+                                   if reuse is not None else ")"),
              "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
                            "Folgar-Tucker fit to a2(t) over two Jeffery periods (pyfold.report)",
-             "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting; shape: change "
+             "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting"
+                       + (" and of its solve interval, in quadrature" if reuse is not None else "") + "; shape: change "
                        f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
                        "3-voxel C_I against the Richardson limit (ci_resolution.py; beta = 5 only, NaN = not "
                        "measured and left out of the total: resolution_in_total = 0); total: in quadrature",
@@ -503,7 +542,9 @@ def main() -> None:
     for values, seed in done:
         point = dict(zip(spec.axes, values))  # point values in the order of spec.axes
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
-    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, args.resolution, args.beta)
+    reuse = reuse_errors(spec.arguments)
+    stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse") if k in spec.arguments}}
+    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, args.resolution, args.beta, reuse, stokes)
     print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
 
 

@@ -98,9 +98,9 @@ def test_the_beta10_series_is_the_beta5_series_at_twice_the_aspect_ratio():
 def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_radius_and_zhangs_beta_e():
     """ci_fluid_series_beta10_calibrated.toml: the points and seeds of the geometric β = 10 series;
     each scene differs from its geometric one only by the Stokes runs' fibre radius scale (> 1) and
-    the β_e rule both models record (Zhang's, what the calibration aims the grid fibre at), so the
-    initial states and the numerics are the same; and the calibration it quotes is that of
-    docs/fluid_coupled_ci.md's table (1.212 on 72³)."""
+    the β_e rule both models record (Zhang's, what the calibration aims the grid fibre at), the step
+    (twice) and the Stokes runs' solves (every 16th step, Jeffery between), so the initial states are
+    the same; and the calibration it quotes is that of docs/fluid_coupled_ci.md's table (1.212 on 72³)."""
     import tomllib
 
     from pyfold.kinematics import equivalent_aspect_ratio
@@ -109,7 +109,7 @@ def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_rad
                   for n in ("ci_fluid_series_beta10", "ci_fluid_series_beta10_calibrated"))
     assert cal.points == plain.points and cal.seeds == plain.seeds
     assert cal.arguments == {**plain.arguments, "fibre_radius_scale": 1.212, "equivalent_aspect_ratio": "zhang",
-                             "dt": 0.02}
+                             "dt": 0.02, "solve_every": 16, "reuse": "jeffery"}
     for point in cal.points:
         a = tomllib.loads(series.scene_of(**point, seed=2, **cal.arguments).toml)
         b = tomllib.loads(series.scene_of(**point, seed=2, **plain.arguments).toml)
@@ -117,6 +117,9 @@ def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_rad
         assert a["numerics"].pop("dt") == 2 * b["numerics"].pop("dt") == 0.02  # time_step_beta10.py
         if point["model"] == "stokes":
             assert a["numerics"]["stokes"].pop("fibre_radius_scale") == 1.212
+            # solve_reuse_beta10.py: a solve every 16th step, Jeffery between solves
+            assert (a["numerics"]["stokes"].pop("reuse"), a["numerics"]["stokes"].pop("solve_every")) == ("jeffery", 16)
+            assert b["numerics"]["stokes"].pop("solve_every") == 4
         assert a == b
         checked = parse_scene(series.scene_of(**point, seed=2, **cal.arguments).toml)
         assert checked.families[0].equivalent_aspect_ratio == pytest.approx(
@@ -135,16 +138,47 @@ def test_the_time_step_runs_are_the_calibrated_beta10_stokes_runs_at_twice_the_s
                  for n in ("time_step_beta10", "ci_fluid_series_beta10_calibrated"))
     assert spec.seeds == cal.seeds
     args = {k: v for k, v in spec.arguments.items() if k not in study.POINT and k != "t_end"}
-    assert args == {k: v for k, v in cal.arguments.items() if k not in ("t_end", "dt")}
+    assert args == {k: v for k, v in cal.arguments.items() if k not in ("t_end", *study.SERIES_AT_FIRST)}
     assert study.POINT in [dict(p) for p in cal.points]
     for point in spec.points:
         a = tomllib.loads(series.scene_of(**point, seed=3, **spec.arguments).toml)
-        b = tomllib.loads(series.scene_of(**study.POINT, seed=3, **{**cal.arguments, "dt": None}).toml)
+        b = tomllib.loads(series.scene_of(**study.POINT, seed=3, **{**cal.arguments, **study.SERIES_AT_FIRST}).toml)
         assert a["numerics"].pop("dt") == pytest.approx(2 * b["numerics"].pop("dt")) == 0.02
         assert a["numerics"].pop("t_end") == study.STRAIN
         b["numerics"].pop("t_end")
         a["output"].pop("snapshot_interval"), b["output"].pop("snapshot_interval")
         assert a == b
+
+
+def test_the_solve_reuse_runs_are_the_calibrated_beta10_stokes_runs_with_other_solve_intervals():
+    """studies/speed_accuracy/solve_reuse_beta10.py pairs each setting with its first point seed by
+    seed: every scene is the calibrated β = 10 series' φβ = 0.5 Stokes scene (same step) with only
+    the end, the snapshot interval and the solve interval and estimate between solves changed, and
+    the first point is the series' own setting (its reference)."""
+    import tomllib
+
+    study = import_study("speed_accuracy", "solve_reuse_beta10")
+    spec, cal = (load_form(STUDIES / "sweeps", n, False)
+                 for n in ("solve_reuse_beta10", "ci_fluid_series_beta10_calibrated"))
+    assert spec.seeds == cal.seeds
+    series_point = {"n_l3": spec.arguments["n_l3"], "model": spec.arguments["model"]}
+    assert series_point in [dict(p) for p in cal.points]
+    first = {"solve_every": None, "reuse": None}  # the series before it took a setting of this study
+    assert {k: v for k, v in spec.arguments.items() if k not in ("t_end", "n_l3", "model")} == \
+        {k: v for k, v in cal.arguments.items() if k not in ("t_end", *first)}
+    b = tomllib.loads(series.scene_of(**series_point, seed=3, **{**cal.arguments, **first}).toml)
+    b["numerics"].pop("t_end"), b["output"].pop("snapshot_interval")
+    assert study.label(dict(spec.points[0])) == "every 4, linear"
+    assert b["numerics"]["stokes"]["solve_every"] == 4 and "reuse" not in b["numerics"]["stokes"]
+    for point in spec.points:
+        a = tomllib.loads(series.scene_of(**point, seed=3, **spec.arguments).toml)
+        assert a["numerics"].pop("t_end") == 20.0
+        a["output"].pop("snapshot_interval")
+        stokes = a["numerics"]["stokes"]
+        assert stokes.pop("reuse") == point["reuse"]
+        stokes["solve_every"] = 4
+        assert a == b
+    assert len({study.label(dict(p)) for p in spec.points}) == len(spec.points)
 
 
 def test_the_series_and_its_twins_share_the_initial_state_and_step():

@@ -494,10 +494,11 @@ def test_solve_reuse_by_jeffery_departures_follows_the_rotation_between_solves(t
     curvature of the rate itself, ~ (k dt)^2 lambda gamma_dot^2; the Jeffery estimate's by
     that of the departure only: the voxelised body's shape factor lambda_g against the
     recorded lambda (5 % here, from two static solves) and the periodic images sliding past
-    (of the same order in this cell, n L^3 = 0.05). So the error must fall by about ten;
-    the test asks a factor 4, which fails if the rotation between solves were extrapolated
-    rather than followed (a missing or wrong Jeffery part: a factor near 1). Steps without
-    a solve record 0 CG iterations."""
+    the body with the Lees-Edwards lattice, which in this small cell (n L^3 = 0.05) vary from
+    step to step. Measured: the largest angle error over the orbit falls 5.6-fold (19-fold at
+    its end). The test asks a factor 2: a missing or wrong Jeffery part, i.e. the rotation
+    between solves extrapolated rather than followed, gives a factor near 1. Steps without a
+    solve record 0 CG iterations."""
     require_fold_run()
     from pyfold.native.stokes import Particles, solve_particles
 
@@ -528,4 +529,4 @@ def test_solve_reuse_by_jeffery_departures_follows_the_rotation_between_solves(t
     lam_g = om[0] - om[1]
     assert abs(lam_g - xi_of(beta)) / lam_g < 0.1  # the shape part of the departure, as stated
     e_lin, e_jef = (np.abs(theta[k, r] - theta[1, "linear"]).max() for r in ("linear", "jeffery"))
-    assert e_jef < e_lin / 4, (e_jef, e_lin)
+    assert e_jef < e_lin / 2, (e_jef, e_lin)
