@@ -40,8 +40,11 @@ Method
     Richardson limit measured by ci_resolution.py on the semi-dilute scene (three grids,
     paired seeds; closure-free for the rate regressions, IBOF for the trajectory fits;
     applied to every concentration). The total error is the four in quadrature. At β = 10 the
-    settings error is the β = 5 regime's (not measured at β = 10) and the resolution error is not
-    measured: its column is NaN, ``resolution_in_total`` = 0 and the total leaves it out.
+    settings error is the β = 5 regime's (not measured at β = 10); the geometric series' resolution
+    error is not measured: its column is NaN, ``resolution_in_total`` = 0 and the total leaves it out.
+    The calibrated series' is the change of its C_I from 72³ to 96³ (both calibrated) measured by
+    ci_resolution_beta10.py on the φβ = 0.5 scene (RESOLUTION_BETA10; applied to every
+    concentration; left out, as unmeasured, while that file is missing).
     ``--beta 10 --calibrated`` (ci_fluid_series_beta10_calibrated.toml): the same scenes and
     seeds, the Stokes runs' fibres voxelised at 1.212 times their radius (one fibre on 72³ then
     turns with β_e 7.63, the converged cylinder's, ci_resolution.py's calibrate_scale) and both
@@ -118,13 +121,14 @@ DATA = ROOT / "data" / "ci_fluid_coupled"
 def scene_of(n_l3: float, model: str, seed: int, t_end: float, beta: float = BETA,
              max_grid_points: int | None = None, fibre_radius_scale: float = 1.0,
              equivalent_aspect_ratio: str | None = None, dt: float | None = None,
-             solve_every: int | None = None, reuse: str | None = None):
+             solve_every: int | None = None, reuse: str | None = None, cells_per_diameter: int | None = None):
     """The sweep's builder: ``beta`` fibres at ``n_l3``, ``model`` "stokes" or "jeffery", seed ``seed``
     (``max_grid_points``: the Stokes grid bound, for the finer grids of slender fibres;
     ``fibre_radius_scale``: the Stokes runs' voxelised radius over the geometric one;
     ``equivalent_aspect_ratio``: the rule of the Jeffery β_e both models record, None the default;
     ``dt``: the time step, None for α/(γ̇L); ``solve_every``: the Stokes runs' solve interval in
-    steps, None for STOKES'; ``reuse``: numerics.stokes.reuse of the Stokes runs, None its default)."""
+    steps, None for STOKES'; ``reuse``: numerics.stokes.reuse of the Stokes runs, None its default;
+    ``cells_per_diameter``: the Stokes grid's voxels per diameter, None for STOKES')."""
     if model == "jeffery":
         return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D,
                               equivalent_aspect_ratio=equivalent_aspect_ratio, dt=dt)
@@ -135,6 +139,8 @@ def scene_of(n_l3: float, model: str, seed: int, t_end: float, beta: float = BET
         stokes = {**stokes, "solve_every": int(solve_every)}
     if reuse is not None:
         stokes = {**stokes, "reuse": str(reuse)}
+    if cells_per_diameter is not None:
+        stokes = {**stokes, "cells_per_diameter": int(cells_per_diameter)}
     return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D, hydrodynamics="stokes",
                           stokes=stokes, time_scheme="ab2", equivalent_aspect_ratio=equivalent_aspect_ratio, dt=dt)
 
@@ -249,9 +255,16 @@ def grid_xi(out: Path, run: Path, beta: float = BETA) -> tuple[float, float]:
     return beta_e, float(aspect_ratio_to_xi(beta_e))
 
 
-def resolution_errors(path: Path) -> tuple[float, float]:
-    """(closure-free, trajectory) resolution error of the 3-voxel C_I: the bias C(3) − C∞ measured by
-    ci_resolution.py (|mean| and its s.e. in quadrature; ξ of Cox, as the runs here), NaN when absent."""
+#: The β = 10 resolution check of the calibrated series (ci_resolution_beta10.py: 72³ against 96³)
+RESOLUTION_BETA10 = Path("out/interaction_coefficient/resolution_beta10/ci_resolution_beta10.json")
+
+
+def resolution_errors(path: Path, keys: tuple[str, str] = ("closure_free_cox", "ibof_trajectory_cox")
+                      ) -> tuple[float, float]:
+    """(closure-free, trajectory) resolution error of the 3-voxel C_I: the bias of the coarse grid
+    measured by ci_resolution.py (against the Richardson limit; ξ of Cox, as the β = 5 runs here) or,
+    with ``keys`` ("closure_free", "ibof_trajectory"), by ci_resolution_beta10.py (against 96³; the
+    recorded ξ, as the calibrated runs): |mean| and its s.e. in quadrature, NaN when absent."""
     import json
 
     if not path.is_file():
@@ -262,7 +275,7 @@ def resolution_errors(path: Path) -> tuple[float, float]:
         b = summary[key]
         return math.hypot(b["coarse_bias"], b["coarse_bias_stderr"])
 
-    return one("closure_free_cox"), one("ibof_trajectory_cox")
+    return one(keys[0]), one(keys[1])
 
 
 def table_rows(n_l3: float, model: str, rep, settings: tuple[float, float], xi_shift: dict,
@@ -420,8 +433,15 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     from pyfold.ensemble import paired_difference
     from pyfold.report import build_report, write_report
 
-    # the resolution study measured the β = 5 semi-dilute scene: its bias is not carried to another β
-    resolution = resolution_errors(resolution_file) if beta == BETA else (math.nan, math.nan)
+    # the β = 5 resolution study measured the β = 5 semi-dilute scene; the calibrated β = 10 series has its own
+    # (resolution_file RESOLUTION_BETA10), the geometric β = 10 series none
+    if beta == BETA:
+        resolution = resolution_errors(resolution_file)
+    elif resolution_file == RESOLUTION_BETA10:
+        resolution = resolution_errors(resolution_file, ("closure_free", "ibof_trajectory"))
+    else:
+        resolution = (math.nan, math.nan)
+    measured_beta10 = beta != BETA and all(math.isfinite(v) for v in resolution)
     if beta == BETA and not all(math.isfinite(v) for v in resolution):
         print(f"--resolution: {resolution_file} is missing: the total errors are NaN (run ci_resolution.py)",
               file=sys.stderr)
@@ -453,7 +473,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
             reps[n_l3, model] = rep
             cost[n_l3, model] = float(np.mean([cpu_of(p) for p in paths]))
             shift = xi_sensitivity(rep, xi_grid, grid_fits) if model == "stokes" else {}
-            rows += table_rows(n_l3, model, rep, settings, shift, resolution, beta, resolution_unmeasured=beta != BETA)
+            rows += table_rows(n_l3, model, rep, settings, shift, resolution, beta,
+                               resolution_unmeasured=beta != BETA and not measured_beta10)
             print(f"n L^3 {n_l3:g} {model}: analysed {len(paths)} runs", flush=True)
         f, j = reps[n_l3, "stokes"], reps[n_l3, "jeffery"]
         d = paired_difference([r.ci["exact"] for r in f.runs], [r.ci["exact"] for r in j.runs])
@@ -486,8 +507,10 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
              "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting"
                        + (" and of its solve interval, in quadrature" if reuse is not None else "") + "; shape: change "
                        f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
-                       "3-voxel C_I against the Richardson limit (ci_resolution.py; beta = 5 only, NaN = not "
-                       "measured and left out of the total: resolution_in_total = 0); total: in quadrature",
+                       + ("3-voxel C_I against the Richardson limit (ci_resolution.py)" if beta == BETA else
+                          "72^3 C_I against 96^3, both calibrated (ci_resolution_beta10.py)" if measured_beta10 else
+                          "not measured at this beta")
+                       + " (NaN = not measured and left out of the total: resolution_in_total = 0); total: in quadrature",
              "seeds": " ".join(map(str, seeds))}
     write_table(rows, out / "ci_fluid_series", attrs)
     if write_data:
@@ -544,7 +567,8 @@ def main() -> None:
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
     reuse = reuse_errors(spec.arguments)
     stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse") if k in spec.arguments}}
-    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, args.resolution, args.beta, reuse, stokes)
+    resolution = RESOLUTION_BETA10 if args.beta != BETA and args.calibrated else args.resolution
+    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, resolution, args.beta, reuse, stokes)
     print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
 
 

@@ -181,6 +181,60 @@ def test_the_solve_reuse_runs_are_the_calibrated_beta10_stokes_runs_with_other_s
     assert len({study.label(dict(p)) for p in spec.points}) == len(spec.points)
 
 
+def test_the_beta10_resolution_runs_are_the_calibrated_series_on_two_calibrated_grids():
+    """studies/interaction_coefficient/ci_resolution_beta10.py: its 72³ scene is the calibrated β = 10
+    series' φβ = 0.5 Stokes scene (same step, solves, radius scale) with a shorter end; its 96³ scene
+    differs from that by the grid and the radius scale calibrated there (docs/fluid_coupled_ci.md's
+    table: 1.100), so a seed's runs share their initial state."""
+    import tomllib
+
+    spec, cal = (load_form(STUDIES / "sweeps", n, False)
+                 for n in ("ci_resolution_beta10_calibrated", "ci_fluid_series_beta10_calibrated"))
+    assert spec.seeds == cal.seeds
+    point = {"n_l3": spec.arguments["n_l3"], "model": spec.arguments["model"]}
+    assert point in [dict(p) for p in cal.points]
+    b = tomllib.loads(series.scene_of(**point, seed=1, **cal.arguments).toml)
+    b["numerics"].pop("t_end"), b["output"].pop("snapshot_interval")
+    scales = {}
+    for pt in spec.points:
+        a = tomllib.loads(series.scene_of(**pt, seed=1, **spec.arguments).toml)
+        assert a["numerics"].pop("t_end") == 20.0
+        a["output"].pop("snapshot_interval")
+        st = a["numerics"]["stokes"]
+        scales[st["cells_per_diameter"]] = st.pop("fibre_radius_scale")
+        st["cells_per_diameter"] = 3
+        st["max_grid_points"] = b["numerics"]["stokes"]["max_grid_points"]
+        st["fibre_radius_scale"] = b["numerics"]["stokes"]["fibre_radius_scale"]
+        assert a == b
+    assert scales == {3: 1.212, 4: 1.1}
+
+
+def test_the_series_reads_the_measured_change_of_its_solves_and_resolution(tmp_path):
+    """ci_fluid_series.reuse_errors: the error of a sweep's solve interval is the solve-reuse study's
+    paired change of that setting ⊕ its s.e. (closure-free, IBOF trajectory); none for the series'
+    own every 4th step; a missing study or setting stops the analysis naming it.
+    resolution_errors reads the β = 10 check's summary the same way."""
+    import json
+
+    import xarray as xr
+
+    nc = tmp_path / "reuse.nc"
+    xr.Dataset({"change_closure_free": ("setting", [0.0, 3e-5]), "change_closure_free_stderr": ("setting", [0.0, 4e-5]),
+                "change_ibof_trajectory": ("setting", [0.0, -5e-5]),
+                "change_ibof_trajectory_stderr": ("setting", [0.0, 12e-5])},
+               coords={"setting": ["every 4, linear", "every 16, jeffery"]}).to_netcdf(nc, engine="h5netcdf")
+    assert series.reuse_errors({"dt": 0.02}, nc) is None
+    assert series.reuse_errors({"solve_every": 16, "reuse": "jeffery"}, nc) == pytest.approx((5e-5, 13e-5))
+    with pytest.raises(SystemExit, match="every 8, jeffery"):
+        series.reuse_errors({"solve_every": 8, "reuse": "jeffery"}, nc)
+    with pytest.raises(SystemExit, match="solve_reuse_beta10.py"):
+        series.reuse_errors({"solve_every": 16, "reuse": "jeffery"}, tmp_path / "missing.nc")
+    js = tmp_path / "res.json"
+    js.write_text(json.dumps({"closure_free": {"coarse_bias": 3e-4, "coarse_bias_stderr": 4e-4},
+                              "ibof_trajectory": {"coarse_bias": -6e-4, "coarse_bias_stderr": 8e-4}}))
+    assert series.resolution_errors(js, ("closure_free", "ibof_trajectory")) == pytest.approx((5e-4, 1e-3))
+
+
 def test_the_series_and_its_twins_share_the_initial_state_and_step():
     """A seed's Stokes run and contacts-only twin differ in the model only (paired comparison)."""
     import tomllib
