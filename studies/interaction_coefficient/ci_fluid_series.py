@@ -53,7 +53,7 @@ Method
     It steps at Δt = 2α/(γ̇L) = 0.02, twice the geometric series' step, both models (the
     change of C_I measured by studies/speed_accuracy/time_step_beta10.py), and its Stokes runs
     solve every 16th step with numerics.stokes.reuse = "jeffery" between solves; the change of
-    C_I that makes, measured by studies/speed_accuracy/solve_reuse_beta10.py (REUSE_EVIDENCE,
+    C_I that makes, measured by studies/speed_accuracy/solve_reuse.py --beta 10 (REUSE_EVIDENCE,
     which the analysis reads), joins the settings error in quadrature.
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
     run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
@@ -76,7 +76,7 @@ Cost (2 cores)
     β = 10: about 33 CPU-s per unit strain per Stokes run at φβ = 0.5 (7 000 CPU-s per run,
     ~7 CPU-hours per point of 4 seeds; docs/fluid_coupled_ci.md#cost), contacts-only twins ~1 CPU-min;
     calibrated, at twice the step and a solve every 16th step: about 4 CPU-s per unit strain
-    (solve_reuse_beta10.py), ~0.9 CPU-hour per point of 4 seeds at φβ = 0.5.
+    (solve_reuse.py), ~0.9 CPU-hour per point of 4 seeds at φβ = 0.5.
 
 Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/ [_calibrated/];
 ``--out``)
@@ -158,15 +158,15 @@ def settings_errors(n_l3: float, beta: float = BETA) -> tuple[float, float]:
     return ev.settings_error(m)
 
 
-#: The solve-reuse study (studies/speed_accuracy/solve_reuse_beta10.py): the measured change of C_I
+#: The solve-reuse study (studies/speed_accuracy/solve_reuse.py --beta 10): the measured change of C_I
 #: of each solve interval and estimate between solves against the series' every 4th step
-REUSE_EVIDENCE = Path("out/speed_accuracy/solve_reuse_beta10/solve_reuse_beta10.nc")
+REUSE_EVIDENCE = Path("out/speed_accuracy/solve_reuse_beta10/solve_reuse.nc")
 
 
 def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE) -> tuple[float, float] | None:
     """(closure-free, trajectory) error of a sweep's solve interval and estimate between solves
     (``arguments`` solve_every, reuse) against STOKES' every 4th step: the paired change and its
-    s.e. in quadrature, as measured by solve_reuse_beta10.py (closure-free; IBOF trajectory for the
+    s.e. in quadrature, as measured by solve_reuse.py (closure-free; IBOF trajectory for the
     trajectory fits); None when the sweep keeps STOKES' solves. SystemExit naming the study when
     its output is missing or lacks the setting."""
     import xarray as xr
@@ -176,7 +176,7 @@ def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE) -> tuple[floa
     name = f"every {int(arguments.get('solve_every', STOKES['solve_every']))}, {arguments.get('reuse', 'linear')}"
     if not evidence.is_file():
         raise SystemExit(f"the sweep solves '{name}': its change of C_I is measured by "
-                         f"studies/speed_accuracy/solve_reuse_beta10.py, whose {evidence} is missing; run it first")
+                         f"studies/speed_accuracy/solve_reuse.py --beta 10, whose {evidence} is missing; run it first")
     with xr.open_dataset(evidence, engine="h5netcdf") as ds:
         if name not in list(ds["setting"].values):
             raise SystemExit(f"{evidence} has no setting '{name}' (it has {list(ds['setting'].values)})")
@@ -500,7 +500,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
                       f"{first.dt:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
                       f"Stokes grid {grid}",
              "stokes_numerics": f"{stokes or STOKES}, ab2 (setting {SETTING} of studies/speed_accuracy/ci_stokes_settings.py"
-                                + (", with the solve interval of studies/speed_accuracy/solve_reuse_beta10.py)"
+                                + (", with the solve interval of studies/speed_accuracy/solve_reuse.py --beta 10)"
                                    if reuse is not None else ")"),
              "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
                            "Folgar-Tucker fit to a2(t) over two Jeffery periods (pyfold.report)",

@@ -117,7 +117,7 @@ def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_rad
         assert a["numerics"].pop("dt") == 2 * b["numerics"].pop("dt") == 0.02  # time_step_beta10.py
         if point["model"] == "stokes":
             assert a["numerics"]["stokes"].pop("fibre_radius_scale") == 1.212
-            # solve_reuse_beta10.py: a solve every 16th step, Jeffery between solves
+            # solve_reuse.py: a solve every 16th step, Jeffery between solves
             assert (a["numerics"]["stokes"].pop("reuse"), a["numerics"]["stokes"].pop("solve_every")) == ("jeffery", 16)
             assert b["numerics"]["stokes"].pop("solve_every") == 4
         assert a == b
@@ -151,13 +151,13 @@ def test_the_time_step_runs_are_the_calibrated_beta10_stokes_runs_at_twice_the_s
 
 
 def test_the_solve_reuse_runs_are_the_calibrated_beta10_stokes_runs_with_other_solve_intervals():
-    """studies/speed_accuracy/solve_reuse_beta10.py pairs each setting with its first point seed by
+    """studies/speed_accuracy/solve_reuse.py pairs each setting with its first point seed by
     seed: every scene is the calibrated β = 10 series' φβ = 0.5 Stokes scene (same step) with only
     the end, the snapshot interval and the solve interval and estimate between solves changed, and
     the first point is the series' own setting (its reference)."""
     import tomllib
 
-    study = import_study("speed_accuracy", "solve_reuse_beta10")
+    study = import_study("speed_accuracy", "solve_reuse")
     spec, cal = (load_form(STUDIES / "sweeps", n, False)
                  for n in ("solve_reuse_beta10", "ci_fluid_series_beta10_calibrated"))
     assert spec.seeds == cal.seeds
@@ -227,7 +227,7 @@ def test_the_series_reads_the_measured_change_of_its_solves_and_resolution(tmp_p
     assert series.reuse_errors({"solve_every": 16, "reuse": "jeffery"}, nc) == pytest.approx((5e-5, 13e-5))
     with pytest.raises(SystemExit, match="every 8, jeffery"):
         series.reuse_errors({"solve_every": 8, "reuse": "jeffery"}, nc)
-    with pytest.raises(SystemExit, match="solve_reuse_beta10.py"):
+    with pytest.raises(SystemExit, match="solve_reuse.py"):
         series.reuse_errors({"solve_every": 16, "reuse": "jeffery"}, tmp_path / "missing.nc")
     js = tmp_path / "res.json"
     js.write_text(json.dumps({"closure_free": {"coarse_bias": 3e-4, "coarse_bias_stderr": 4e-4},

@@ -1,28 +1,30 @@
-"""Fewer Stokes solves for β = 10 fibres: what does each save, and does it move C_I?
+"""Fewer Stokes solves: what does each save, and does it move the fluid-coupled C_I?
 
 Question
-    A calibrated β = 10 point (studies/interaction_coefficient/ci_fluid_series.py --beta 10
-    --calibrated) costs about 4 CPU-hours for 4 seeds to strain 200, nearly all of it in the Stokes
-    solves: a solve every 4th step at Δt = 0.02 is 12.5 solves per unit strain, 55–62 CG
-    iterations each on the 72³ grid. Between solves the velocities are estimated; the series
-    extrapolates the last two solves linearly (``numerics.stokes.reuse = "linear"``), which
-    follows a tumbling fibre's angular velocity badly once the interval is a sizeable part of its
-    flip. ``reuse = "jeffery"`` follows each particle's rotation in the mean flow every step
-    (its dilute Jeffery velocity at its current axis) and extrapolates only the departure of
-    the solves from it, which the interactions make. How far can the solve interval grow with
-    each estimate before the fluid-coupled C_I moves by half its statistical error, and what
-    does that save?
+    A fluid-coupled point costs nearly all its CPU time in the Stokes solves. A calibrated β = 10
+    point (studies/interaction_coefficient/ci_fluid_series.py --beta 10 --calibrated) with a solve
+    every 4th step at Δt = 0.02 makes 12.5 solves per unit strain, 55–62 CG iterations each on the
+    72³ grid: about 4 CPU-hours for 4 seeds to strain 200; the β = 5 series (42³) a quarter of
+    that per unit strain. Between solves the velocities are estimated; the series extrapolate the
+    last two solves linearly (``numerics.stokes.reuse = "linear"``), which follows a tumbling
+    fibre's angular velocity badly once the interval is a sizeable part of its flip.
+    ``reuse = "jeffery"`` follows each particle's rotation in the mean flow every step (its dilute
+    Jeffery velocity at its current axis) and extrapolates only the departure of the solves from
+    it, which the interactions make. How far can the solve interval grow with each estimate
+    before the fluid-coupled C_I moves by half its statistical error, and what does that save?
 
 Method
-    The calibrated series' Stokes scene at φβ = 0.5 (n L³ = 6.4: 88 fibres, cell 2.4 L, 72³ grid,
-    fibres voxelised at 1.212 R, Zhang's β_e = 7.61 recorded, κ = 10³, CG tolerance 10⁻³, AB2,
-    Δt = 0.02), seeds 1–4, strain 20, at the intervals and estimates of
-    studies/sweeps/solve_reuse_beta10.toml; its first point is the series' own setting (a solve
-    every 4th step, linear), the reference. A seed fixes the initial state (checked: the initial
-    axes are equal bit for bit), so the changes are paired. Per run, as
-    studies/speed_accuracy/time_step_beta10.py measures them: the closure-free C_I (rate
-    regression with the run's own a4) and the IBOF trajectory fit over strain 0–20, both with the
-    ξ the runs record; the RMS change of a2(t) against the reference run; the median CG
+    ``--beta 10`` (studies/sweeps/solve_reuse_beta10.toml): the calibrated β = 10 series' Stokes
+    scene at φβ = 0.5 (n L³ = 6.4: 88 fibres, cell 2.4 L, 72³ grid, fibres voxelised at 1.212 R,
+    Zhang's β_e = 7.61 recorded, κ = 10³, CG tolerance 10⁻³, AB2, Δt = 0.02). ``--beta 5``
+    (solve_reuse_beta5.toml): the β = 5 series' semi-dilute Stokes scene (n L³ = 4.98: 98 fibres,
+    cell 2.7 L, 42³ grid, geometric radius, Cox's β_e, the same Stokes numerics, Δt = 0.02).
+    Seeds 1–4, strain 20, at the intervals and estimates of the sweep file; its first point is the
+    series' own setting (a solve every 4th step, linear), the reference. A seed fixes the
+    initial state (checked: the initial axes are equal bit for bit), so the changes are paired.
+    Per run, as studies/speed_accuracy/time_step_beta10.py measures them: the closure-free C_I
+    (rate regression with the run's own a4) and the IBOF trajectory fit over strain 0–20, both
+    with the ξ the runs record; the RMS change of a2(t) against the reference run; the median CG
     iterations per solve; the smallest gap over α; the CPU time (the sweep's attempts). Per
     setting and estimator: the paired change (pyfold.ensemble.paired_difference) in units of the
     reference's ensemble error (pyfold.ensemble.ensemble_mean): admissible at ≤ 0.5, the rule of
@@ -30,20 +32,20 @@ Method
     the change plus twice its s.e. stays within that too (else 4 seeds cannot tell).
 
 Command
-    .venv/bin/python studies/speed_accuracy/solve_reuse_beta10.py [--analyse-only]
+    .venv/bin/python studies/speed_accuracy/solve_reuse.py [--beta 10|5] [--analyse-only]
 
 Cost (2 cores)
-    The reference runs cost 360–380 CPU-s each; the settings with fewer solves less (the table
-    gives each); the whole sweep of 20 runs is about 1 CPU-hour, 35 min wall. The analysis about a
+    β = 10: the reference runs 290 CPU-s each, the others less (the table gives each); the sweep
+    of 20 runs about 1 CPU-hour, 35 min wall. β = 5: about 0.2 CPU-hour. The analysis about a
     CPU-minute.
 
-Outputs (under out/speed_accuracy/solve_reuse_beta10/, ``--out``)
+Outputs (under out/speed_accuracy/solve_reuse_beta<β>/, ``--out``)
     sweep/                      the runs (pyfold sweep folder)
-    solve_reuse_beta10.md       per setting: CPU time, CG iterations, a2 change and both C_I changes
-    solve_reuse_beta10.nc       C_I per setting and seed; per setting the CPU time and the paired change of
-                                each estimator with its s.e. (ci_fluid_series.py --beta 10 --calibrated
-                                reads the change of the setting its sweep uses as part of the settings error)
-    solve_reuse_beta10.png      change of C_I in statistical errors against CPU time per run
+    solve_reuse.md              per setting: CPU time, CG iterations, a2 change and both C_I changes
+    solve_reuse.nc              C_I per setting and seed; per setting the CPU time and the paired change of
+                                each estimator with its s.e. (ci_fluid_series.py reads the change of the
+                                setting its sweep uses as part of the settings error)
+    solve_reuse.png             change of C_I in statistical errors against CPU time per run
 """
 from __future__ import annotations
 
@@ -59,7 +61,9 @@ sys.path.insert(0, str(ROOT / "studies" / "speed_accuracy"))
 from ci_stokes_settings import ADMISSIBLE_FRACTION  # noqa: E402
 from time_step_beta10 import measure  # noqa: E402
 
-SWEEP = "solve_reuse_beta10"
+#: The sweep of each aspect ratio (studies/sweeps/<name>.toml) and what its scene is
+SWEEPS = {10.0: ("solve_reuse_beta10", "φβ = 0.5, calibrated radius"),
+          5.0: ("solve_reuse_beta5", "n L³ = 4.98, geometric radius")}
 ESTIMATORS = ("closure_free", "ibof_trajectory")
 
 
@@ -75,10 +79,13 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
-    ap.add_argument("--out", type=Path, default=Path("out/speed_accuracy/solve_reuse_beta10"))
+    ap.add_argument("--beta", type=float, default=10.0, choices=sorted(SWEEPS), help="fibre aspect ratio: its sweep")
+    ap.add_argument("--out", type=Path, default=None, help="output folder (out/speed_accuracy/solve_reuse_beta<β>)")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
-    spec = sweep_study.load_form(ROOT / "studies" / "sweeps", SWEEP, False)
+    sweep, scene = SWEEPS[args.beta]
+    args.out = args.out or Path(f"out/speed_accuracy/solve_reuse_beta{args.beta:g}")
+    spec = sweep_study.load_form(ROOT / "studies" / "sweeps", sweep, False)
     done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor,
                                  analyse_only=args.analyse_only)
     points = [dict(p) for p in spec.points]
@@ -96,8 +103,9 @@ def main() -> None:
     e_ref = {est: ensemble_mean([ref[s][est][0] for s in ref_seeds], [ref[s][est][1] for s in ref_seeds])
              for est in ESTIMATORS}
     ref_cpu = float(np.mean([ref[s]["cpu_s"] for s in ref_seeds]))
-    lines = [f"# Fewer Stokes solves at β = 10 (φβ = 0.5, calibrated radius, Δt = 0.02, strain 0–20)", "",
-             f"Reference: {ref_name} (the calibrated series' setting); closure-free C_I "
+    lines = [f"# Fewer Stokes solves at β = {args.beta:g} ({scene}, Δt = {float(spec.arguments.get('dt', 0.02)):g}, "
+             "strain 0–20)", "",
+             f"Reference: {ref_name} (the series' setting); closure-free C_I "
              f"{e_ref['closure_free'].mean:+.2e} ± {e_ref['closure_free'].error:.1e}, IBOF trajectory "
              f"{e_ref['ibof_trajectory'].mean:+.2e} ± {e_ref['ibof_trajectory'].error:.1e} (± the 4-seed "
              f"standard error). Change: paired over the seeds, ± its s.e.; in stat. errors: |change| over the "
@@ -143,7 +151,7 @@ def main() -> None:
               "tell whether the setting passes)."]
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{SWEEP}.md").write_text(text, encoding="utf-8")
+    (args.out / "solve_reuse.md").write_text(text, encoding="utf-8")
     have = [n for n in names if n in table]
     ds = xr.Dataset(
         {**{f"ci_{est}": (("setting", "seed"), [[runs[n, s][est][0] if (n, s) in runs else np.nan
@@ -158,9 +166,9 @@ def main() -> None:
          **{f"change_{est}_in_stat_errors": ("setting", [table[n][est][2] for n in have], {"units": "1"})
             for est in ESTIMATORS}},
         coords={"setting": have, "seed": ref_seeds})
-    ds.attrs.update(reference=ref_name, strain=20.0, admissible_fraction=ADMISSIBLE_FRACTION)
-    ds.to_netcdf(args.out / f"{SWEEP}.nc", engine="h5netcdf")
-    plot(table, e_ref, ref_name, args.out / f"{SWEEP}.png")
+    ds.attrs.update(reference=ref_name, strain=20.0, admissible_fraction=ADMISSIBLE_FRACTION, beta=args.beta)
+    ds.to_netcdf(args.out / "solve_reuse.nc", engine="h5netcdf")
+    plot(table, e_ref, ref_name, args.out / "solve_reuse.png", f"β = {args.beta:g}, {scene}")
     print(text)
 
 
@@ -172,7 +180,7 @@ def verdict(ok: bool, resolved: bool) -> str:
     return "yes" if resolved else "yes, not resolved"
 
 
-def plot(table: dict, e_ref: dict, ref_name: str, path: Path) -> None:
+def plot(table: dict, e_ref: dict, ref_name: str, path: Path, title: str) -> None:
     """Change of each estimator's C_I in statistical errors against CPU time per run."""
     import matplotlib
     matplotlib.use("Agg")
@@ -193,7 +201,7 @@ def plot(table: dict, e_ref: dict, ref_name: str, path: Path) -> None:
         ax.set_xlabel("CPU s per run (strain 20)")
         ax.set_title(est.replace("_", " "))
     axes[0].set_ylabel("|paired change of C_I| / statistical error")
-    fig.suptitle("β = 10, φβ = 0.5: fewer Stokes solves (blue: Jeffery + departures, orange: linear)")
+    fig.suptitle(f"{title}: fewer Stokes solves (blue: Jeffery + departures, orange: linear)")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
