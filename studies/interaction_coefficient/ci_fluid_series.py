@@ -167,8 +167,10 @@ def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE) -> tuple[floa
     """(closure-free, trajectory) error of a sweep's solve interval and estimate between solves
     (``arguments`` solve_every, reuse) against STOKES' every 4th step: the paired change and its
     s.e. in quadrature, as measured by solve_reuse.py (closure-free; IBOF trajectory for the
-    trajectory fits); None when the sweep keeps STOKES' solves. SystemExit naming the study when
-    its output is missing or lacks the setting."""
+    trajectory fits); None when the sweep keeps STOKES' solves. Measured at β = 10, φβ = 0.5 and applied
+    to every concentration of the series (at β = 5 and φ = 0.16 a solve every 16th step fails the rule:
+    docs/speed_accuracy.md#fewer-stokes-solves-at-β--10). SystemExit naming the study when its output is
+    missing or lacks the setting."""
     import xarray as xr
 
     if "solve_every" not in arguments and "reuse" not in arguments:
@@ -505,7 +507,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
              "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
                            "Folgar-Tucker fit to a2(t) over two Jeffery periods (pyfold.report)",
              "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting"
-                       + (" and of its solve interval, in quadrature" if reuse is not None else "") + "; shape: change "
+                       + (" and of its solve interval (measured at phi beta = 0.5, applied to every concentration), "
+                          "in quadrature" if reuse is not None else "") + "; shape: change "
                        f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
                        + ("3-voxel C_I against the Richardson limit (ci_resolution.py)" if beta == BETA else
                           "72^3 C_I against 96^3, both calibrated (ci_resolution_beta10.py)" if measured_beta10 else
