@@ -14,29 +14,35 @@ Method
     recorded, κ = 10³, CG tolerance 10⁻³, Δt = 0.02, a solve every 16th step with the Jeffery
     estimate between solves, AB2), seeds 1–4, strain 20 (the transient from the isotropic start,
     where the per-strain information on C_I is largest), on 72³ (fibre radius scale 1.212) and
-    96³ (1.100): studies/sweeps/ci_resolution_beta10_calibrated.toml. A seed fixes the initial
+    96³ (1.100) and 120³ (1.091): studies/sweeps/ci_resolution_beta10_calibrated.toml, which also runs
+    96³ with a solve every 4th step (linear) as the control of the solve interval on the finer grid
+    (solve_reuse.py measured it on 72³). A seed fixes the initial
     state on both grids (checked: the initial axes are equal bit for bit), so the change is
     paired. Per run, as studies/speed_accuracy/time_step_beta10.py measures them: the closure-free
     C_I (rate regression with the run's own a4) and the IBOF trajectory fit over strain 0–20,
     both with the recorded ξ (Zhang's: the calibration's target on both grids). Per estimator:
     the paired change 72³ − 96³ (pyfold.ensemble.paired_difference) in units of the 72³ ensemble
-    error. With two grids there is no observed order: the change itself, |mean| ⊕ its s.e., is
-    the resolution error the series carries (a first-order Richardson extrapolation from these
-    two grids would put the limit 3 times the change beyond 96³, the table says so).
+    error. With three grids: the observed order from the three ensemble means
+    (ci_resolution.observed_order) and a Richardson limit per seed from the two finest grids
+    (order 1 assumed where none is observed: with these grids the largest extrapolation); the
+    bias of the series' grid (SERIES_CELLS, 96³) against that limit, |mean| ⊕ its s.e., is the
+    resolution error the series carries.
 
 Command
     .venv/bin/python studies/interaction_coefficient/ci_resolution_beta10.py [--analyse-only]
 
 Cost (2 cores)
-    The table gives the CPU time per run of each grid (72³ about 85 CPU-s, 96³ about 2.5 times
-    that); the whole sweep about 0.4 CPU-hour. The analysis about a CPU-minute.
+    The table gives the CPU time per run of each grid (72³ about 85 CPU-s, 96³ 185, 120³ 370 at a
+    solve every 16th step; 96³ every 4th step about 730); the whole sweep about 1.5 CPU-hours. The
+    analysis about a CPU-minute.
 
 Outputs (under out/interaction_coefficient/resolution_beta10/, ``--out``)
     sweep/                      the runs (pyfold sweep folder)
-    ci_resolution_beta10.md     per grid and estimator: C_I ± stat., the paired change, CPU time
+    ci_resolution_beta10.md     per grid and estimator: C_I ± stat., the paired change, CPU time; the
+                                solve-interval control
     ci_resolution_beta10.nc     C_I per grid and seed
-    ci_resolution_beta10.json   the resolution error of the 72³ C_I per estimator (coarse_bias and
-                                its s.e.), which ci_fluid_series.py --beta 10 --calibrated reads
+    ci_resolution_beta10.json   the resolution error of the series' grid's C_I (SERIES_CELLS) per estimator
+                                (coarse_bias and its s.e.), which ci_fluid_series.py --beta 10 --calibrated reads
 """
 from __future__ import annotations
 
@@ -51,9 +57,16 @@ import xarray as xr
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "studies" / "speed_accuracy"))
+sys.path.insert(0, str(ROOT / "studies" / "interaction_coefficient"))
+from ci_resolution import ASSUMED_ORDER, observed_order  # noqa: E402
 from time_step_beta10 import measure  # noqa: E402
 
 SWEEP = "ci_resolution_beta10_calibrated"
+#: The calibrated series' solves (ci_fluid_series_beta10_calibrated.toml); a grid's runs with other solves
+#: are the control of that interval on that grid
+SERIES_SOLVES = "every 16, jeffery"
+#: The calibrated series' grid in voxels per diameter (96³): the grid whose bias the summary carries
+SERIES_CELLS = 4
 ESTIMATORS = ("closure_free", "ibof_trajectory")
 
 
@@ -70,7 +83,8 @@ def main() -> None:
     spec = sweep_study.load_form(ROOT / "studies" / "sweeps", SWEEP, False)
     done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor,
                                  analyse_only=args.analyse_only)
-    runs: dict[tuple[int, int], dict] = {}
+    runs: dict[tuple[int, int], dict] = {}  # the series' solves on each grid: (cells per diameter, seed)
+    controls: dict[tuple[int, str, int], dict] = {}  # other solves: (cells per diameter, setting, seed)
     grids: dict[int, str] = {}
     for (values, seed), path in done.items():
         point = dict(zip(spec.axes, values))
@@ -78,19 +92,25 @@ def main() -> None:
         m = measure(path)
         m["cpu_s"] = sweep_store.cpu_seconds(path.parent)
         m["scale"] = float(point["fibre_radius_scale"])
-        runs[c, seed] = m
-        with xr.open_dataset(path, group="setup/resolved", engine="h5netcdf") as ds:
+        setting = f"every {int(point['solve_every'])}, {point['reuse']}"
+        if setting == SERIES_SOLVES:
+            runs[c, seed] = m
+        else:
+            controls[c, setting, seed] = m
+        with xr.open_dataset(path, group="setup/resolved", engine="h5netcdf", phony_dims="sort") as ds:
             grids[c] = "x".join(str(int(n)) for n in np.atleast_1d(ds["stokes_grid"].values))
     cpds = sorted({c for c, _s in runs})
-    if len(cpds) < 2:
-        raise SystemExit("need finished runs on both grids")
+    seeds = [s for s in spec.seeds if all((c, s) in runs for c in cpds)]
+    if len(seeds) < 2:  # a grid still running is left out, so that the seeds are paired on every grid kept
+        cpds = [c for c in cpds if sum((c, s) in runs for s in spec.seeds) >= len(spec.seeds)] or cpds
+        seeds = [s for s in spec.seeds if all((c, s) in runs for c in cpds)]
+    if len(cpds) < 2 or len(seeds) < 2:
+        raise SystemExit("need 2 grids with 2 seeds finished on each at least")
     coarse, fine = cpds[0], cpds[-1]
-    seeds = [s for s in spec.seeds if (coarse, s) in runs and (fine, s) in runs]
-    if len(seeds) < 2:
-        raise SystemExit("need 2 seeds finished on both grids at least")
     for s in seeds:
-        if not np.array_equal(runs[coarse, s]["p0"], runs[fine, s]["p0"]):
-            raise SystemExit(f"seed {s}: the initial axes differ between the grids; the runs are not paired")
+        for c in cpds[1:]:
+            if not np.array_equal(runs[coarse, s]["p0"], runs[c, s]["p0"]):
+                raise SystemExit(f"seed {s}: the initial axes differ between the grids; the runs are not paired")
     lines = [f"# Resolution of the calibrated β = 10 C_I (φβ = 0.5, strain 0–20, seeds {seeds})", "",
              "| voxels per diameter | grid | radius scale | CPU-s per run | CG it./solve | closure-free C_I | "
              "IBOF trajectory C_I |", "|---|---|---|---|---|---|---|"]
@@ -104,19 +124,59 @@ def main() -> None:
                      f"{np.mean([runs[c, s]['cpu_s'] for s in have]):.0f} | "
                      f"{np.median([runs[c, s]['iterations'] for s in have]):.0f} | "
                      + " | ".join(f"{e[est].mean:+.3e} ± {e[est].error:.1e}" for est in ESTIMATORS) + " |")
-    lines += ["", f"| estimator | {coarse} − {fine} voxels, paired ± s.e. | in stat. errors of the {coarse}-voxel C_I | "
-              "p | resolution error carried (|change| ⊕ s.e.) |", "|---|---|---|---|---|"]
-    summary = {"grids": {str(c): grids[c] for c in cpds}, "seeds": seeds, "strain": 20.0}
+    side = 2.4  # the series' cell [L]
+    h = {c: 1.0 / c for c in cpds}  # voxel size over the fibre diameter (cells_per_diameter exact here)
+    lines += ["", "| estimator | grid | change against the finest, paired ± s.e. | in stat. errors |", "|---|---|---|---|"]
     for est in ESTIMATORS:
-        d = paired_difference([runs[coarse, s][est][0] for s in seeds], [runs[fine, s][est][0] for s in seeds])
-        err = math.hypot(d.mean, d.stderr)
-        summary[est] = {"coarse_bias": d.mean, "coarse_bias_stderr": d.stderr, "p": d.p,
-                        "coarse": ens[coarse][est].mean, "fine": ens[fine][est].mean}
-        lines.append(f"| {est} | {d.mean:+.2e} ± {d.stderr:.1e} | {abs(d.mean) / ens[coarse][est].error:.2f} | "
-                     f"{d.p:.2g} | {err:.1e} |")
-    lines += ["", "Two grids give no observed order: the 72³ C_I's resolution error is taken as the measured change "
-              "to 96³ (|mean| and its s.e. in quadrature). Were the error first order in h, the limit would lie 3 "
-              "times that change beyond the 96³ value."]
+        for c in cpds[:-1]:
+            d = paired_difference([runs[c, s][est][0] for s in seeds], [runs[fine, s][est][0] for s in seeds])
+            lines.append(f"| {est} | {grids[c]} | {d.mean:+.2e} ± {d.stderr:.1e} (p {d.p:.2g}) | "
+                         f"{abs(d.mean) / ens[c][est].error:.2f} |")
+    lines += ["", "## Order and Richardson extrapolation", ""]
+    summary = {"grids": {str(c): grids[c] for c in cpds}, "seeds": seeds, "strain": 20.0, "side": side}
+    for est in ESTIMATORS:
+        means = [ens[c][est].mean for c in cpds]
+        p = observed_order(means[-3:], [h[c] for c in cpds[-3:]]) if len(cpds) >= 3 else math.nan
+        p_used = p if math.isfinite(p) else ASSUMED_ORDER
+        mid = cpds[-2]
+        r = (h[mid] / h[fine]) ** p_used
+        v = {c: np.array([runs[c, s][est][0] for s in seeds]) for c in cpds}
+        c_inf = v[fine] + (v[fine] - v[mid]) / (r - 1.0)  # per seed: the grids of a seed share its initial state
+        e_inf = ensemble_mean(c_inf)
+        carried = SERIES_CELLS if SERIES_CELLS in cpds[:-1] else coarse
+        bias = paired_difference(v[carried], c_inf)
+        summary[est] = {"coarse_cells_per_diameter": carried, "coarse": float(v[carried].mean()),
+                        "richardson": e_inf.mean, "richardson_err": e_inf.error, "coarse_bias": bias.mean,
+                        "coarse_bias_stderr": bias.stderr, "p": bias.p, "order": p_used,
+                        "order_observed": bool(math.isfinite(p))}
+        if math.isfinite(p):
+            order = f"observed order {p:.2f}"
+        elif len(cpds) < 3:
+            order = f"two grids, order {ASSUMED_ORDER:g} assumed"
+        else:
+            order = f"no observed order (the differences change sign or no order in (0.1, 8) fits), " \
+                    f"order {ASSUMED_ORDER:g} assumed"
+        others = "".join(f"; C({c}) − C∞ = {b.mean:+.2e} ± {b.stderr:.1e}"
+                         for c, b in ((c, paired_difference(v[c], c_inf)) for c in cpds[:-1] if c != carried))
+        lines.append(f"* {est}: {order}; Richardson C∞ = {e_inf.mean:+.2e} ± {e_inf.error:.1e} (from the two finest "
+                     f"grids, per seed); the series' {carried}-voxel value's bias C({carried}) − C∞ = {bias.mean:+.2e} ± "
+                     f"{bias.stderr:.1e} (p {bias.p:.2g}){others}; the series carries |bias| ⊕ s.e. = "
+                     f"{math.hypot(bias.mean, bias.stderr):.1e}")
+    control_lines = []
+    for c, setting in sorted({(c, st) for c, st, _s in controls}):
+        have = [s for s in spec.seeds if (c, setting, s) in controls and (c, s) in runs]
+        if len(have) < 2:
+            continue
+        for est in ESTIMATORS:
+            d = paired_difference([runs[c, s][est][0] for s in have], [controls[c, setting, s][est][0] for s in have])
+            e = ensemble_mean([controls[c, setting, s][est][0] for s in have])
+            control_lines.append(f"| {grids[c]} | {est} | {setting} | {e.mean:+.3e} ± {e.error:.1e} | "
+                                 f"{d.mean:+.2e} ± {d.stderr:.1e} | {abs(d.mean) / e.error:.2f} | {len(have)} | "
+                                 f"{np.mean([controls[c, setting, s]['cpu_s'] for s in have]):.0f} |")
+    if control_lines:
+        lines += ["", f"## The series' solves ({SERIES_SOLVES}) against another setting on the same grid", "",
+                  "| grid | estimator | other setting | its C_I | series − other, paired ± s.e. | in stat. errors | "
+                  "seeds | its CPU-s per run |", "|---|---|---|---|---|---|---|---|"] + control_lines
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "ci_resolution_beta10.md").write_text(text, encoding="utf-8")

@@ -58,8 +58,9 @@ SERIES = "ci_fluid_series_beta10_calibrated"
 STRAIN = 20.0
 POINT = {"n_l3": 6.4, "model": "stokes"}
 #: The series' arguments at its first setting (the step α/(γ̇L), a solve every 4th step extrapolated
-#: linearly), whatever its sweep file now sets: the reference runs
-SERIES_AT_FIRST = {"dt": None, "solve_every": None, "reuse": None}
+#: linearly, the 72³ grid with its calibrated radius), whatever its sweep file now sets: the reference runs
+SERIES_AT_FIRST = {"dt": None, "solve_every": None, "reuse": None, "cells_per_diameter": None,
+                   "max_grid_points": 400000, "fibre_radius_scale": 1.212}
 
 
 def series_runs(series_dir: Path, seeds) -> dict[int, Path]:

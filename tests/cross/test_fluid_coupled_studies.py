@@ -99,8 +99,9 @@ def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_rad
     """ci_fluid_series_beta10_calibrated.toml: the points and seeds of the geometric β = 10 series;
     each scene differs from its geometric one only by the Stokes runs' fibre radius scale (> 1) and
     the β_e rule both models record (Zhang's, what the calibration aims the grid fibre at), the step
-    (twice) and the Stokes runs' solves (every 16th step, Jeffery between), so the initial states are
-    the same; and the calibration it quotes is that of docs/fluid_coupled_ci.md's table (1.212 on 72³)."""
+    (twice), the Stokes runs' solves (every 16th step, Jeffery between) and grid (96³), so the initial
+    states are the same; and the calibration it quotes is that of docs/fluid_coupled_ci.md's table
+    (1.100 on 96³)."""
     import tomllib
 
     from pyfold.kinematics import equivalent_aspect_ratio
@@ -108,18 +109,23 @@ def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_rad
     plain, cal = (load_form(STUDIES / "sweeps", n, False)
                   for n in ("ci_fluid_series_beta10", "ci_fluid_series_beta10_calibrated"))
     assert cal.points == plain.points and cal.seeds == plain.seeds
-    assert cal.arguments == {**plain.arguments, "fibre_radius_scale": 1.212, "equivalent_aspect_ratio": "zhang",
-                             "dt": 0.02, "solve_every": 16, "reuse": "jeffery"}
+    assert cal.arguments == {**plain.arguments, "fibre_radius_scale": 1.1, "equivalent_aspect_ratio": "zhang",
+                             "dt": 0.02, "solve_every": 16, "reuse": "jeffery", "cells_per_diameter": 4,
+                             "max_grid_points": 900000}
     for point in cal.points:
         a = tomllib.loads(series.scene_of(**point, seed=2, **cal.arguments).toml)
         b = tomllib.loads(series.scene_of(**point, seed=2, **plain.arguments).toml)
         assert a["particles"][0].pop("equivalent_aspect_ratio") == "zhang"
         assert a["numerics"].pop("dt") == 2 * b["numerics"].pop("dt") == 0.02  # time_step_beta10.py
         if point["model"] == "stokes":
-            assert a["numerics"]["stokes"].pop("fibre_radius_scale") == 1.212
+            st_a, st_b = a["numerics"]["stokes"], b["numerics"]["stokes"]
+            assert st_a.pop("fibre_radius_scale") == 1.1
             # solve_reuse.py: a solve every 16th step, Jeffery between solves
-            assert (a["numerics"]["stokes"].pop("reuse"), a["numerics"]["stokes"].pop("solve_every")) == ("jeffery", 16)
-            assert b["numerics"]["stokes"].pop("solve_every") == 4
+            assert (st_a.pop("reuse"), st_a.pop("solve_every")) == ("jeffery", 16)
+            assert st_b.pop("solve_every") == 4
+            # ci_resolution_beta10.py: 96³, 4 voxels per diameter
+            assert (st_a.pop("cells_per_diameter"), st_b.pop("cells_per_diameter")) == (4, 3)
+            assert (st_a.pop("max_grid_points"), st_b.pop("max_grid_points")) == (900000, 400000)
         assert a == b
         checked = parse_scene(series.scene_of(**point, seed=2, **cal.arguments).toml)
         assert checked.families[0].equivalent_aspect_ratio == pytest.approx(
@@ -138,7 +144,8 @@ def test_the_time_step_runs_are_the_calibrated_beta10_stokes_runs_at_twice_the_s
                  for n in ("time_step_beta10", "ci_fluid_series_beta10_calibrated"))
     assert spec.seeds == cal.seeds
     args = {k: v for k, v in spec.arguments.items() if k not in study.POINT and k != "t_end"}
-    assert args == {k: v for k, v in cal.arguments.items() if k not in ("t_end", *study.SERIES_AT_FIRST)}
+    assert args == {k: v for k, v in {**cal.arguments, **study.SERIES_AT_FIRST}.items()
+                    if k not in ("t_end", "dt") and v is not None}
     assert study.POINT in [dict(p) for p in cal.points]
     for point in spec.points:
         a = tomllib.loads(series.scene_of(**point, seed=3, **spec.arguments).toml)
@@ -158,15 +165,16 @@ def test_the_solve_reuse_runs_are_the_calibrated_beta10_stokes_runs_with_other_s
     import tomllib
 
     study = import_study("speed_accuracy", "solve_reuse")
+    time_step = import_study("speed_accuracy", "time_step_beta10")
     spec, cal = (load_form(STUDIES / "sweeps", n, False)
                  for n in ("solve_reuse_beta10", "ci_fluid_series_beta10_calibrated"))
     assert spec.seeds == cal.seeds
     series_point = {"n_l3": spec.arguments["n_l3"], "model": spec.arguments["model"]}
     assert series_point in [dict(p) for p in cal.points]
-    first = {"solve_every": None, "reuse": None}  # the series before it took a setting of this study
-    assert {k: v for k, v in spec.arguments.items() if k not in ("t_end", "n_l3", "model")} == \
-        {k: v for k, v in cal.arguments.items() if k not in ("t_end", *first)}
-    b = tomllib.loads(series.scene_of(**series_point, seed=3, **{**cal.arguments, **first}).toml)
+    first = time_step.SERIES_AT_FIRST  # the series at Δt 0.02 before it took a setting of this study, on 72³
+    assert {k: v for k, v in spec.arguments.items() if k not in ("t_end", "n_l3", "model", "dt")} == \
+        {k: v for k, v in {**cal.arguments, **first}.items() if k not in ("t_end", "dt") and v is not None}
+    b = tomllib.loads(series.scene_of(**series_point, seed=3, **{**cal.arguments, **first, "dt": 0.02}).toml)
     b["numerics"].pop("t_end"), b["output"].pop("snapshot_interval")
     assert study.label(dict(spec.points[0])) == "every 4, linear"
     assert b["numerics"]["stokes"]["solve_every"] == 4 and "reuse" not in b["numerics"]["stokes"]
@@ -181,16 +189,20 @@ def test_the_solve_reuse_runs_are_the_calibrated_beta10_stokes_runs_with_other_s
     assert len({study.label(dict(p)) for p in spec.points}) == len(spec.points)
 
 
-def test_the_beta10_resolution_runs_are_the_calibrated_series_on_two_calibrated_grids():
-    """studies/interaction_coefficient/ci_resolution_beta10.py: its 72³ scene is the calibrated β = 10
-    series' φβ = 0.5 Stokes scene (same step, solves, radius scale) with a shorter end; its 96³ scene
-    differs from that by the grid and the radius scale calibrated there (docs/fluid_coupled_ci.md's
-    table: 1.100), so a seed's runs share their initial state."""
+def test_the_beta10_resolution_runs_are_the_calibrated_series_on_three_calibrated_grids():
+    """studies/interaction_coefficient/ci_resolution_beta10.py: its 96³ scene is the calibrated β = 10
+    series' φβ = 0.5 Stokes scene (same grid, step, solves, radius scale) with a shorter end; its
+    72³ and 120³ scenes differ from that by the grid and the radius scale calibrated there
+    (docs/fluid_coupled_ci.md: 1.212, 1.091), and its control by the solves only, so a seed's runs
+    share their initial state; the grid whose bias the study hands to the series is the series'."""
     import tomllib
 
+    study = import_study("interaction_coefficient", "ci_resolution_beta10")
     spec, cal = (load_form(STUDIES / "sweeps", n, False)
                  for n in ("ci_resolution_beta10_calibrated", "ci_fluid_series_beta10_calibrated"))
     assert spec.seeds == cal.seeds
+    assert study.SERIES_CELLS == cal.arguments["cells_per_diameter"]
+    assert study.SERIES_SOLVES == f"every {cal.arguments['solve_every']}, {cal.arguments['reuse']}"
     point = {"n_l3": spec.arguments["n_l3"], "model": spec.arguments["model"]}
     assert point in [dict(p) for p in cal.points]
     b = tomllib.loads(series.scene_of(**point, seed=1, **cal.arguments).toml)
@@ -201,12 +213,12 @@ def test_the_beta10_resolution_runs_are_the_calibrated_series_on_two_calibrated_
         assert a["numerics"].pop("t_end") == 20.0
         a["output"].pop("snapshot_interval")
         st = a["numerics"]["stokes"]
-        scales[st["cells_per_diameter"]] = st.pop("fibre_radius_scale")
-        st["cells_per_diameter"] = 3
-        st["max_grid_points"] = b["numerics"]["stokes"]["max_grid_points"]
-        st["fibre_radius_scale"] = b["numerics"]["stokes"]["fibre_radius_scale"]
+        if (pt["solve_every"], pt["reuse"]) == (cal.arguments["solve_every"], cal.arguments["reuse"]):
+            scales[st["cells_per_diameter"]] = st["fibre_radius_scale"]
+        for key in ("cells_per_diameter", "fibre_radius_scale", "max_grid_points", "solve_every", "reuse"):
+            st[key] = b["numerics"]["stokes"][key]
         assert a == b
-    assert scales == {3: 1.212, 4: 1.1}
+    assert scales == {3: 1.212, 4: 1.1, 5: 1.091}
 
 
 def test_the_series_reads_the_measured_change_of_its_solves_and_resolution(tmp_path):
