@@ -42,11 +42,13 @@ Method
     applied to every concentration). The total error is the four in quadrature. At β = 10 the
     settings error is the β = 5 regime's (not measured at β = 10); the geometric series' resolution
     error is not measured: its column is NaN, ``resolution_in_total`` = 0 and the total leaves it out.
-    The calibrated series' is the change of its C_I from 72³ to 96³ (both calibrated) measured by
-    ci_resolution_beta10.py on the φβ = 0.5 scene (RESOLUTION_BETA10; applied to every
-    concentration; left out, as unmeasured, while that file is missing).
+    The calibrated series' is the bias of its 96³ C_I against the Richardson limit of 96³ and
+    120³ (all calibrated) measured by ci_resolution_beta10.py on the φβ = 0.5 scene
+    (RESOLUTION_BETA10; applied to every concentration; left out, as unmeasured, while that file
+    is missing).
     ``--beta 10 --calibrated`` (ci_fluid_series_beta10_calibrated.toml): the same scenes and
-    seeds, the Stokes runs' fibres voxelised at 1.212 times their radius (one fibre on 72³ then
+    seeds, the Stokes runs on 96³ (4 voxels per diameter: on 72³ the calibrated C_I is not
+    converged) with their fibres voxelised at 1.100 times their radius (one fibre there then
     turns with β_e 7.63, the converged cylinder's, ci_resolution.py's calibrate_scale) and both
     models recording Zhang's β_e, so every fit uses the ξ of the fibres simulated; the shape
     column is then the calibration's residual (the grid fibre's measured β_e at that scale).
@@ -75,8 +77,8 @@ Cost (2 cores)
     wall sharing the machine with the resolution study; the analysis about 6 CPU-min.
     β = 10: about 33 CPU-s per unit strain per Stokes run at φβ = 0.5 (7 000 CPU-s per run,
     ~7 CPU-hours per point of 4 seeds; docs/fluid_coupled_ci.md#cost), contacts-only twins ~1 CPU-min;
-    calibrated, at twice the step and a solve every 16th step: about 4 CPU-s per unit strain
-    (solve_reuse.py), ~0.9 CPU-hour per point of 4 seeds at φβ = 0.5.
+    calibrated, at twice the step and a solve every 16th step: about 9 CPU-s per unit strain on
+    96³ (ci_resolution_beta10.py), ~2.1 CPU-hours per point of 4 seeds at φβ = 0.5.
 
 Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/ [_calibrated/];
 ``--out``)
@@ -257,7 +259,7 @@ def grid_xi(out: Path, run: Path, beta: float = BETA) -> tuple[float, float]:
     return beta_e, float(aspect_ratio_to_xi(beta_e))
 
 
-#: The β = 10 resolution check of the calibrated series (ci_resolution_beta10.py: 72³ against 96³)
+#: The β = 10 resolution check of the calibrated series (ci_resolution_beta10.py: 72³, 96³, 120³)
 RESOLUTION_BETA10 = Path("out/interaction_coefficient/resolution_beta10/ci_resolution_beta10.json")
 
 
