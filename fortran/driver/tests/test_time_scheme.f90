@@ -36,6 +36,21 @@ contains
       print '(2a)', "FAILED: ", what
    end subroutine check
 
+   !> A 4 x 3 Lees-Edwards cell in simple shear G_xy = 2 at t = 0.1: a particle above y = 3
+   !> wraps through the sheared face with the velocity jump -G_xy Ly = -6.
+   subroutine sheared_cell(cell, failures)
+      type(cell_t), intent(out) :: cell
+      integer, intent(inout) :: failures
+      real(dp) :: G(3, 3)
+      integer :: stat
+      character(len=msg_len) :: errmsg
+      G = 0.0_dp
+      G(1, 2) = 2.0_dp
+      call cell_init(cell, 2_ip, [4.0_dp, 3.0_dp, 1.0_dp], .false., G, stat, errmsg)
+      call check(stat == FOLD_OK, "cell_init: "//trim(errmsg), failures)
+      call cell_set_time(cell, 0.1_dp)
+   end subroutine sheared_cell
+
    subroutine ab2_after_euler(failures)
       integer, intent(inout) :: failures
       type(time_scheme_state_t) :: s
@@ -84,9 +99,7 @@ contains
       type(time_scheme_state_t) :: s
       type(cell_t) :: cell
       real(dp) :: da(2, 1), wa(3, 1), db(2, 1), wb(3, 1), vj(2, 1), wj(3, 1), v(2, 1), w(3, 1)
-      real(dp) :: d_est(2, 1), w_est(3, 1), G(3, 3), x(2, 1), x_before(2, 1)
-      integer :: stat
-      character(len=msg_len) :: errmsg
+      real(dp) :: d_est(2, 1), w_est(3, 1), x(2, 1), x_before(2, 1)
       da(:, 1) = [0.1_dp, -0.2_dp]
       wa = 0.05_dp
       db(:, 1) = [0.15_dp, -0.1_dp]
@@ -106,11 +119,7 @@ contains
                  "between solves: the Jeffery velocity of the step + the extrapolated departure", failures)
       call check(all(v == 1.5_dp*(2.0_dp*vj + d_est) - 0.5_dp*(vj + db)), "combined by AB2", failures)
       ! across the sheared face only the history jumps; the departures are periodic
-      G = 0.0_dp
-      G(1, 2) = 2.0_dp
-      call cell_init(cell, 2_ip, [4.0_dp, 3.0_dp, 1.0_dp], .false., G, stat, errmsg)
-      call check(stat == FOLD_OK, "cell_init: "//trim(errmsg), failures)
-      call cell_set_time(cell, 0.1_dp)
+      call sheared_cell(cell, failures)
       x(:, 1) = [1.0_dp, 3.2_dp]
       x_before = x
       call cell_wrap(cell, x(:, 1), v(:, 1))
@@ -140,14 +149,8 @@ contains
       integer, intent(inout) :: failures
       type(time_scheme_state_t) :: s
       type(cell_t) :: cell
-      real(dp) :: G(3, 3), x(2, 1), x_before(2, 1), v(2, 1), w(3, 1), vs(2, 1), ws(3, 1)
-      integer :: stat
-      character(len=msg_len) :: errmsg
-      G = 0.0_dp
-      G(1, 2) = 2.0_dp
-      call cell_init(cell, 2_ip, [4.0_dp, 3.0_dp, 1.0_dp], .false., G, stat, errmsg)
-      call check(stat == FOLD_OK, "cell_init: "//trim(errmsg), failures)
-      call cell_set_time(cell, 0.1_dp)
+      real(dp) :: x(2, 1), x_before(2, 1), v(2, 1), w(3, 1), vs(2, 1), ws(3, 1)
+      call sheared_cell(cell, failures)
       vs(:, 1) = [0.5_dp, 0.1_dp]
       ws = 0.0_dp
       call s%init(FOLD_AB2, 1_ip, 2_ip, 1_ip)
