@@ -165,19 +165,30 @@ def settings_errors(n_l3: float, beta: float = BETA) -> tuple[float, float]:
 REUSE_EVIDENCE = Path("out/speed_accuracy/solve_reuse_beta10/solve_reuse.nc")
 
 
-def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE) -> tuple[float, float] | None:
+def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE, grid_evidence: Path | None = None
+                 ) -> tuple[float, float] | None:
     """(closure-free, trajectory) error of a sweep's solve interval and estimate between solves
     (``arguments`` solve_every, reuse) against STOKES' every 4th step: the paired change and its
-    s.e. in quadrature, as measured by solve_reuse.py (closure-free; IBOF trajectory for the
-    trajectory fits); None when the sweep keeps STOKES' solves. Measured at β = 10, φβ = 0.5 and applied
-    to every concentration of the series (at β = 5 and φ = 0.16 a solve every 16th step fails the rule:
+    s.e. in quadrature (closure-free; IBOF trajectory for the trajectory fits); None when the sweep
+    keeps STOKES' solves. Measured on the sweep's own grid where ``grid_evidence`` (the summary of
+    ci_resolution_beta10.py) holds that setting's control on it (``solve_interval``), else as
+    solve_reuse.py measured it on 72³ (``evidence``). Measured at β = 10, φβ = 0.5 and applied to every
+    concentration of the series (at β = 5 and φ = 0.16 a solve every 16th step fails the rule:
     docs/speed_accuracy.md#fewer-stokes-solves-at-β--10). SystemExit naming the study when its output is
     missing or lacks the setting."""
+    import json
+
     import xarray as xr
 
     if "solve_every" not in arguments and "reuse" not in arguments:
         return None
     name = f"every {int(arguments.get('solve_every', STOKES['solve_every']))}, {arguments.get('reuse', 'linear')}"
+    cells = int(arguments.get("cells_per_diameter", STOKES["cells_per_diameter"]))
+    if grid_evidence is not None and grid_evidence.is_file():
+        control = json.loads(grid_evidence.read_text(encoding="utf-8")).get("solve_interval")
+        if control and control["series"] == name and control["cells_per_diameter"] == cells:
+            return tuple(math.hypot(control[est]["change"], control[est]["stderr"])
+                         for est in ("closure_free", "ibof_trajectory"))
     if not evidence.is_file():
         raise SystemExit(f"the sweep solves '{name}': its change of C_I is measured by "
                          f"studies/speed_accuracy/solve_reuse.py --beta 10, whose {evidence} is missing; run it first")
@@ -509,8 +520,9 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
              "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
                            "Folgar-Tucker fit to a2(t) over two Jeffery periods (pyfold.report)",
              "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting"
-                       + (" and of its solve interval (measured at phi beta = 0.5, applied to every concentration), "
-                          "in quadrature" if reuse is not None else "") + "; shape: change "
+                       + (" and of its solve interval (measured at phi beta = 0.5 on the series' grid where "
+                          "ci_resolution_beta10.py has its control, applied to every concentration), in quadrature"
+                          if reuse is not None else "") + "; shape: change "
                        f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
                        + ("3-voxel C_I against the Richardson limit (ci_resolution.py)" if beta == BETA else
                           "72^3 C_I against 96^3, both calibrated (ci_resolution_beta10.py)" if measured_beta10 else
@@ -570,9 +582,10 @@ def main() -> None:
     for values, seed in done:
         point = dict(zip(spec.axes, values))  # point values in the order of spec.axes
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
-    reuse = reuse_errors(spec.arguments)
-    stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse") if k in spec.arguments}}
     resolution = RESOLUTION_BETA10 if args.beta != BETA and args.calibrated else args.resolution
+    reuse = reuse_errors(spec.arguments, grid_evidence=resolution if resolution == RESOLUTION_BETA10 else None)
+    stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse", "cells_per_diameter")
+                           if k in spec.arguments}}
     analyse(keyed, tuple(spec.seeds), args.out, args.write_data, resolution, args.beta, reuse, stokes)
     print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
 

@@ -42,7 +42,8 @@ Outputs (under out/interaction_coefficient/resolution_beta10/, ``--out``)
                                 solve-interval control
     ci_resolution_beta10.nc     C_I per grid and seed
     ci_resolution_beta10.json   the resolution error of the series' grid's C_I (SERIES_CELLS) per estimator
-                                (coarse_bias and its s.e.), which ci_fluid_series.py --beta 10 --calibrated reads
+                                (coarse_bias and its s.e.) and the change its solve interval makes on that
+                                grid (solve_interval), which ci_fluid_series.py --beta 10 --calibrated reads
 """
 from __future__ import annotations
 
@@ -167,9 +168,14 @@ def main() -> None:
         have = [s for s in spec.seeds if (c, setting, s) in controls and (c, s) in runs]
         if len(have) < 2:
             continue
+        if c == SERIES_CELLS:  # the series' solve interval against this setting on its own grid
+            summary["solve_interval"] = {"cells_per_diameter": c, "series": SERIES_SOLVES, "against": setting,
+                                         "seeds": have}
         for est in ESTIMATORS:
             d = paired_difference([runs[c, s][est][0] for s in have], [controls[c, setting, s][est][0] for s in have])
             e = ensemble_mean([controls[c, setting, s][est][0] for s in have])
+            if c == SERIES_CELLS:
+                summary["solve_interval"][est] = {"change": d.mean, "stderr": d.stderr}
             control_lines.append(f"| {grids[c]} | {est} | {setting} | {e.mean:+.3e} ± {e.error:.1e} | "
                                  f"{d.mean:+.2e} ± {d.stderr:.1e} | {abs(d.mean) / e.error:.2f} | {len(have)} | "
                                  f"{np.mean([controls[c, setting, s]['cpu_s'] for s in have]):.0f} |")
@@ -179,8 +185,8 @@ def main() -> None:
                   "seeds | its CPU-s per run |", "|---|---|---|---|---|---|---|---|"] + control_lines
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "ci_resolution_beta10.md").write_text(text, encoding="utf-8")
     (args.out / "ci_resolution_beta10.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
+    (args.out / "ci_resolution_beta10.md").write_text(text, encoding="utf-8")
     ds = xr.Dataset({f"ci_{est}": (("cells_per_diameter", "seed"), [[runs[c, s][est][0] for s in seeds] for c in cpds],
                                    {"units": "1"}) for est in ESTIMATORS},
                     coords={"cells_per_diameter": cpds, "seed": seeds})

@@ -242,9 +242,17 @@ def test_the_series_reads_the_measured_change_of_its_solves_and_resolution(tmp_p
     with pytest.raises(SystemExit, match="solve_reuse.py"):
         series.reuse_errors({"solve_every": 16, "reuse": "jeffery"}, tmp_path / "missing.nc")
     js = tmp_path / "res.json"
-    js.write_text(json.dumps({"closure_free": {"coarse_bias": 3e-4, "coarse_bias_stderr": 4e-4},
-                              "ibof_trajectory": {"coarse_bias": -6e-4, "coarse_bias_stderr": 8e-4}}))
+    summary = {"closure_free": {"coarse_bias": 3e-4, "coarse_bias_stderr": 4e-4},
+               "ibof_trajectory": {"coarse_bias": -6e-4, "coarse_bias_stderr": 8e-4}}
+    js.write_text(json.dumps(summary))
     assert series.resolution_errors(js, ("closure_free", "ibof_trajectory")) == pytest.approx((5e-4, 1e-3))
+    # the control on the sweep's own grid wins over the 72³ study; another grid's or setting's does not
+    args = {"solve_every": 16, "reuse": "jeffery", "cells_per_diameter": 4}
+    control = {"cells_per_diameter": 4, "series": "every 16, jeffery", "against": "every 4, linear",
+               "closure_free": {"change": 6e-5, "stderr": 8e-5}, "ibof_trajectory": {"change": 0.0, "stderr": 2e-5}}
+    js.write_text(json.dumps({**summary, "solve_interval": control}))
+    assert series.reuse_errors(args, nc, js) == pytest.approx((1e-4, 2e-5))
+    assert series.reuse_errors({**args, "cells_per_diameter": 3}, nc, js) == pytest.approx((5e-5, 13e-5))
 
 
 def test_the_series_and_its_twins_share_the_initial_state_and_step():
