@@ -55,8 +55,9 @@ Method
     It steps at Δt = 2α/(γ̇L) = 0.02, twice the geometric series' step, both models (the
     change of C_I measured by studies/speed_accuracy/time_step_beta10.py), and its Stokes runs
     solve every 16th step with numerics.stokes.reuse = "jeffery" between solves; the change of
-    C_I that makes, measured by studies/speed_accuracy/solve_reuse.py --beta 10 (REUSE_EVIDENCE,
-    which the analysis reads), joins the settings error in quadrature.
+    C_I that makes joins the settings error in quadrature: measured on the series' own grid by
+    ci_resolution_beta10.py's control where its summary has it, else on 72³ by
+    studies/speed_accuracy/solve_reuse.py --beta 10 (REUSE_EVIDENCE).
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
     run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
     its drift reported).
@@ -583,6 +584,15 @@ def main() -> None:
         point = dict(zip(spec.axes, values))  # point values in the order of spec.axes
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
     resolution = RESOLUTION_BETA10 if args.beta != BETA and args.calibrated else args.resolution
+    if resolution == RESOLUTION_BETA10 and resolution.is_file():
+        import json
+
+        measured = json.loads(resolution.read_text(encoding="utf-8"))["closure_free"]["coarse_cells_per_diameter"]
+        cells = int(spec.arguments.get("cells_per_diameter", STOKES["cells_per_diameter"]))
+        if measured != cells:  # the check measured another grid's bias: not this series' resolution error
+            print(f"{resolution} holds the bias of {measured} voxels per diameter, the sweep runs {cells}: its "
+                  "resolution error is left out as unmeasured", file=sys.stderr)
+            resolution = resolution.with_name("not_measured_for_this_grid.json")
     reuse = reuse_errors(spec.arguments, grid_evidence=resolution if resolution == RESOLUTION_BETA10 else None)
     stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse", "cells_per_diameter")
                            if k in spec.arguments}}
