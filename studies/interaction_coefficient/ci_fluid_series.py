@@ -161,6 +161,12 @@ def settings_errors(n_l3: float, beta: float = BETA) -> tuple[float, float]:
     return ev.settings_error(m)
 
 
+def solve_label(solve_every: int, reuse: str = "linear") -> str:
+    """The name of a Stokes solve setting in the solve-interval studies' tables and files: its
+    interval and its estimate between solves ("every 16, jeffery")."""
+    return f"every {int(solve_every)}, {reuse}"
+
+
 #: The solve-reuse study (studies/speed_accuracy/solve_reuse.py --beta 10): the measured change of C_I
 #: of each solve interval and estimate between solves against the series' every 4th step
 REUSE_EVIDENCE = Path("out/speed_accuracy/solve_reuse_beta10/solve_reuse.nc")
@@ -183,7 +189,7 @@ def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE, grid_evidence
 
     if "solve_every" not in arguments and "reuse" not in arguments:
         return None
-    name = f"every {int(arguments.get('solve_every', STOKES['solve_every']))}, {arguments.get('reuse', 'linear')}"
+    name = solve_label(arguments.get("solve_every", STOKES["solve_every"]), arguments.get("reuse", "linear"))
     cells = int(arguments.get("cells_per_diameter", STOKES["cells_per_diameter"]))
     if grid_evidence is not None and grid_evidence.is_file():
         control = json.loads(grid_evidence.read_text(encoding="utf-8")).get("solve_interval")

@@ -59,13 +59,14 @@ import xarray as xr
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "studies" / "speed_accuracy"))
 sys.path.insert(0, str(ROOT / "studies" / "interaction_coefficient"))
+import ci_fluid_series as series  # noqa: E402
 from ci_resolution import ASSUMED_ORDER, observed_order  # noqa: E402
 from time_step_beta10 import measure  # noqa: E402
 
 SWEEP = "ci_resolution_beta10_calibrated"
 #: The calibrated series' solves (ci_fluid_series_beta10_calibrated.toml); a grid's runs with other solves
 #: are the control of that interval on that grid
-SERIES_SOLVES = "every 16, jeffery"
+SERIES_SOLVES = series.solve_label(16, "jeffery")
 #: The calibrated series' grid in voxels per diameter (96³): the grid whose bias the summary carries
 SERIES_CELLS = 4
 ESTIMATORS = ("closure_free", "ibof_trajectory")
@@ -93,13 +94,12 @@ def main() -> None:
         m = measure(path)
         m["cpu_s"] = sweep_store.cpu_seconds(path.parent)
         m["scale"] = float(point["fibre_radius_scale"])
-        setting = f"every {int(point['solve_every'])}, {point['reuse']}"
+        setting = series.solve_label(point["solve_every"], point["reuse"])
         if setting == SERIES_SOLVES:
             runs[c, seed] = m
         else:
             controls[c, setting, seed] = m
-        with xr.open_dataset(path, group="setup/resolved", engine="h5netcdf", phony_dims="sort") as ds:
-            grids[c] = "x".join(str(int(n)) for n in np.atleast_1d(ds["stokes_grid"].values))
+        grids[c] = "x".join(map(str, series.grid_of(path)))
     cpds = sorted({c for c, _s in runs})
     seeds = [s for s in spec.seeds if all((c, s) in runs for c in cpds)]
     if len(seeds) < 2:  # a grid still running is left out, so that the seeds are paired on every grid kept
@@ -125,7 +125,6 @@ def main() -> None:
                      f"{np.mean([runs[c, s]['cpu_s'] for s in have]):.0f} | "
                      f"{np.median([runs[c, s]['iterations'] for s in have]):.0f} | "
                      + " | ".join(f"{e[est].mean:+.3e} ± {e[est].error:.1e}" for est in ESTIMATORS) + " |")
-    side = 2.4  # the series' cell [L]
     h = {c: 1.0 / c for c in cpds}  # voxel size over the fibre diameter (cells_per_diameter exact here)
     lines += ["", "| estimator | grid | change against the finest, paired ± s.e. | in stat. errors |", "|---|---|---|---|"]
     for est in ESTIMATORS:
@@ -134,7 +133,7 @@ def main() -> None:
             lines.append(f"| {est} | {grids[c]} | {d.mean:+.2e} ± {d.stderr:.1e} (p {d.p:.2g}) | "
                          f"{abs(d.mean) / ens[c][est].error:.2f} |")
     lines += ["", "## Order and Richardson extrapolation", ""]
-    summary = {"grids": {str(c): grids[c] for c in cpds}, "seeds": seeds, "strain": 20.0, "side": side}
+    summary = {"grids": {str(c): grids[c] for c in cpds}, "seeds": seeds, "strain": 20.0}
     for est in ESTIMATORS:
         means = [ens[c][est].mean for c in cpds]
         p = observed_order(means[-3:], [h[c] for c in cpds[-3:]]) if len(cpds) >= 3 else math.nan

@@ -58,6 +58,8 @@ import xarray as xr
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "studies" / "speed_accuracy"))
+sys.path.insert(0, str(ROOT / "studies" / "interaction_coefficient"))
+import ci_fluid_series as series  # noqa: E402
 from ci_stokes_settings import ADMISSIBLE_FRACTION  # noqa: E402
 from time_step_beta10 import measure  # noqa: E402
 
@@ -69,7 +71,7 @@ ESTIMATORS = ("closure_free", "ibof_trajectory")
 
 def label(point: dict) -> str:
     """A setting's name: its solve interval and estimate between solves."""
-    return f"every {int(point['solve_every'])}, {point.get('reuse', 'linear')}"
+    return series.solve_label(point["solve_every"], point.get("reuse", "linear"))
 
 
 def main() -> None:
