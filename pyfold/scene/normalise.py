@@ -747,8 +747,9 @@ def normalise(scene: Scene, source: str = "scene", base_dir: str | Path | None =
     from pyfold.scene import study_preset
 
     probe = _normalise(study_preset.probe_scene(scene), source, base_dir)
-    filled, reason = study_preset.fill(scene, probe)
-    return dataclasses.replace(_normalise(filled, source, base_dir), preset_reason=reason)
+    filled, reason, warnings = study_preset.fill(scene, probe)
+    resolved = _normalise(filled, source, base_dir)
+    return dataclasses.replace(resolved, preset_reason=reason, warnings=resolved.warnings + warnings)
 
 
 def _normalise(scene: Scene, source: str, base_dir: str | Path | None) -> ResolvedScene:

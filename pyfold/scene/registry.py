@@ -388,9 +388,11 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("numerics.preset", "choice", None, ("study",),
             default_text="none: each key keeps its own default",
             help='"study": every numerical setting the scene leaves '
-                 'unset (dt and the Stokes kappa, tolerance, precision, solve reuse and resolution) chosen, '
-                 'for the scene\'s regime, as the cheapest measured to move C_I by less than half its '
-                 'statistical error over 4 seeds (pyfold/scene/study_preset.py, docs/speed_accuracy.md)'),
+                 'unset (dt and the Stokes kappa, tolerance, precision, solve reuse and resolution, with the '
+                 'fibre radius calibrated to the grid where that was measured) chosen, for the scene\'s regime '
+                 'and aspect ratio, as the cheapest measured to move C_I by less than half its statistical '
+                 'error over 4 seeds; a stated grid known to be too coarse is kept with a warning '
+                 '(pyfold/scene/study_preset.py, docs/speed_accuracy.md)'),
     Setting("numerics.time_scheme", "choice", "ab2", ("ab2", "euler"), _codes(euler=1, ab2=2), physics=_STOKES,
             resolved="time_scheme",
             legend="time scheme of the Stokes velocities: 1 explicit Euler, 2 Adams-Bashforth 2",

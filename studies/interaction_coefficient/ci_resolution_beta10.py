@@ -72,6 +72,30 @@ SERIES_CELLS = 4
 ESTIMATORS = ("closure_free", "ibof_trajectory")
 
 
+def _evidence_lines(runs: dict, ens: dict, seeds: list[int], cpds: list[int], fine: int) -> list[str]:
+    """The grids' changes as the preset holds them (pyfold.scene.study_preset.RESOLUTION), checked
+    against its copy."""
+    from pyfold.ensemble import paired_difference
+    from pyfold.scene.study_preset import GridMeasured, resolution_check
+
+    cpu = {c: np.mean([runs[c, s]["cpu_s"] for s in seeds]) for c in cpds}
+    rows = []
+    for c in cpds:
+        ch = {}
+        for est in ESTIMATORS:
+            d = paired_difference([runs[c, s][est][0] for s in seeds], [runs[fine, s][est][0] for s in seeds])
+            ch[est] = (0.0, 0.0) if c == fine else (round(abs(d.mean) / ens[c][est].error, 2),
+                                                     round(d.stderr / ens[c][est].error, 2))
+        rows.append(GridMeasured(c, "", runs[c, seeds[0]]["scale"], closure_free=ch["closure_free"][0],
+                                 closure_free_stderr=ch["closure_free"][1], trajectory=ch["ibof_trajectory"][0],
+                                 trajectory_stderr=ch["ibof_trajectory"][1],
+                                 cpu_ratio=round(cpu[c] / cpu[cpds[0]], 2)))
+    notes, bad = resolution_check(10.0, rows)
+    return (["", "## Against the preset's copy (pyfold.scene.study_preset.RESOLUTION)", ""]
+            + [f"* disagrees: {b}" for b in bad] + [f"* note: {n}" for n in notes]
+            + ([] if bad else ["* the changes agree with the stored rows"]))
+
+
 def main() -> None:
     from pyfold.ensemble import ensemble_mean, paired_difference
     from pyfold.sweep import store as sweep_store
@@ -132,6 +156,7 @@ def main() -> None:
             d = paired_difference([runs[c, s][est][0] for s in seeds], [runs[fine, s][est][0] for s in seeds])
             lines.append(f"| {est} | {grids[c]} | {d.mean:+.2e} ± {d.stderr:.1e} (p {d.p:.2g}) | "
                          f"{abs(d.mean) / ens[c][est].error:.2f} |")
+    lines += _evidence_lines(runs, ens, seeds, cpds, fine)
     lines += ["", "## Order and Richardson extrapolation", ""]
     summary = {"grids": {str(c): grids[c] for c in cpds}, "seeds": seeds, "strain": 20.0}
     for est in ESTIMATORS:

@@ -47,10 +47,20 @@ def _evidence(settings):
         period_error=-0.16)})
 
 
+def _grid(cells, change, cpu, scale=1.0):
+    return sp.GridMeasured(cells, f"{cells}", scale, closure_free=change, closure_free_stderr=0.1, trajectory=change,
+                           trajectory_stderr=0.2, cpu_ratio=cpu)
+
+
 @pytest.fixture
 def evidence(monkeypatch):
-    def use(settings):
+    """Replace the preset's tables by ones made for the test; no resolution study unless given."""
+    def use(settings, grids=None, beta_evidence=None):
         monkeypatch.setattr(sp, "EVIDENCE", _evidence(settings))
+        monkeypatch.setattr(sp, "BETA_EVIDENCE", MappingProxyType(beta_evidence or {}))
+        monkeypatch.setattr(sp, "RESOLUTION", MappingProxyType(
+            {5.0: sp.ResolutionEvidence(beta=5.0, scene="test scene", grids=tuple(grids), study="test study")}
+            if grids else {}))
     return use
 
 
@@ -141,3 +151,98 @@ def test_settings_error_is_the_measured_absolute_change():
     closure_free, trajectory = ev.settings_error(m)
     assert closure_free == pytest.approx(math.hypot(4.6e-5, 1.7e-4), rel=0.1)
     assert trajectory == pytest.approx(math.hypot(2.0e-4, 2.4e-4), rel=0.1)
+
+
+def test_the_coarsest_grid_within_the_rule_is_filled_with_its_calibrated_radius(evidence):
+    evidence([_m("tol1e-3", {"tolerance": 1e-3}, 0.1, 0.6)],
+             grids=[_grid(2, 0.9, 1.0, 1.3), _grid(3, 0.3, 2.0, 1.2), _grid(4, 0.0, 4.0, 1.1)])
+    r = parse_scene(_scene(), "s.toml")
+    st = r.scene.numerics.stokes
+    assert (st.cells_per_diameter, st.fibre_radius_scale) == (3, 1.2)
+    assert r.stokes_grid == (42, 42, 42)  # 2.7 / (0.2 / 3) = 40.5, rounded up to 2^a 3^b 5^c 7^d
+    assert "cells_per_diameter = 3, the coarsest grid" in r.preset_reason and "2 voxels per diameter 0.90" in r.preset_reason
+    assert not any("too coarse" in w for w in r.warnings)
+
+
+def test_a_stated_grid_known_to_be_too_coarse_is_kept_and_the_run_says_so(evidence):
+    evidence([_m("tol1e-3", {"tolerance": 1e-3}, 0.1, 0.6)],
+             grids=[_grid(2, 0.9, 1.0), _grid(3, 0.3, 2.0), _grid(4, 0.0, 4.0)])
+    r = parse_scene(_scene(stokes={"cells_per_diameter": 2}), "s.toml")
+    assert r.scene.numerics.stokes.cells_per_diameter == 2
+    assert "known to be too coarse" in r.preset_reason and "3 voxels per diameter keeps it" in r.preset_reason
+    too_coarse = [w for w in r.warnings if "too coarse for C_I" in w]
+    assert len(too_coarse) == 1 and too_coarse[0].startswith("numerics.stokes.cells_per_diameter = 2")
+    # a stated grid within the rule: no warning
+    r = parse_scene(_scene(stokes={"cells_per_diameter": 4}), "s.toml")
+    assert not any("too coarse for C_I" in w for w in r.warnings) and "finest grid of test study" in r.preset_reason
+    # coarser than the coarsest measured grid, which already fails: known too coarse as well
+    r = parse_scene(_scene(stokes={"cells_per_diameter": 1}), "s.toml")
+    assert any("too coarse for C_I" in w for w in r.warnings)
+
+
+def test_the_grid_budget_follows_the_grid_the_preset_chose_but_not_a_stated_one(evidence):
+    from pyfold.errors import InputError
+
+    evidence([_m("tol1e-3", {"tolerance": 1e-3}, 0.1, 0.6)], grids=[_grid(9, 0.1, 1.0), _grid(10, 0.0, 2.0)])
+    r = parse_scene(_scene(), "s.toml")
+    n = math.prod(r.stokes_grid)
+    assert r.scene.numerics.stokes.max_grid_points == n > 64 ** 3 and f"raised to the grid's {n}" in r.preset_reason
+    with pytest.raises(InputError, match="numerics.stokes.max_grid_points"):
+        parse_scene(_scene(stokes={"cells_per_diameter": 9}), "s.toml")
+
+
+def test_a_setting_measured_against_another_is_judged_by_the_sum_of_the_chain(evidence):
+    step = _m("dt2", {"tolerance": 1e-3}, 0.3, 0.5, dt_factor=2.0)
+    chained = sp.Measured(name="every8", stokes={"tolerance": 1e-3, "solve_every": 8}, dt_factor=2.0,
+                          closure_free=0.3, closure_free_stderr=0.1, trajectory=0.1, trajectory_stderr=0.2,
+                          cpu_ratio=0.2, against="dt2")
+    evidence([step, chained])
+    ev, chosen = sp.choice_for("semi-dilute")
+    total = ev.total(chained)
+    assert total.closure_free == pytest.approx(0.6) and total.closure_free_stderr == pytest.approx(math.hypot(0.1, 0.1), abs=0.005)  # 2 digits
+    assert chosen.name == "dt2"  # every8 passes on its own change (0.3) but not on the chain's (0.6)
+
+
+def test_another_aspect_ratio_takes_its_own_evidence_and_any_other_the_beta_5_rows(evidence):
+    own = sp.RegimeEvidence(regime="semi-dilute", beta=10.0, n_l3=6.4, n_fibres=88, seeds=4, reference=REF,
+                            settings=(_m("beta10 row", {"tolerance": 1e-3, "solve_every": 16}, 0.2, 0.1),),
+                            period_error=0.0)
+    evidence([_m("tol1e-3", {"tolerance": 1e-3}, 0.1, 0.6)], beta_evidence={("semi-dilute", 10.0): own})
+    thin = dict(FIBRE, radius=0.05)
+    r = parse_scene(_scene(count=88, side=2.4, particle=thin, stokes={"max_grid_points": 10 ** 6}), "s.toml")
+    assert r.scene.numerics.stokes.solve_every == 16 and "beta10 row" in r.preset_reason
+    assert "this scene's beta" not in r.preset_reason
+    r = parse_scene(_scene(count=98, particle=dict(FIBRE, radius=1 / 14)), "s.toml")  # beta = 7
+    assert "tol1e-3" in r.preset_reason and "this scene's beta = 7: not measured" in r.preset_reason
+
+
+def test_the_shipped_resolution_evidence_follows_the_preset_rule():
+    assert sp.RESOLUTION, "pyfold/scene/study_preset.py holds no resolution study"
+    for beta, res in sp.RESOLUTION.items():
+        cells = [g.cells_per_diameter for g in res.grids]
+        assert res.beta == beta and cells == sorted(set(cells)) and len(cells) >= 3, res
+        assert res.finest.change() == 0.0 and res.grids[0].cpu_ratio == 1.0
+        assert all(a.cpu_ratio < b.cpu_ratio for a, b in zip(res.grids, res.grids[1:]))
+        chosen = res.choice()
+        assert chosen is res.finest or sp.admissible(chosen)
+        assert not any(sp.admissible(g) for g in res.grids if g.cells_per_diameter < chosen.cells_per_diameter)
+    for (regime, beta), ev in sp.BETA_EVIDENCE.items():
+        assert ev.regime == regime and ev.beta == beta and ev.reference.change() == 0.0
+        names = {m.name for m in ev.settings}
+        assert all(m.against is None or m.against in names for m in ev.settings)
+
+
+def test_a_recomputed_resolution_study_is_checked_against_the_stored_rows():
+    stored = sp.RESOLUTION[10.0]
+    same = list(stored.grids)
+    assert sp.resolution_check(10.0, same) == ([], [])
+    g = same[1]
+    off = sp.GridMeasured(g.cells_per_diameter, g.grid, g.fibre_radius_scale, closure_free=g.closure_free + 5.0,
+                          closure_free_stderr=g.closure_free_stderr, trajectory=g.trajectory,
+                          trajectory_stderr=g.trajectory_stderr, cpu_ratio=g.cpu_ratio)
+    notes, bad = sp.resolution_check(10.0, [off])
+    assert len(bad) == 1 and "closure_free" in bad[0] and not notes
+    rescaled = sp.GridMeasured(g.cells_per_diameter, g.grid, 1.0, g.closure_free, g.closure_free_stderr, g.trajectory,
+                               g.trajectory_stderr, g.cpu_ratio)
+    assert any("radius scale" in b for b in sp.resolution_check(10.0, [rescaled])[1])
+    assert sp.resolution_check(7.0, same)[1]
