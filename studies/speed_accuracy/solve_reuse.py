@@ -14,6 +14,9 @@ Question
     before the fluid-coupled C_I moves by half its statistical error, and what does that save?
 
 Method
+    ``--beta 10 --concentrated`` (solve_reuse_beta10_concentrated.toml): the same series' Stokes scene
+    at φβ = 1.0 (n L³ = 12.7: 176 fibres) on the series' own grid, 96³ (fibres voxelised at 1.100 R), a
+    solve every 4th step against every 16th (the series') and every 8th, the Jeffery estimate between.
     ``--beta 10`` (studies/sweeps/solve_reuse_beta10.toml): the calibrated β = 10 series' Stokes
     scene at φβ = 0.5 (n L³ = 6.4: 88 fibres, cell 2.4 L, 72³ grid, fibres voxelised at 1.212 R,
     Zhang's β_e = 7.61 recorded, κ = 10³, CG tolerance 10⁻³, AB2, Δt = 0.02). ``--beta 5``
@@ -32,14 +35,14 @@ Method
     the change plus twice its s.e. stays within that too (else 4 seeds cannot tell).
 
 Command
-    .venv/bin/python studies/speed_accuracy/solve_reuse.py [--beta 10|5] [--analyse-only]
+    .venv/bin/python studies/speed_accuracy/solve_reuse.py [--beta 10|5] [--concentrated] [--analyse-only]
 
 Cost (2 cores)
     β = 10: the reference runs 290 CPU-s each, the others less (the table gives each); the sweep
     of 20 runs about 1 CPU-hour, 35 min wall. β = 5: about 0.2 CPU-hour. The analysis about a
     CPU-minute.
 
-Outputs (under out/speed_accuracy/solve_reuse_beta<β>/, ``--out``)
+Outputs (under out/speed_accuracy/solve_reuse_beta<β>[_concentrated]/, ``--out``)
     sweep/                      the runs (pyfold sweep folder)
     solve_reuse.md              per setting: CPU time, CG iterations, a2 change and both C_I changes
     solve_reuse.nc              C_I per setting and seed; per setting the CPU time and the paired change of
@@ -63,9 +66,10 @@ import ci_fluid_series as series  # noqa: E402
 from ci_stokes_settings import ADMISSIBLE_FRACTION  # noqa: E402
 from time_step_beta10 import measure  # noqa: E402
 
-#: The sweep of each aspect ratio (studies/sweeps/<name>.toml) and what its scene is
-SWEEPS = {10.0: ("solve_reuse_beta10", "φβ = 0.5, calibrated radius"),
-          5.0: ("solve_reuse_beta5", "n L³ = 4.98, geometric radius")}
+#: The sweep of each (aspect ratio, concentrated) (studies/sweeps/<name>.toml) and what its scene is
+SWEEPS = {(10.0, False): ("solve_reuse_beta10", "φβ = 0.5, calibrated radius"),
+          (10.0, True): ("solve_reuse_beta10_concentrated", "φβ = 1.0, 96³, calibrated radius"),
+          (5.0, False): ("solve_reuse_beta5", "n L³ = 4.98, geometric radius")}
 ESTIMATORS = ("closure_free", "ibof_trajectory")
 
 
@@ -81,12 +85,18 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
-    ap.add_argument("--beta", type=float, default=10.0, choices=sorted(SWEEPS), help="fibre aspect ratio: its sweep")
-    ap.add_argument("--out", type=Path, default=None, help="output folder (out/speed_accuracy/solve_reuse_beta<β>)")
+    ap.add_argument("--beta", type=float, default=10.0, choices=sorted({b for b, _c in SWEEPS}),
+                    help="fibre aspect ratio: its sweep")
+    ap.add_argument("--concentrated", action="store_true",
+                    help="the series' concentrated point (beta = 10: phi beta = 1.0 on the series' 96^3 grid)")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="output folder (out/speed_accuracy/solve_reuse_beta<β>[_concentrated])")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
-    sweep, scene = SWEEPS[args.beta]
-    args.out = args.out or Path(f"out/speed_accuracy/solve_reuse_beta{args.beta:g}")
+    if (args.beta, args.concentrated) not in SWEEPS:
+        ap.error(f"--concentrated: no such sweep at beta = {args.beta:g}")
+    sweep, scene = SWEEPS[args.beta, args.concentrated]
+    args.out = args.out or Path(f"out/speed_accuracy/{sweep}")
     spec = sweep_study.load_form(ROOT / "studies" / "sweeps", sweep, False)
     done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor,
                                  analyse_only=args.analyse_only)

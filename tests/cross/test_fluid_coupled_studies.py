@@ -189,6 +189,32 @@ def test_the_solve_reuse_runs_are_the_calibrated_beta10_stokes_runs_with_other_s
     assert len({study.label(dict(p)) for p in spec.points}) == len(spec.points)
 
 
+def test_the_concentrated_solve_reuse_runs_are_the_calibrated_series_concentrated_stokes_runs():
+    """solve_reuse.py --beta 10 --concentrated: every scene is the calibrated β = 10 series' φβ = 1.0
+    Stokes scene (its grid, radius scale, step and seeds) with only the end, the snapshot interval and
+    the solves changed; its first point solves every 4th step (the reference) and the series' own
+    setting is among the others."""
+    import tomllib
+
+    study = import_study("speed_accuracy", "solve_reuse")
+    spec, cal = (load_form(STUDIES / "sweeps", n, False)
+                 for n in (study.SWEEPS[10.0, True][0], "ci_fluid_series_beta10_calibrated"))
+    assert spec.seeds == cal.seeds
+    point = {"n_l3": spec.arguments["n_l3"], "model": spec.arguments["model"]}
+    assert point in [dict(p) for p in cal.points] and point["n_l3"] == max(p["n_l3"] for p in cal.points)
+    b = tomllib.loads(series.scene_of(**point, seed=3, **cal.arguments).toml)
+    b["numerics"].pop("t_end"), b["output"].pop("snapshot_interval")
+    assert study.label(dict(spec.points[0])) == "every 4, linear"
+    series_label = series.solve_label(cal.arguments["solve_every"], cal.arguments["reuse"])
+    assert series_label in [study.label(dict(p)) for p in spec.points[1:]]
+    for p in spec.points:
+        a = tomllib.loads(series.scene_of(**p, seed=3, **spec.arguments).toml)
+        assert a["numerics"].pop("t_end") == 20.0
+        a["output"].pop("snapshot_interval")
+        a["numerics"]["stokes"].update(solve_every=cal.arguments["solve_every"], reuse=cal.arguments["reuse"])
+        assert a == b
+
+
 def test_the_beta10_resolution_runs_are_the_calibrated_series_on_three_calibrated_grids():
     """studies/interaction_coefficient/ci_resolution_beta10.py: its 96³ scene is the calibrated β = 10
     series' φβ = 0.5 Stokes scene (same grid, step, solves, radius scale) with a shorter end; its
