@@ -67,7 +67,8 @@ Command
         [--write-data]     # also write data/ci_fluid_coupled.{nc,csv} (the shipped table)
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10   # the β = 10 sweep
         (analysed once a concentration has two finished pairs of runs; no --write-data)
-    .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10 --calibrated
+    .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10 --calibrated [--write-data]
+        (--write-data: its rows replace the table's β = 10 rows, the β = 5 rows stay)
     (the sweep runs two serial simulations at a time; finished runs are re-used, a killed one
     is resumed from its checkpoint; --analyse-only analyses what is there)
 
@@ -364,6 +365,51 @@ def write_table(rows: list[dict], stem: Path, attrs: dict) -> None:
     ds.to_netcdf(stem.with_suffix(".nc"), engine="h5netcdf")
 
 
+def read_attrs(csv_path: Path) -> dict[str, str]:
+    """The ``# key: value`` lines heading a table written by :func:`write_table`."""
+    attrs = {}
+    with open(csv_path, encoding="utf-8") as f:
+        for line in f:
+            if not line.startswith("# "):
+                break
+            key, _, value = line[2:].rstrip("\n").partition(": ")
+            attrs[key] = value
+    return attrs
+
+
+def merged_table(rows: list[dict], attrs: dict, beta: float, csv_path: Path) -> tuple[list[dict], dict]:
+    """The shipped table at ``csv_path`` with this aspect ratio's rows replaced by ``rows``: the
+    other aspect ratios' rows kept, each aspect ratio's header lines prefixed ``beta<β>_`` (a
+    table of one aspect ratio has them unprefixed), the columns of ``rows`` (a column an older
+    row lacks: ``resolution_in_total`` is whether its resolution error is finite)."""
+    import re
+
+    from pyfold.correlations import fluid_coupled_table
+
+    old = fluid_coupled_table(csv_path) if csv_path.is_file() else []
+    old_attrs = read_attrs(csv_path) if csv_path.is_file() else {}
+    old_betas = sorted({r["beta"] for r in old})
+    per_beta: dict[float, dict] = {}
+    for key, value in old_attrs.items():
+        m = re.fullmatch(r"beta([0-9.]+)_(.+)", key)
+        if m:
+            per_beta.setdefault(float(m[1]), {})[m[2]] = value
+        elif key != "title" and len(old_betas) == 1:
+            per_beta.setdefault(old_betas[0], {})[key] = value
+    per_beta[beta] = {k: v for k, v in attrs.items() if k != "title"}
+    kept = [r for r in old if r["beta"] != beta]
+    for r in kept:
+        r.setdefault("resolution_in_total", int(math.isfinite(r["resolution_err"])))
+    keys = list(rows[0])
+    merged = sorted([{k: r[k] for k in keys} for r in kept] + rows, key=lambda r: r["beta"])
+    betas = sorted({r["beta"] for r in merged})
+    head = {"title": "Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = "
+                     + ", ".join(f"{b:g}" for b in betas) + " fibres"}
+    for b in betas:
+        head.update({f"beta{b:g}_{k}": v for k, v in per_beta.get(b, {}).items()})
+    return merged, head
+
+
 def figure(rows: list[dict], path: Path) -> None:
     """C_I against φβ: fluid-coupled and contacts-only beside the published values, one colour
     per aspect ratio of ``rows``."""
@@ -517,7 +563,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     first = scene_of(5.0, "jeffery", 1, 1.0, beta)
     attrs = {"title": f"Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = {beta:g} fibres",
              "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py "
-                        + ("--write-data" if beta == BETA else f"--beta {beta:g}"),
+                        + ("--write-data" if beta == BETA else f"--beta {beta:g}"
+                           + (" --calibrated --write-data" if measured_beta10 else "")),
              "scene": f"pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = "
                       f"{first.dt:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
                       f"Stokes grid {grid}",
@@ -532,16 +579,17 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
                           if reuse is not None else "") + "; shape: change "
                        f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
                        + ("3-voxel C_I against the Richardson limit (ci_resolution.py)" if beta == BETA else
-                          "72^3 C_I against 96^3, both calibrated (ci_resolution_beta10.py)" if measured_beta10 else
+                          "96^3 C_I against the Richardson limit of 96^3 and 120^3, all calibrated "
+                          "(ci_resolution_beta10.py)" if measured_beta10 else
                           "not measured at this beta")
                        + " (NaN = not measured and left out of the total: resolution_in_total = 0); total: in quadrature",
              "seeds": " ".join(map(str, seeds))}
     write_table(rows, out / "ci_fluid_series", attrs)
-    if write_data:
-        write_table(rows, DATA, attrs)
-    # beside the shipped β = 5 table: how the answer moves with the aspect ratio at equal φβ
-    shipped = [] if beta == BETA or not DATA.with_suffix(".csv").is_file() else fluid_coupled_table(
-        DATA.with_suffix(".csv"))
+    if write_data:  # this aspect ratio's rows replace its old ones; the others' stay
+        write_table(*merged_table(rows, attrs, beta, DATA.with_suffix(".csv")), DATA)
+    # beside the shipped table's other aspect ratios: how the answer moves with β at equal φβ
+    shipped = [r for r in (fluid_coupled_table(DATA.with_suffix(".csv")) if DATA.with_suffix(".csv").is_file()
+                           else []) if r["beta"] != beta]
     figure(rows + shipped, out / "ci_fluid_series.png")
     text = markdown(rows, reps, cost, beta_e_grid, beta, grid) + "\n## Fluid-coupled against contacts only\n\n" + "\n".join(pairs)
     (out / "ci_fluid_series.md").write_text(text + "\n", encoding="utf-8")
@@ -571,9 +619,10 @@ def main() -> None:
                          "(beta = 5 only: at another beta it is not measured and not read)")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
-    if args.write_data and args.beta != BETA:
-        ap.error(f"--write-data: the shipped table holds beta = {BETA:g} only (its resolution error is measured "
-                 f"there); --beta {args.beta:g} is analysed into --out")
+    if args.write_data and args.beta != BETA and not args.calibrated:
+        ap.error(f"--write-data: the shipped table takes the series whose resolution error is measured: beta = "
+                 f"{BETA:g}, or --beta {args.beta:g} --calibrated; the geometric --beta {args.beta:g} series is "
+                 "analysed into --out")
     name = SERIES[args.beta] + ("_calibrated" if args.calibrated else "")
     if not (SWEEPS / f"{name}.toml").is_file():
         ap.error(f"--calibrated: no calibrated series at beta = {args.beta:g} (studies/sweeps/{name}.toml)")

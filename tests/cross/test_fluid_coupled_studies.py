@@ -457,3 +457,34 @@ def test_grid_fibre_shape_refuses_a_bad_aspect_ratio_naming_it(tmp_path):
                           timeout=300)
     assert proc.returncode == 2 and "--betas: 1; aspect ratios must be > 1" in proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_beta10_table_joins_the_shipped_beta5_one_without_touching_its_rows(tmp_path):
+    """ci_fluid_series.py --beta 10 --calibrated --write-data: merged_table keeps the shipped table's
+    β = 5 rows and header (now prefixed beta5_), adds the β = 10 rows, and a second write replaces
+    them rather than adding them twice; pyfold.correlations reads the result and fits each β alone."""
+    import shutil
+
+    shipped = tmp_path / "ci_fluid_coupled.csv"
+    shutil.copy(series.DATA.with_suffix(".csv"), shipped)
+    five = fluid_coupled_table(shipped)
+    old_head = series.read_attrs(shipped)
+    rows = []
+    for r in five:  # a β = 10 table of the same shape: φβ 0.25 / 0.5 / 1.0
+        if r["model"] == "stokes":
+            rows.append({**r, "beta": 10.0, "phi_beta": r["phi_beta"] * 0.8, "ci": r["ci"] / 2,
+                         "resolution_in_total": 1})
+    attrs = {"title": "beta 10 table", "command": "the beta 10 command", "seeds": "1 2 3 4"}
+    for _ in range(2):
+        merged, head = series.merged_table(rows, attrs, 10.0, shipped)
+        series.write_table(merged, tmp_path / "ci_fluid_coupled", head)
+    back = fluid_coupled_table(shipped)
+    assert len(back) == len(five) + len(rows)
+    assert [r for r in back if r["beta"] == 5.0] == [{**r, "resolution_in_total": 1.0} for r in five]
+    head = series.read_attrs(shipped)
+    assert head["title"].endswith("beta = 5, 10 fibres") and head["beta10_command"] == "the beta 10 command"
+    assert all(head[f"beta5_{k}"] == v for k, v in old_head.items() if k != "title")
+    values, text = fluid_coupled_ci(10.0, 0.5, rows=back)
+    assert values and "beta 10" in text
+    five_values, _ = fluid_coupled_ci(5.0, 0.78, rows=back)
+    assert five_values == fluid_coupled_ci(5.0, 0.78, rows=five)[0]
