@@ -282,36 +282,33 @@ class ResolutionEvidence:
         return next((g for g in self.grids if g.cells_per_diameter == cells_per_diameter), None)
 
 
+def _grids(*rows: tuple) -> tuple[GridMeasured, ...]:
+    """GridMeasured of rows (cells per diameter, grid, radius scale, closure-free change ± s.e.,
+    trajectory change ± s.e., CPU ratio); the last row, the finest, is the reference."""
+    return tuple(GridMeasured(*row[:3], closure_free=row[3], closure_free_stderr=row[4], trajectory=row[5],
+                              trajectory_stderr=row[6], cpu_ratio=row[7]) for row in rows)
+
+
 #: The resolution studies, by β. Changes against the finest grid, paired over seeds 1–4 (strain 20
 #: from the isotropic start, the numerics of the fluid-coupled series), in statistical errors of
 #: the coarser grid's C_I; docs/fluid_coupled_ci.md, "Resolution" and "β = 10: the calibrated C_I
-#: against the grid".
+#: against the grid". In the comments: the changes and the coarser grid's error, absolute.
 RESOLUTION: Mapping[float, ResolutionEvidence] = MappingProxyType({
     5.0: ResolutionEvidence(
         beta=5.0, scene="98 beta = 5 fibres, n L^3 = 4.98", study="studies/interaction_coefficient/ci_resolution.py",
-        grids=(
-            # 42^3: closure-free -3.6e-4 +- 1.7e-4 (its error 4.4e-4), IBOF +6.9e-4 +- 1.9e-4 (4.2e-4)
-            GridMeasured(3, "42^3", 1.0, closure_free=0.82, closure_free_stderr=0.39, trajectory=1.64,
-                         trajectory_stderr=0.45, cpu_ratio=1.0),
-            # 54^3: -1.7e-5 +- 1.2e-4 (3.9e-4), +1.3e-4 +- 1.6e-4 (4.2e-4)
-            GridMeasured(4, "54^3", 1.0, closure_free=0.04, closure_free_stderr=0.31, trajectory=0.31,
-                         trajectory_stderr=0.38, cpu_ratio=2.10),
-            GridMeasured(5, "70^3", 1.0, closure_free=0.0, closure_free_stderr=0.0, trajectory=0.0,
-                         trajectory_stderr=0.0, cpu_ratio=4.92),
-        )),
+        # 42^3: -3.6e-4 +- 1.7e-4 (4.4e-4), +6.9e-4 +- 1.9e-4 (4.2e-4); 54^3: -1.7e-5 +- 1.2e-4 (3.9e-4),
+        # +1.3e-4 +- 1.6e-4 (4.2e-4)
+        grids=_grids((3, "42^3", 1.0, 0.82, 0.39, 1.64, 0.45, 1.0),
+                     (4, "54^3", 1.0, 0.04, 0.31, 0.31, 0.38, 2.10),
+                     (5, "70^3", 1.0, 0.0, 0.0, 0.0, 0.0, 4.92))),
     10.0: ResolutionEvidence(
         beta=10.0, scene="88 beta = 10 fibres, n L^3 = 6.37, fibres voxelised at the radius calibrated per grid",
         study="studies/interaction_coefficient/ci_resolution_beta10.py",
-        grids=(
-            # 72^3: +6.7e-4 +- 1.6e-4 (its error 2.5e-4), +2.48e-3 +- 3.4e-4 (3.9e-4)
-            GridMeasured(3, "72^3", 1.212, closure_free=2.68, closure_free_stderr=0.64, trajectory=6.31,
-                         trajectory_stderr=0.87, cpu_ratio=1.0),
-            # 96^3: -1.4e-5 +- 1.8e-5 (1.4e-4), -2.2e-5 +- 4.1e-5 (1.2e-4)
-            GridMeasured(4, "96^3", 1.100, closure_free=0.10, closure_free_stderr=0.13, trajectory=0.18,
-                         trajectory_stderr=0.34, cpu_ratio=2.23),
-            GridMeasured(5, "120^3", 1.091, closure_free=0.0, closure_free_stderr=0.0, trajectory=0.0,
-                         trajectory_stderr=0.0, cpu_ratio=4.39),
-        )),
+        # 72^3: +6.7e-4 +- 1.6e-4 (2.5e-4), +2.48e-3 +- 3.4e-4 (3.9e-4); 96^3: -1.4e-5 +- 1.8e-5 (1.4e-4),
+        # -2.2e-5 +- 4.1e-5 (1.2e-4)
+        grids=_grids((3, "72^3", 1.212, 2.68, 0.64, 6.31, 0.87, 1.0),
+                     (4, "96^3", 1.100, 0.10, 0.13, 0.18, 0.34, 2.23),
+                     (5, "120^3", 1.091, 0.0, 0.0, 0.0, 0.0, 4.39))),
 })
 
 

@@ -160,7 +160,8 @@ def test_the_coarsest_grid_within_the_rule_is_filled_with_its_calibrated_radius(
     st = r.scene.numerics.stokes
     assert (st.cells_per_diameter, st.fibre_radius_scale) == (3, 1.2)
     assert r.stokes_grid == (42, 42, 42)  # 2.7 / (0.2 / 3) = 40.5, rounded up to 2^a 3^b 5^c 7^d
-    assert "cells_per_diameter = 3, the coarsest grid" in r.preset_reason and "2 voxels per diameter 0.90" in r.preset_reason
+    assert "cells_per_diameter = 3, the coarsest grid" in r.preset_reason
+    assert "2 voxels per diameter 0.90" in r.preset_reason
     assert not any("too coarse" in w for w in r.warnings)
 
 
@@ -199,7 +200,8 @@ def test_a_setting_measured_against_another_is_judged_by_the_sum_of_the_chain(ev
     evidence([step, chained])
     ev, chosen = sp.choice_for("semi-dilute")
     total = ev.total(chained)
-    assert total.closure_free == pytest.approx(0.6) and total.closure_free_stderr == pytest.approx(math.hypot(0.1, 0.1), abs=0.005)  # 2 digits
+    assert total.closure_free == pytest.approx(0.6)
+    assert total.closure_free_stderr == pytest.approx(math.hypot(0.1, 0.1), abs=0.005)  # kept to 2 digits
     assert chosen.name == "dt2"  # every8 passes on its own change (0.3) but not on the chain's (0.6)
 
 
