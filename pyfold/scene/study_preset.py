@@ -48,7 +48,7 @@ from pyfold.scene.schema import Scene
 
 __all__ = ["Measured", "RegimeEvidence", "EVIDENCE", "BETA_EVIDENCE", "GridMeasured", "ResolutionEvidence",
            "RESOLUTION", "ADMISSIBLE_FRACTION", "admissible", "evidence_for", "choice_for", "resolution_for",
-           "resolution_check",
+           "compare_changes", "resolution_check",
            "probe_scene", "fill"]
 
 #: The preset's rule: a setting is admissible where its change of C_I (paired mean over the
@@ -312,11 +312,25 @@ RESOLUTION: Mapping[float, ResolutionEvidence] = MappingProxyType({
 })
 
 
+def compare_changes(label: str, stored: Measured | GridMeasured,
+                    recomputed: Measured | GridMeasured) -> tuple[list[str], list[str]]:
+    """A stored change of C_I against one recomputed from runs, per estimator: (notes, disagreements).
+    The same runs give the same value; runs remade on another machine are other realisations of a
+    chaotic suspension, so a change agrees when it differs from the stored one by at most twice
+    their combined standard error."""
+    notes, bad = [], []
+    for est in ("closure_free", "trajectory"):
+        a, b = getattr(stored, est), getattr(recomputed, est)
+        width = 2.0 * math.hypot(getattr(stored, f"{est}_stderr"), getattr(recomputed, f"{est}_stderr"))
+        if a != b:
+            (bad if abs(a - b) > width else notes).append(
+                f"{label}/{est}: stored {a:.2f}, recomputed {b:.2f} (2 combined s.e. {width:.2f})")
+    return notes, bad
+
+
 def resolution_check(beta: float, recomputed: list[GridMeasured]) -> tuple[list[str], list[str]]:
     """A resolution study's grids, recomputed from its runs, against :data:`RESOLUTION` (the
-    preset's copy): (notes, disagreements). The same runs give the same rows; runs remade on
-    another machine are other realisations of a chaotic suspension, so a change agrees when it
-    differs from the stored one by at most twice their combined standard error; CPU ratios are
+    preset's copy): (notes, disagreements), the changes by :func:`compare_changes`; CPU ratios are
     the machine's and are only noted."""
     stored = resolution_for(beta)
     if stored is None:
@@ -327,13 +341,9 @@ def resolution_check(beta: float, recomputed: list[GridMeasured]) -> tuple[list[
         if old is None:
             bad.append(f"{g.cells_per_diameter} voxels per diameter: not in pyfold/scene/study_preset.py")
             continue
-        for est in ("closure_free", "trajectory"):
-            a, b = getattr(old, est), getattr(g, est)
-            width = 2.0 * math.hypot(getattr(old, f"{est}_stderr"), getattr(g, f"{est}_stderr"))
-            line = (f"{g.cells_per_diameter} voxels per diameter/{est}: stored {a:.2f}, recomputed {b:.2f} "
-                    f"(2 combined s.e. {width:.2f})")
-            if a != b:
-                (bad if abs(a - b) > width else notes).append(line)
+        n, b = compare_changes(f"{g.cells_per_diameter} voxels per diameter", old, g)
+        notes += n
+        bad += b
         if abs(old.fibre_radius_scale - g.fibre_radius_scale) > 1e-9:
             bad.append(f"{g.cells_per_diameter} voxels per diameter: radius scale stored {old.fibre_radius_scale:g}, "
                        f"run at {g.fibre_radius_scale:g}")

@@ -144,11 +144,11 @@ def main() -> None:
         for est in ESTIMATORS:
             if name == ref_name:
                 cells += ["–", "–"]
-                row[est] = (0.0, 0.0, 0.0)
+                row[est] = (0.0, 0.0, 0.0, 0.0)
                 continue
             d = paired_difference([new[s][est][0] for s in seeds], [ref[s][est][0] for s in seeds])
             frac = abs(d.mean) / e_ref[est].error
-            row[est] = (d.mean, d.stderr, frac)
+            row[est] = (d.mean, d.stderr, frac, d.stderr / e_ref[est].error)
             ok = ok and frac <= ADMISSIBLE_FRACTION
             resolved = resolved and frac + 2 * d.stderr / e_ref[est].error <= ADMISSIBLE_FRACTION
             cells += [f"{d.mean:+.2e} ± {d.stderr:.1e}", f"{frac:.2f} ± {d.stderr / e_ref[est].error:.2f}"]
@@ -161,6 +161,7 @@ def main() -> None:
               f"|change| ≤ {ADMISSIBLE_FRACTION:g} statistical errors for both estimators; 'not resolved' when "
               f"|change| + 2 s.e. of the change exceeds {ADMISSIBLE_FRACTION:g} for one of them (4 seeds cannot "
               "tell whether the setting passes)."]
+    lines += evidence_lines(table, args.beta, args.concentrated)
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "solve_reuse.md").write_text(text, encoding="utf-8")
@@ -184,6 +185,33 @@ def main() -> None:
     print(text)
 
 
+def evidence_lines(table: dict, beta: float, concentrated: bool) -> list[str]:
+    """The settings of pyfold.scene.study_preset.BETA_EVIDENCE that this sweep measures (its grid:
+    no ``measured_on``; its interval and estimate) against the changes just computed."""
+    from pyfold.scene.study_preset import BETA_EVIDENCE, Measured, compare_changes
+
+    ev = BETA_EVIDENCE.get(("semi-dilute", beta))
+    if ev is None or concentrated:
+        return []
+    notes, bad, checked = [], [], []
+    for m in ev.settings:
+        name = label({"solve_every": m.stokes.get("solve_every", 1), "reuse": m.stokes.get("reuse", "linear")})
+        if m.measured_on or name not in table or m.stokes.get("solve_every") == ev.reference.stokes["solve_every"]:
+            continue
+        row = table[name]  # per estimator: change, its s.e., both in statistical errors at [2], [3]
+        new = Measured(name=m.name, stokes=m.stokes, dt_factor=m.dt_factor,
+                       closure_free=round(row["closure_free"][2], 2),
+                       closure_free_stderr=round(row["closure_free"][3], 2),
+                       trajectory=round(row["ibof_trajectory"][2], 2),
+                       trajectory_stderr=round(row["ibof_trajectory"][3], 2),
+                       cpu_ratio=m.cpu_ratio)
+        n, b = compare_changes(m.name, m, new)
+        notes, bad, checked = notes + n, bad + b, checked + [m.name]
+    return (["", "## Against the preset's copy (pyfold.scene.study_preset.BETA_EVIDENCE)", ""]
+            + [f"* disagrees: {b}" for b in bad] + [f"* note: {n}" for n in notes]
+            + [f"* checked: {', '.join(checked) or 'no row of this sweep'}"])
+
+
 def verdict(ok: bool, resolved: bool) -> str:
     """The admissibility of a setting: its mean changes within the rule, and whether that is
     resolved (the changes plus twice their s.e. within it too)."""
@@ -203,7 +231,7 @@ def plot(table: dict, e_ref: dict, ref_name: str, path: Path, title: str) -> Non
         for name, row in table.items():
             if name == ref_name:
                 continue
-            mean, se, frac = row[est]
+            mean, se, frac, _se_frac = row[est]
             ax.errorbar(row["cpu_s"], frac, yerr=se / e_ref[est].error, fmt="o", capsize=3,
                         color="C0" if "jeffery" in name else "C1")
             ax.annotate(name, (row["cpu_s"], frac), fontsize=7, xytext=(3, 3), textcoords="offset points")
