@@ -171,19 +171,31 @@ def solve_label(solve_every: int, reuse: str = "linear") -> str:
 #: The solve-reuse study (studies/speed_accuracy/solve_reuse.py --beta 10): the measured change of C_I
 #: of each solve interval and estimate between solves against the series' every 4th step
 REUSE_EVIDENCE = Path("out/speed_accuracy/solve_reuse_beta10/solve_reuse.nc")
+#: ... and at φβ = 1.0 on the calibrated series' 96³ grid (solve_reuse.py --beta 10 --concentrated)
+REUSE_EVIDENCE_CONCENTRATED = Path("out/speed_accuracy/solve_reuse_beta10_concentrated/solve_reuse.nc")
 
 
-def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE, grid_evidence: Path | None = None
-                 ) -> tuple[float, float] | None:
+def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE, grid_evidence: Path | None = None,
+                 point_evidence: Path | None = None, n_l3: float | None = None) -> tuple[float, float] | None:
     """(closure-free, trajectory) error of a sweep's solve interval and estimate between solves
     (``arguments`` solve_every, reuse) against STOKES' every 4th step: the paired change and its
     s.e. in quadrature (closure-free; IBOF trajectory for the trajectory fits); None when the sweep
-    keeps STOKES' solves. Measured on the sweep's own grid where ``grid_evidence`` (the summary of
-    ci_resolution_beta10.py) holds that setting's control on it (``solve_interval``), else as
-    solve_reuse.py measured it on 72³ (``evidence``). Measured at β = 10, φβ = 0.5 and applied to every
-    concentration of the series (at β = 5 and φ = 0.16 a solve every 16th step fails the rule:
-    docs/speed_accuracy.md#fewer-stokes-solves-at-β--10). SystemExit naming the study when its output is
-    missing or lacks the setting."""
+    keeps STOKES' solves. :func:`reuse_evidence` says where it was measured."""
+    found = reuse_evidence(arguments, evidence, grid_evidence, point_evidence, n_l3)
+    return None if found is None else found[0]
+
+
+def reuse_evidence(arguments: dict, evidence: Path = REUSE_EVIDENCE, grid_evidence: Path | None = None,
+                   point_evidence: Path | None = None, n_l3: float | None = None
+                   ) -> tuple[tuple[float, float], str] | None:
+    """:func:`reuse_errors` and where it was measured, the closest measurement first: at this
+    concentration ``n_l3`` on the sweep's grid (``point_evidence``, a solve_reuse.py output whose
+    attributes name its n L³ and grid, e.g. REUSE_EVIDENCE_CONCENTRATED); at φβ = 0.5 on the sweep's
+    grid (``grid_evidence``, ci_resolution_beta10.py's summary, ``solve_interval``); at φβ = 0.5
+    on 72³ (``evidence``, solve_reuse.py --beta 10). At β = 5 and φ = 0.16 a solve every 16th step
+    fails the rule (docs/speed_accuracy.md#fewer-stokes-solves-at-β--10), so a concentration without
+    its own measurement carries the φβ = 0.5 one, which the source says. SystemExit naming the study
+    when the last resort is missing or lacks the setting."""
     import json
 
     import xarray as xr
@@ -192,20 +204,31 @@ def reuse_errors(arguments: dict, evidence: Path = REUSE_EVIDENCE, grid_evidence
         return None
     name = solve_label(arguments.get("solve_every", STOKES["solve_every"]), arguments.get("reuse", "linear"))
     cells = int(arguments.get("cells_per_diameter", STOKES["cells_per_diameter"]))
+
+    def row_of(path: Path) -> tuple[float, float]:
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            if name not in list(ds["setting"].values):
+                raise SystemExit(f"{path} has no setting '{name}' (it has {list(ds['setting'].values)})")
+            row = ds.sel(setting=name)
+            return tuple(math.hypot(float(row[f"change_{est}"]), float(row[f"change_{est}_stderr"]))
+                         for est in ("closure_free", "ibof_trajectory"))
+
+    if point_evidence is not None and n_l3 is not None and point_evidence.is_file():
+        with xr.open_dataset(point_evidence, engine="h5netcdf") as ds:
+            here = (abs(float(ds.attrs.get("n_l3", math.nan)) - n_l3) <= 1e-9 * n_l3
+                    and int(ds.attrs.get("cells_per_diameter", -1)) == cells and name in list(ds["setting"].values))
+        if here:
+            return row_of(point_evidence), f"n L^3 {n_l3:g} on its grid ({point_evidence})"
     if grid_evidence is not None and grid_evidence.is_file():
         control = json.loads(grid_evidence.read_text(encoding="utf-8")).get("solve_interval")
         if control and control["series"] == name and control["cells_per_diameter"] == cells:
-            return tuple(math.hypot(control[est]["change"], control[est]["stderr"])
-                         for est in ("closure_free", "ibof_trajectory"))
+            return (tuple(math.hypot(control[est]["change"], control[est]["stderr"])
+                          for est in ("closure_free", "ibof_trajectory")),
+                    f"phi beta 0.5 on this grid ({grid_evidence})")
     if not evidence.is_file():
         raise SystemExit(f"the sweep solves '{name}': its change of C_I is measured by "
                          f"studies/speed_accuracy/solve_reuse.py --beta 10, whose {evidence} is missing; run it first")
-    with xr.open_dataset(evidence, engine="h5netcdf") as ds:
-        if name not in list(ds["setting"].values):
-            raise SystemExit(f"{evidence} has no setting '{name}' (it has {list(ds['setting'].values)})")
-        row = ds.sel(setting=name)
-        return tuple(math.hypot(float(row[f"change_{est}"]), float(row[f"change_{est}_stderr"]))
-                     for est in ("closure_free", "ibof_trajectory"))
+    return row_of(evidence), f"phi beta 0.5 on 72^3 ({evidence})"
 
 
 def xi_sensitivity(rep, xi_grid: float, fits_out: dict[str, list[float]] | None = None
@@ -493,10 +516,11 @@ def cpu_of(path: Path) -> float:
 
 
 def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path,
-            beta: float = BETA, reuse: tuple[float, float] | None = None, stokes: dict | None = None) -> None:
-    """The tables, report and figure of the finished runs ``done``; ``reuse``: the (closure-free,
-    trajectory) error of the sweep's solve interval against STOKES' (reuse_errors), added to the
-    settings error in quadrature; ``stokes``: the Stokes numerics the sweep runs (STOKES by default)."""
+            beta: float = BETA, reuse: dict | None = None, stokes: dict | None = None) -> None:
+    """The tables, report and figure of the finished runs ``done``; ``reuse``: per n L³, the
+    (closure-free, trajectory) error of the sweep's solve interval against STOKES' and where it was
+    measured (reuse_evidence), added to the settings error in quadrature; ``stokes``: the Stokes
+    numerics the sweep runs (STOKES by default)."""
     from pyfold.correlations import fluid_coupled_table
     from pyfold.ensemble import paired_difference
     from pyfold.report import build_report, write_report
@@ -531,8 +555,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
             print(f"n L^3 {n_l3:g}: {len(have)} finished pair(s) of runs; left out")
             continue
         settings = settings_errors(n_l3, beta)
-        if reuse is not None:
-            settings = tuple(math.hypot(a, b) for a, b in zip(settings, reuse))
+        if reuse and reuse.get(n_l3) is not None:
+            settings = tuple(math.hypot(a, b) for a, b in zip(settings, reuse[n_l3][0]))
         grid_fits: dict[str, list[float]] = {}  # the Stokes runs' trajectory fits with the grid fibre's ξ
         for model in MODELS:
             paths = [done[(n_l3, model), s] for s in have]
@@ -570,13 +594,13 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
                       f"Stokes grid {grid}",
              "stokes_numerics": f"{stokes or STOKES}, ab2 (setting {SETTING} of studies/speed_accuracy/ci_stokes_settings.py"
                                 + (", with the solve interval of studies/speed_accuracy/solve_reuse.py --beta 10)"
-                                   if reuse is not None else ")"),
+                                   if reuse else ")"),
              "estimators": "steady: rate regression over each run's stationary window (MSER-5); trajectory: "
                            "Folgar-Tucker fit to a2(t) over two Jeffery periods (pyfold.report)",
              "errors": "stat: ensemble over seeds; settings: measured change of the Stokes setting"
-                       + (" and of its solve interval (measured at phi beta = 0.5 on the series' grid where "
-                          "ci_resolution_beta10.py has its control, applied to every concentration), in quadrature"
-                          if reuse is not None else "") + "; shape: change "
+                       + (" and of its solve interval, in quadrature (measured at "
+                          + "; ".join(f"n L^3 {n:g}: {src}" for n, (_v, src) in sorted(reuse.items())) + ")"
+                          if reuse else "") + "; shape: change "
                        f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
                        + ("3-voxel C_I against the Richardson limit (ci_resolution.py)" if beta == BETA else
                           "96^3 C_I against the Richardson limit of 96^3 and 120^3, all calibrated "
@@ -648,7 +672,14 @@ def main() -> None:
             print(f"{resolution} holds the bias of {measured} voxels per diameter, the sweep runs {cells}: its "
                   "resolution error is left out as unmeasured", file=sys.stderr)
             resolution = resolution.with_name("not_measured_for_this_grid.json")
-    reuse = reuse_errors(spec.arguments, grid_evidence=resolution if resolution == RESOLUTION_BETA10 else None)
+    reuse = {}
+    for point in spec.points:  # a point may set its own solve interval
+        point = dict(point)
+        if point["model"] == "stokes":
+            n = float(point["n_l3"])
+            reuse[n] = reuse_evidence({**spec.arguments, **point}, n_l3=n, point_evidence=REUSE_EVIDENCE_CONCENTRATED,
+                                      grid_evidence=resolution if resolution == RESOLUTION_BETA10 else None)
+    reuse = {n: v for n, v in reuse.items() if v is not None} or None
     stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse", "cells_per_diameter")
                            if k in spec.arguments}}
     analyse(keyed, tuple(spec.seeds), args.out, args.write_data, resolution, args.beta, reuse, stokes)

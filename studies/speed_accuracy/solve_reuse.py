@@ -179,7 +179,10 @@ def main() -> None:
          **{f"change_{est}_in_stat_errors": ("setting", [table[n][est][2] for n in have], {"units": "1"})
             for est in ESTIMATORS}},
         coords={"setting": have, "seed": ref_seeds})
-    ds.attrs.update(reference=ref_name, strain=20.0, admissible_fraction=ADMISSIBLE_FRACTION, beta=args.beta)
+    ds.attrs.update(reference=ref_name, strain=20.0, admissible_fraction=ADMISSIBLE_FRACTION, beta=args.beta,
+                    n_l3=float(spec.arguments["n_l3"]),  # where it was measured: ci_fluid_series.reuse_evidence
+                    cells_per_diameter=int(spec.arguments.get("cells_per_diameter",
+                                                              series.STOKES["cells_per_diameter"])))
     ds.to_netcdf(args.out / "solve_reuse.nc", engine="h5netcdf")
     plot(table, e_ref, ref_name, args.out / "solve_reuse.png", f"β = {args.beta:g}, {scene}")
     print(text)

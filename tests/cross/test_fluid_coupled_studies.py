@@ -279,6 +279,18 @@ def test_the_series_reads_the_measured_change_of_its_solves_and_resolution(tmp_p
     js.write_text(json.dumps({**summary, "solve_interval": control}))
     assert series.reuse_errors(args, nc, js) == pytest.approx((1e-4, 2e-5))
     assert series.reuse_errors({**args, "cells_per_diameter": 3}, nc, js) == pytest.approx((5e-5, 13e-5))
+    # a measurement at the point's own concentration and grid wins over both, at that concentration only
+    here = tmp_path / "concentrated.nc"
+    xr.Dataset({"change_closure_free": ("setting", [0.0, 3e-4]), "change_closure_free_stderr": ("setting", [0.0, 4e-4]),
+                "change_ibof_trajectory": ("setting", [0.0, 0.0]),
+                "change_ibof_trajectory_stderr": ("setting", [0.0, 1e-4])},
+               coords={"setting": ["every 4, linear", "every 16, jeffery"]},
+               attrs={"n_l3": 12.7, "cells_per_diameter": 4}).to_netcdf(here, engine="h5netcdf")
+    values, source = series.reuse_evidence(args, nc, js, here, 12.7)
+    assert values == pytest.approx((5e-4, 1e-4)) and str(here) in source
+    values, source = series.reuse_evidence(args, nc, js, here, 6.4)
+    assert values == pytest.approx((1e-4, 2e-5)) and "phi beta 0.5 on this grid" in source
+    assert series.reuse_errors({**args, "cells_per_diameter": 3}, nc, js, here, 12.7) == pytest.approx((5e-5, 13e-5))
 
 
 def test_the_series_and_its_twins_share_the_initial_state_and_step():
