@@ -452,8 +452,10 @@ def fill(scene: Scene, probe) -> tuple[Scene, str, tuple[str, ...]]:
     if row is not None and row.fibre_radius_scale != 1.0:
         wanted["fibre_radius_scale"] = row.fibre_radius_scale
     points = _grid_points(probe, cells)
+    # the budget follows the grid the preset chose for a Stokes scene; under hydrodynamics = "auto" the
+    # budget decides whether the solver runs at all, which is the scene's choice, not a numerical setting
     if ("max_grid_points" not in stokes_set and "cells_per_diameter" not in stokes_set
-            and points > num.stokes.max_grid_points):  # the grid the preset chose: its budget too
+            and scene.model.hydrodynamics == "stokes" and points > num.stokes.max_grid_points):
         wanted["max_grid_points"] = points
     filled = {k: v for k, v in wanted.items() if k not in stokes_set}
     kept = sorted(k for k in wanted if k in stokes_set)

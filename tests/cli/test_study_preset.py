@@ -190,6 +190,9 @@ def test_the_grid_budget_follows_the_grid_the_preset_chose_but_not_a_stated_one(
     assert r.scene.numerics.stokes.max_grid_points == n > 64 ** 3 and f"raised to the grid's {n}" in r.preset_reason
     with pytest.raises(InputError, match="numerics.stokes.max_grid_points"):
         parse_scene(_scene(stokes={"cells_per_diameter": 9}), "s.toml")
+    # under hydrodynamics = "auto" the budget decides whether the solver runs: the scene's, left alone
+    r = parse_scene(_scene(hydrodynamics="auto"), "s.toml")
+    assert r.scene.numerics.stokes.max_grid_points == 64 ** 3 and r.hydrodynamics != "stokes"
 
 
 def test_a_setting_measured_against_another_is_judged_by_the_sum_of_the_chain(evidence):
