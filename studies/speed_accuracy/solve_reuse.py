@@ -117,7 +117,7 @@ def main() -> None:
     ref_cpu = float(np.mean([ref[s]["cpu_s"] for s in ref_seeds]))
     lines = [f"# Fewer Stokes solves at β = {args.beta:g} ({scene}, Δt = {float(spec.arguments.get('dt', 0.02)):g}, "
              "strain 0–20)", "",
-             f"Reference: {ref_name} (the series' setting); closure-free C_I "
+             f"Reference: {ref_name} (the sweep's first point); closure-free C_I "
              f"{e_ref['closure_free'].mean:+.2e} ± {e_ref['closure_free'].error:.1e}, IBOF trajectory "
              f"{e_ref['ibof_trajectory'].mean:+.2e} ± {e_ref['ibof_trajectory'].error:.1e} (± the 4-seed "
              f"standard error). Change: paired over the seeds, ± its s.e.; in stat. errors: |change| over the "
