@@ -238,6 +238,30 @@ BETA_EVIDENCE: Mapping[tuple[str, float], RegimeEvidence] = MappingProxyType({
         command=".venv/bin/python studies/speed_accuracy/solve_reuse.py --beta 10",
         output="out/speed_accuracy/solve_reuse_beta10/solve_reuse.nc",
         ci_reference=(1.14e-3, 2.7e-4), trajectory_reference=(2.85e-3, 3.9e-4)),
+    # beta = 10, concentrated: the series' phi beta = 1.0 scene (176 fibres, n L^3 = 12.7) on 96^3, its
+    # reference a solve every 4th step at the longer step (studies/speed_accuracy/solve_reuse.py --beta 10
+    # --concentrated); the longer step itself was measured at phi beta = 0.5 only
+    ("concentrated", 10.0): RegimeEvidence(
+        regime="concentrated", beta=10.0, n_l3=176 / 2.4 ** 3, n_fibres=176, seeds=4,
+        reference=Measured(name="tol1e-3_every4_dt2", stokes={**_BETA10_REF_STOKES, "cells_per_diameter": 4},
+                           dt_factor=2.0, closure_free=0.0, closure_free_stderr=0.0, trajectory=0.0,
+                           trajectory_stderr=0.0, cpu_ratio=1.0,
+                           measured_on="96^3; its step 2 alpha/(gamma_dot L) measured at phi beta = 0.5 only"),
+        settings=(
+            Measured(name="tol1e-3_every8_jeffery_dt2",
+                     stokes={**_BETA10_REF_STOKES, "cells_per_diameter": 4, "solve_every": 8, "reuse": "jeffery"},
+                     dt_factor=2.0, closure_free=0.03, closure_free_stderr=0.03, trajectory=0.19,
+                     trajectory_stderr=0.16, cpu_ratio=0.51, measured_on="96^3, 4 voxels per diameter"),
+            Measured(name="tol1e-3_every16_jeffery_dt2",
+                     stokes={**_BETA10_REF_STOKES, "cells_per_diameter": 4, "solve_every": 16, "reuse": "jeffery"},
+                     dt_factor=2.0, closure_free=0.04, closure_free_stderr=0.24, trajectory=0.30,
+                     trajectory_stderr=0.25, cpu_ratio=0.28, measured_on="96^3, 4 voxels per diameter"),
+        ),
+        period_error=0.003,  # the same fibre and grid as the semi-dilute row's
+        study="studies/speed_accuracy/solve_reuse.py --beta 10 --concentrated",
+        command=".venv/bin/python studies/speed_accuracy/solve_reuse.py --beta 10 --concentrated",
+        output="out/speed_accuracy/solve_reuse_beta10_concentrated/solve_reuse.nc",
+        ci_reference=(7.65e-4, 1.8e-4), trajectory_reference=(6.18e-4, 3.2e-4)),
 })
 
 
@@ -488,7 +512,8 @@ def fill(scene: Scene, probe) -> tuple[Scene, str, tuple[str, ...]]:
         text = (f'numerics.preset = "study": {m.name} ({chosen}) for the {ev.regime} regime: measured on '
                 f"{measured_on}{f' ({m.measured_on})' if m.measured_on else ''}, it changes C_I by "
                 f"{m.closure_free:.2f} +- {m.closure_free_stderr:.2f} (closure-free) and {m.trajectory:.2f} +- "
-                f"{m.trajectory_stderr:.2f} (IBOF trajectory fit) statistical errors against the reference numerics, "
+                f"{m.trajectory_stderr:.2f} (IBOF trajectory fit) statistical errors against the reference numerics"
+                f"{f' ({ev.reference.name}: {ev.reference.measured_on})' if ev.reference.measured_on else ''}, "
                 f"at {m.cpu_ratio:.2f} of its CPU time (rule: change <= {ADMISSIBLE_FRACTION:g}; "
                 f"{ev.study})")
     if kept:

@@ -189,17 +189,19 @@ def main() -> None:
 
 
 def evidence_lines(table: dict, beta: float, concentrated: bool) -> list[str]:
-    """The settings of pyfold.scene.study_preset.BETA_EVIDENCE that this sweep measures (its grid:
-    no ``measured_on``; its interval and estimate) against the changes just computed."""
+    """The settings of pyfold.scene.study_preset.BETA_EVIDENCE that this sweep measures (its regime,
+    interval and estimate; at φβ = 0.5 the rows without ``measured_on``, the 96³ one being
+    ci_resolution_beta10.py's) against the changes just computed."""
     from pyfold.scene.study_preset import BETA_EVIDENCE, Measured, compare_changes
 
-    ev = BETA_EVIDENCE.get(("semi-dilute", beta))
-    if ev is None or concentrated:
+    ev = BETA_EVIDENCE.get(("concentrated" if concentrated else "semi-dilute", beta))
+    if ev is None:
         return []
     notes, bad, checked = [], [], []
     for m in ev.settings:
         name = label({"solve_every": m.stokes.get("solve_every", 1), "reuse": m.stokes.get("reuse", "linear")})
-        if m.measured_on or name not in table or m.stokes.get("solve_every") == ev.reference.stokes["solve_every"]:
+        if (m.measured_on and not concentrated) or name not in table \
+                or m.stokes.get("solve_every") == ev.reference.stokes["solve_every"]:
             continue
         row = table[name]  # per estimator: change, its s.e., both in statistical errors at [2], [3]
         new = Measured(name=m.name, stokes=m.stokes, dt_factor=m.dt_factor,
