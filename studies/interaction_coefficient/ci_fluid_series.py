@@ -55,9 +55,11 @@ Method
     It steps at Δt = 2α/(γ̇L) = 0.02, twice the geometric series' step, both models (the
     change of C_I measured by studies/speed_accuracy/time_step_beta10.py), and its Stokes runs
     solve every 16th step with numerics.stokes.reuse = "jeffery" between solves; the change of
-    C_I that makes joins the settings error in quadrature: measured on the series' own grid by
-    ci_resolution_beta10.py's control where its summary has it, else on 72³ by
-    studies/speed_accuracy/solve_reuse.py --beta 10 (REUSE_EVIDENCE).
+    C_I that makes joins the settings error in quadrature, measured as close to each point as
+    there is a measurement (reuse_evidence): at φβ = 1.0 on 96³ by solve_reuse.py --beta 10
+    --concentrated (REUSE_EVIDENCE_CONCENTRATED), at φβ = 0.5 on 96³ by ci_resolution_beta10.py's
+    control (φβ = 0.25 takes that one), else on 72³ by studies/speed_accuracy/solve_reuse.py
+    --beta 10 (REUSE_EVIDENCE).
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
     run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
     its drift reported).
