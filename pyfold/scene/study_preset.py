@@ -48,7 +48,7 @@ from pyfold.scene.schema import Scene
 
 __all__ = ["Measured", "RegimeEvidence", "EVIDENCE", "BETA_EVIDENCE", "GridMeasured", "ResolutionEvidence",
            "RESOLUTION", "ADMISSIBLE_FRACTION", "admissible", "evidence_for", "choice_for", "resolution_for",
-           "compare_changes", "resolution_check",
+           "compare_changes", "evidence_check_lines", "resolution_check",
            "probe_scene", "fill"]
 
 #: The preset's rule: a setting is admissible where its change of C_I (paired mean over the
@@ -350,6 +350,13 @@ def compare_changes(label: str, stored: Measured | GridMeasured,
             (bad if abs(a - b) > width else notes).append(
                 f"{label}/{est}: stored {a:.2f}, recomputed {b:.2f} (2 combined s.e. {width:.2f})")
     return notes, bad
+
+
+def evidence_check_lines(table: str, notes: list[str], bad: list[str], agreed: str) -> list[str]:
+    """A study's Markdown section on its check against the preset's copy ``table`` (a name in
+    this module): the disagreements, the notes, and ``agreed`` when nothing disagrees."""
+    return (["", f"## Against the preset's copy (pyfold.scene.study_preset.{table})", ""]
+            + [f"* disagrees: {b}" for b in bad] + [f"* note: {n}" for n in notes] + ([] if bad else [f"* {agreed}"]))
 
 
 def resolution_check(beta: float, recomputed: list[GridMeasured]) -> tuple[list[str], list[str]]:

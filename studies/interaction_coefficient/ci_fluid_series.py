@@ -207,20 +207,18 @@ def reuse_evidence(arguments: dict, evidence: Path = REUSE_EVIDENCE, grid_eviden
     name = solve_label(arguments.get("solve_every", STOKES["solve_every"]), arguments.get("reuse", "linear"))
     cells = int(arguments.get("cells_per_diameter", STOKES["cells_per_diameter"]))
 
-    def row_of(path: Path) -> tuple[float, float]:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
-            if name not in list(ds["setting"].values):
-                raise SystemExit(f"{path} has no setting '{name}' (it has {list(ds['setting'].values)})")
-            row = ds.sel(setting=name)
-            return tuple(math.hypot(float(row[f"change_{est}"]), float(row[f"change_{est}_stderr"]))
-                         for est in ("closure_free", "ibof_trajectory"))
+    def row_of(ds, path: Path) -> tuple[float, float]:
+        if name not in list(ds["setting"].values):
+            raise SystemExit(f"{path} has no setting '{name}' (it has {list(ds['setting'].values)})")
+        row = ds.sel(setting=name)
+        return tuple(math.hypot(float(row[f"change_{est}"]), float(row[f"change_{est}_stderr"]))
+                     for est in ("closure_free", "ibof_trajectory"))
 
     if point_evidence is not None and n_l3 is not None and point_evidence.is_file():
         with xr.open_dataset(point_evidence, engine="h5netcdf") as ds:
-            here = (abs(float(ds.attrs.get("n_l3", math.nan)) - n_l3) <= 1e-9 * n_l3
-                    and int(ds.attrs.get("cells_per_diameter", -1)) == cells and name in list(ds["setting"].values))
-        if here:
-            return row_of(point_evidence), f"n L^3 {n_l3:g} on its grid ({point_evidence})"
+            if (abs(float(ds.attrs.get("n_l3", math.nan)) - n_l3) <= 1e-9 * n_l3
+                    and int(ds.attrs.get("cells_per_diameter", -1)) == cells and name in list(ds["setting"].values)):
+                return row_of(ds, point_evidence), f"n L^3 {n_l3:g} on its grid ({point_evidence})"
     if grid_evidence is not None and grid_evidence.is_file():
         control = json.loads(grid_evidence.read_text(encoding="utf-8")).get("solve_interval")
         if control and control["series"] == name and control["cells_per_diameter"] == cells:
@@ -230,7 +228,8 @@ def reuse_evidence(arguments: dict, evidence: Path = REUSE_EVIDENCE, grid_eviden
     if not evidence.is_file():
         raise SystemExit(f"the sweep solves '{name}': its change of C_I is measured by "
                          f"studies/speed_accuracy/solve_reuse.py --beta 10, whose {evidence} is missing; run it first")
-    return row_of(evidence), f"phi beta 0.5 on 72^3 ({evidence})"
+    with xr.open_dataset(evidence, engine="h5netcdf") as ds:
+        return row_of(ds, evidence), f"phi beta 0.5 on 72^3 ({evidence})"
 
 
 def xi_sensitivity(rep, xi_grid: float, fits_out: dict[str, list[float]] | None = None

@@ -76,7 +76,7 @@ def _evidence_lines(runs: dict, ens: dict, seeds: list[int], cpds: list[int], fi
     """The grids' changes as the preset holds them (pyfold.scene.study_preset.RESOLUTION), checked
     against its copy."""
     from pyfold.ensemble import paired_difference
-    from pyfold.scene.study_preset import GridMeasured, resolution_check
+    from pyfold.scene.study_preset import GridMeasured, evidence_check_lines, resolution_check
 
     cpu = {c: np.mean([runs[c, s]["cpu_s"] for s in seeds]) for c in cpds}
     rows = []
@@ -90,36 +90,27 @@ def _evidence_lines(runs: dict, ens: dict, seeds: list[int], cpds: list[int], fi
                                  closure_free_stderr=ch["closure_free"][1], trajectory=ch["ibof_trajectory"][0],
                                  trajectory_stderr=ch["ibof_trajectory"][1],
                                  cpu_ratio=round(cpu[c] / cpu[cpds[0]], 2)))
-    notes, bad = resolution_check(10.0, rows)
-    return (["", "## Against the preset's copy (pyfold.scene.study_preset.RESOLUTION)", ""]
-            + [f"* disagrees: {b}" for b in bad] + [f"* note: {n}" for n in notes]
-            + ([] if bad else ["* the changes agree with the stored rows"]))
+    return evidence_check_lines("RESOLUTION", *resolution_check(10.0, rows), "the changes agree with the stored rows")
 
 
-def _control_evidence_lines(interval: dict | None, runs: dict, controls: dict) -> list[str]:
-    """The control on the series' grid against its row in pyfold.scene.study_preset.BETA_EVIDENCE
-    (the series' solves measured on that grid), in the control's statistical errors."""
-    from pyfold.ensemble import ensemble_mean, paired_difference
-    from pyfold.scene.study_preset import BETA_EVIDENCE, Measured, compare_changes
+def _control_evidence_lines(interval: dict | None) -> list[str]:
+    """The control on the series' grid (``interval``: the summary's ``solve_interval``) against its
+    row in pyfold.scene.study_preset.BETA_EVIDENCE (the series' solves measured on that grid), in
+    the control's statistical errors."""
+    from pyfold.scene.study_preset import BETA_EVIDENCE, Measured, compare_changes, evidence_check_lines
 
     if not interval:
         return []
     ev = BETA_EVIDENCE[("semi-dilute", 10.0)]
     stored = next(m for m in ev.settings if m.measured_on and m.stokes.get("cells_per_diameter") == SERIES_CELLS)
-    c, setting, have = interval["cells_per_diameter"], interval["against"], interval["seeds"]
-    new = {}
-    for est in ESTIMATORS:
-        d = paired_difference([runs[c, s][est][0] for s in have], [controls[c, setting, s][est][0] for s in have])
-        e = ensemble_mean([controls[c, setting, s][est][0] for s in have])
-        new[est] = (round(abs(d.mean) / e.error, 2), round(d.stderr / e.error, 2))
+    new = {est: (round(abs(v["change"]) / v["error"], 2), round(v["stderr"] / v["error"], 2))
+           for est, v in ((est, interval[est]) for est in ESTIMATORS)}
     recomputed = Measured(name=stored.name, stokes=stored.stokes, dt_factor=stored.dt_factor,
                           closure_free=new["closure_free"][0], closure_free_stderr=new["closure_free"][1],
                           trajectory=new["ibof_trajectory"][0], trajectory_stderr=new["ibof_trajectory"][1],
                           cpu_ratio=stored.cpu_ratio)
-    notes, bad = compare_changes(stored.name, stored, recomputed)
-    return (["", "Against the preset's copy (pyfold.scene.study_preset.BETA_EVIDENCE):", ""]
-            + [f"* disagrees: {b}" for b in bad] + [f"* note: {n}" for n in notes]
-            + ([] if bad else [f"* {stored.name}: the changes agree with the stored row"]))
+    return evidence_check_lines("BETA_EVIDENCE", *compare_changes(stored.name, stored, recomputed),
+                                f"{stored.name}: the changes agree with the stored row")
 
 
 def main() -> None:
@@ -225,7 +216,7 @@ def main() -> None:
             d = paired_difference([runs[c, s][est][0] for s in have], [controls[c, setting, s][est][0] for s in have])
             e = ensemble_mean([controls[c, setting, s][est][0] for s in have])
             if c == SERIES_CELLS:
-                summary["solve_interval"][est] = {"change": d.mean, "stderr": d.stderr}
+                summary["solve_interval"][est] = {"change": d.mean, "stderr": d.stderr, "error": e.error}
             control_lines.append(f"| {grids[c]} | {est} | {setting} | {e.mean:+.3e} ± {e.error:.1e} | "
                                  f"{d.mean:+.2e} ± {d.stderr:.1e} | {abs(d.mean) / e.error:.2f} | {len(have)} | "
                                  f"{np.mean([controls[c, setting, s]['cpu_s'] for s in have]):.0f} |")
@@ -233,7 +224,7 @@ def main() -> None:
         lines += ["", f"## The series' solves ({SERIES_SOLVES}) against another setting on the same grid", "",
                   "| grid | estimator | other setting | its C_I | series − other, paired ± s.e. | in stat. errors | "
                   "seeds | its CPU-s per run |", "|---|---|---|---|---|---|---|---|"] + control_lines
-        lines += _control_evidence_lines(summary.get("solve_interval"), runs, controls)
+        lines += _control_evidence_lines(summary.get("solve_interval"))
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "ci_resolution_beta10.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")

@@ -192,7 +192,7 @@ def evidence_lines(table: dict, beta: float, concentrated: bool) -> list[str]:
     """The settings of pyfold.scene.study_preset.BETA_EVIDENCE that this sweep measures (its regime,
     interval and estimate; at φβ = 0.5 the rows without ``measured_on``, the 96³ one being
     ci_resolution_beta10.py's) against the changes just computed."""
-    from pyfold.scene.study_preset import BETA_EVIDENCE, Measured, compare_changes
+    from pyfold.scene.study_preset import BETA_EVIDENCE, Measured, compare_changes, evidence_check_lines
 
     ev = BETA_EVIDENCE.get(("concentrated" if concentrated else "semi-dilute", beta))
     if ev is None:
@@ -212,9 +212,7 @@ def evidence_lines(table: dict, beta: float, concentrated: bool) -> list[str]:
                        cpu_ratio=m.cpu_ratio)
         n, b = compare_changes(m.name, m, new)
         notes, bad, checked = notes + n, bad + b, checked + [m.name]
-    return (["", "## Against the preset's copy (pyfold.scene.study_preset.BETA_EVIDENCE)", ""]
-            + [f"* disagrees: {b}" for b in bad] + [f"* note: {n}" for n in notes]
-            + [f"* checked: {', '.join(checked) or 'no row of this sweep'}"])
+    return evidence_check_lines("BETA_EVIDENCE", notes, bad, f"checked: {', '.join(checked) or 'no row of this sweep'}")
 
 
 def verdict(ok: bool, resolved: bool) -> str:
