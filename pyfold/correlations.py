@@ -153,12 +153,20 @@ class LinearFit:
 
 
 def fluid_coupled_fit(closure: str = "ibof", estimator: str = "trajectory", model: str = "stokes",
-                      rows: list[dict] | None = None) -> LinearFit:
+                      rows: list[dict] | None = None, beta: float | None = None) -> LinearFit:
     """The linear fit in phi*beta of the table's C_I of ``closure`` and ``estimator`` ("trajectory":
     the Folgar-Tucker fit to a2(t) from the isotropic start; "steady": the rate regression over
-    the stationary window; closure "closure-free" with the runs' own a4). Weighted by 1/total_err^2:
-    ``(X^T W X) c = X^T W y``, ``cov = (X^T W X)^-1``."""
+    the stationary window; closure "closure-free" with the runs' own a4) at aspect ratio ``beta``
+    (needed when the table has several: C_I is not a function of phi*beta alone). Weighted by
+    1/total_err^2: ``(X^T W X) c = X^T W y``, ``cov = (X^T W X)^-1``."""
     rows = fluid_coupled_table() if rows is None else rows
+    betas = sorted({r["beta"] for r in rows})
+    if beta is None and len(betas) > 1:
+        raise ValueError(f"beta: the table has beta {', '.join(f'{b:g}' for b in betas)}; name the one to fit")
+    if beta is not None:
+        rows = [r for r in rows if r["beta"] == beta]
+        if not rows:
+            raise ValueError(f"beta: {beta:g} is not in the table (it has beta {', '.join(f'{b:g}' for b in betas)})")
     sel = [r for r in rows if r["closure"] == closure and r["estimator"] == estimator and r["model"] == model]
     if len(sel) < 2:
         raise ValueError(f"closure, estimator: {closure!r}/{estimator!r} has {len(sel)} point(s) in the table; "
@@ -200,7 +208,7 @@ def fluid_coupled_ci(beta: float, phi_b: float, rows: list[dict] | None = None) 
     values, span = {}, None
     for closure, est in FLUID_COUPLED_QUOTED:
         try:
-            fit = fluid_coupled_fit(closure, est, rows=sub)
+            fit = fluid_coupled_fit(closure, est, rows=sub, beta=match[0])
         except ValueError:
             continue
         span = fit.phi_beta_range

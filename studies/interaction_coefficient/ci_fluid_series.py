@@ -509,6 +509,24 @@ def markdown(rows, reps, cost, beta_e_grid, beta: float = BETA, grid: str = "42�
     return "\n".join(lines) + "\n"
 
 
+def fit_lines(rows: list[dict], beta: float) -> list[str]:
+    """The linear fits in φβ of this series' fluid-coupled rows that pyfold.correlations.fluid_coupled_ci
+    quotes (FLUID_COUPLED_QUOTED), one Markdown bullet each, as the shipped table's fit of this β gives them."""
+    from pyfold.correlations import FLUID_COUPLED_QUOTED, fluid_coupled_fit
+
+    lines = []
+    for closure, est in FLUID_COUPLED_QUOTED:
+        try:
+            fit = fluid_coupled_fit(closure, est, rows=rows, beta=beta)
+        except ValueError:  # fewer than two concentrations with this closure's value
+            continue
+        (v00, _), (_, v11) = fit.cov
+        lines.append(f"* {closure} ({est}): C_I = {fit.c0:.2e} + {fit.c1:.2e} φβ, s.e. {math.sqrt(v00):.1e} / "
+                     f"{math.sqrt(v11):.1e}, chi2 {fit.chi2:.2f} ({fit.points - 2} dof), "
+                     f"φβ {fit.phi_beta_range[0]:.2f}-{fit.phi_beta_range[1]:.2f}")
+    return lines
+
+
 def cpu_of(path: Path) -> float:
     """CPU time of the sweep run whose run file is ``path`` [s]."""
     from pyfold.sweep import store as sweep_store
@@ -617,6 +635,9 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
                            else []) if r["beta"] != beta]
     figure(rows + shipped, out / "ci_fluid_series.png")
     text = markdown(rows, reps, cost, beta_e_grid, beta, grid) + "\n## Fluid-coupled against contacts only\n\n" + "\n".join(pairs)
+    fits = fit_lines(rows, beta)
+    if fits:
+        text += "\n\n## The fit in φβ (pyfold.correlations.fluid_coupled_fit)\n\n" + "\n".join(fits)
     (out / "ci_fluid_series.md").write_text(text + "\n", encoding="utf-8")
     print(text)
 

@@ -5,6 +5,7 @@ recover a known convergence, and pyfold.correlations' fit of the shipped table
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -409,15 +410,30 @@ def test_the_fit_is_not_quoted_outside_its_beta_or_range():
 
 
 def test_the_shipped_table_covers_three_concentrations_with_all_errors():
+    """Every aspect ratio of the shipped table: three concentrations or more, every error part
+    measured (resolution included) and the total their quadrature sum, and a fit of its own."""
     rows = fluid_coupled_table()
-    stokes = [r for r in rows if r["model"] == "stokes"]
-    assert len({r["n_l3"] for r in stokes}) >= 3
-    for r in stokes:
-        parts = [r[k] for k in ("stat_err", "settings_err", "shape_err", "resolution_err")]
-        assert all(math.isfinite(v) and v >= 0.0 for v in parts) and min(parts[:2] + parts[3:]) > 0.0
-        assert r["total_err"] == pytest.approx(math.sqrt(sum(v * v for v in parts)), rel=1e-4)  # 6 digits in the csv
-    fit = fluid_coupled_fit("ibof", "trajectory", rows=rows)
-    assert math.isfinite(fit.c0) and math.isfinite(fit.c1) and fit.points >= 3
+    for beta in sorted({r["beta"] for r in rows}):
+        stokes = [r for r in rows if r["model"] == "stokes" and r["beta"] == beta]
+        assert len({r["n_l3"] for r in stokes}) >= 3, beta
+        for r in stokes:
+            parts = [r[k] for k in ("stat_err", "settings_err", "shape_err", "resolution_err")]
+            assert all(math.isfinite(v) and v >= 0.0 for v in parts) and min(parts[:2] + parts[3:]) > 0.0
+            assert r["total_err"] == pytest.approx(math.sqrt(sum(v * v for v in parts)), rel=1e-4)  # 6 digits in the csv
+        fit = fluid_coupled_fit("ibof", "trajectory", rows=rows, beta=beta)
+        assert math.isfinite(fit.c0) and math.isfinite(fit.c1) and fit.points >= 3 and fit.beta == beta
+
+
+def test_the_fit_of_a_table_of_several_aspect_ratios_needs_its_beta():
+    rows = _rows([(0.4, 3e-3, 1e-4), (1.2, 5e-3, 1e-4)]) + [
+        {**r, "beta": 10.0} for r in _rows([(0.25, 1e-3, 1e-4), (1.0, 2e-3, 1e-4)])]
+    with pytest.raises(ValueError, match="beta: the table has beta 5, 10"):
+        fluid_coupled_fit(rows=rows)
+    with pytest.raises(ValueError, match="beta: 20 is not in the table"):
+        fluid_coupled_fit(rows=rows, beta=20.0)
+    ten = fluid_coupled_fit(rows=rows, beta=10.0)
+    assert ten.beta == 10.0 and ten(0.25)[0] == pytest.approx(1e-3) and ten(1.0)[0] == pytest.approx(2e-3)
+    assert fluid_coupled_fit(rows=rows, beta=5.0)(0.4)[0] == pytest.approx(3e-3)
 
 
 def test_an_unmeasured_resolution_error_is_left_out_of_the_total_and_flagged():
@@ -500,3 +516,15 @@ def test_a_beta10_table_joins_the_shipped_beta5_one_without_touching_its_rows(tm
     assert values and "beta 10" in text
     five_values, _ = fluid_coupled_ci(5.0, 0.78, rows=back)
     assert five_values == fluid_coupled_ci(5.0, 0.78, rows=five)[0]
+
+
+def test_the_documented_fits_are_those_of_the_shipped_table():
+    """docs/fluid_coupled_ci.md lists the fit of each aspect ratio of data/ci_fluid_coupled.csv as
+    ci_fluid_series.fit_lines gives it: a new table without the new fits in the docs fails here."""
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "fluid_coupled_ci.md").read_text(encoding="utf-8")
+    rows = fluid_coupled_table()
+    for beta in sorted({r["beta"] for r in rows}):
+        lines = series.fit_lines(rows, beta)
+        assert len(lines) == 4, beta
+        for line in lines:
+            assert line in docs, line
