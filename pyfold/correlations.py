@@ -204,11 +204,10 @@ def fluid_coupled_ci(beta: float, phi_b: float, rows: list[dict] | None = None) 
     if not match:
         return {}, (f"pyfold fluid-coupled fit: not for beta = {beta:.3g} (the table has beta "
                     f"{', '.join(f'{b:g}' for b in betas)})")
-    sub = [r for r in rows if r["beta"] == match[0]]
     values, span = {}, None
     for closure, est in FLUID_COUPLED_QUOTED:
         try:
-            fit = fluid_coupled_fit(closure, est, rows=sub, beta=match[0])
+            fit = fluid_coupled_fit(closure, est, rows=rows, beta=match[0])
         except ValueError:
             continue
         span = fit.phi_beta_range
