@@ -82,7 +82,8 @@ Cost (2 cores)
     β = 10: about 33 CPU-s per unit strain per Stokes run at φβ = 0.5 (7 000 CPU-s per run,
     ~7 CPU-hours per point of 4 seeds; docs/fluid_coupled_ci.md#cost), contacts-only twins ~1 CPU-min;
     calibrated, at twice the step and a solve every 16th step: about 9 CPU-s per unit strain on
-    96³ (ci_resolution_beta10.py), ~2.1 CPU-hours per point of 4 seeds at φβ = 0.5.
+    96³ (ci_resolution_beta10.py); measured: 1822 / 1940 / 2787 CPU-s per Stokes run, 2.0 / 2.2 / 3.1
+    CPU-hours per point of 4 seeds at φβ = 0.25 / 0.5 / 1.0; the analysis of the three points 4 min.
 
 Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/ [_calibrated/];
 ``--out``)
@@ -535,11 +536,11 @@ def cpu_of(path: Path) -> float:
 
 
 def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path,
-            beta: float = BETA, reuse: dict | None = None, stokes: dict | None = None) -> None:
+            beta: float = BETA, reuse: dict | None = None, stokes: dict | None = None, dt: float | None = None) -> None:
     """The tables, report and figure of the finished runs ``done``; ``reuse``: per n L³, the
     (closure-free, trajectory) error of the sweep's solve interval against STOKES' and where it was
     measured (reuse_evidence), added to the settings error in quadrature; ``stokes``: the Stokes
-    numerics the sweep runs (STOKES by default)."""
+    numerics the sweep runs (STOKES by default); ``dt``: its time step (None: α/(γ̇L))."""
     from pyfold.correlations import fluid_coupled_table
     from pyfold.ensemble import paired_difference
     from pyfold.report import build_report, write_report
@@ -603,7 +604,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
         pairs.append(line + f"; paired over {d.n} seeds")
     out.mkdir(parents=True, exist_ok=True)
     grid = "x".join(map(str, grid_of(first_stokes)))
-    first = scene_of(5.0, "jeffery", 1, 1.0, beta)
+    first = scene_of(5.0, "jeffery", 1, 1.0, beta, dt=dt)
     attrs = {"title": f"Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = {beta:g} fibres",
              "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py "
                         + ("--write-data" if beta == BETA else f"--beta {beta:g}"
@@ -629,7 +630,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
              "seeds": " ".join(map(str, seeds))}
     write_table(rows, out / "ci_fluid_series", attrs)
     if write_data:  # this aspect ratio's rows replace its old ones; the others' stay
-        write_table(*merged_table(rows, attrs, beta, DATA.with_suffix(".csv")), DATA)
+        merged, head = merged_table(rows, attrs, beta, DATA.with_suffix(".csv"))
+        write_table(merged, DATA, head)
     # beside the shipped table's other aspect ratios: how the answer moves with β at equal φβ
     shipped = [r for r in (fluid_coupled_table(DATA.with_suffix(".csv")) if DATA.with_suffix(".csv").is_file()
                            else []) if r["beta"] != beta]
@@ -704,7 +706,8 @@ def main() -> None:
     reuse = {n: v for n, v in reuse.items() if v is not None} or None
     stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse", "cells_per_diameter")
                            if k in spec.arguments}}
-    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, resolution, args.beta, reuse, stokes)
+    analyse(keyed, tuple(spec.seeds), args.out, args.write_data, resolution, args.beta, reuse, stokes,
+            spec.arguments.get("dt"))
     print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
 
 
