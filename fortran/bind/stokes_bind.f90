@@ -24,8 +24,10 @@ contains
    end subroutine velocity_out
 
    function make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, &
-                          plan_effort, rigidity, fibre_radius_scale) result(set)
+                          plan_effort, rigidity, fibre_radius_scale, fibre_shells) result(set)
       real(dp), intent(in) :: eta_f, kappa, tol, fibre_radius_scale
+      !> fold_settings FOLD_SHELLS_* (default: overlap)
+      integer(ip), intent(in), optional :: fibre_shells
       integer(ip), intent(in) :: max_iter, derivative, mixing, subsamples, fibre_ends, warm_start, plan_effort
       !> fold_settings FOLD_RIGIDITY_*
       integer(ip), intent(in) :: rigidity
@@ -36,6 +38,7 @@ contains
                               mixing=mixing, subsamples=subsamples, fibre_ends=fibre_ends, &
                               warm_start=warm_start /= 0, guess=max(1_ip, min(int(warm_start, ip), 2_ip)), &
                               plan_effort=plan_effort, rigidity=rigidity, fibre_radius_scale=fibre_radius_scale)
+      if (present(fibre_shells)) set%fibre_shells = fibre_shells
    end function make_settings
 end module fold_stokes_bind_util
 
@@ -92,7 +95,8 @@ end subroutine fold_stokes_solve_chi
 
 subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offset, g, shape, radius, length, xi, x, p, &
                                        eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, fibre_ends, &
-                                       fibre_radius_scale, plan_effort, rigidity_code, chi, u, v, omega, rigidity, stress, sigma_p, scalars, &
+                                       fibre_radius_scale, fibre_shells, shell_gap, plan_effort, rigidity_code, chi, u, v, omega, &
+                                       rigidity, stress, sigma_p, scalars, &
                                        iterations, history, stat, errmsg)
    use fold_kinds, only: dp, ip, msg_len
    use fold_status, only: FOLD_OK, FOLD_NOT_CONVERGED
@@ -106,6 +110,9 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    real(dp), intent(in) :: lengths(3), shear_offset, g(3, 3), radius(np), length(np), xi(np), x(dim, np), p(dim, np)
    !> radius of the voxelised fibres over their geometric radius (fold_voxelise)
    real(dp), intent(in) :: eta_f, kappa, tol, fibre_radius_scale
+   !> the added shells of near fibres (FOLD_SHELLS_*) and, kept apart, their gap [m]
+   integer(ip), intent(in) :: fibre_shells
+   real(dp), intent(in) :: shell_gap
    real(dp), intent(out) :: chi(n1, n2, n3), u(n1, n2, n3, dim), v(dim, np), omega(3, np), rigidity(np)
    !> scalars: residual, eta_eff, eta_dissipation, solid_strain, solid_fraction
    real(dp), intent(out) :: stress(3, 3), sigma_p(3, 3), scalars(5), history(max_iter + 1)
@@ -133,10 +140,12 @@ subroutine fold_stokes_solve_particles(dim, n1, n2, n3, np, lengths, shear_offse
    call particles_init(parts, dim, np, stat, errmsg, x=x, p=p, shape=shape, radius=radius, length=length, xi=xi)
    if (stat /= FOLD_OK) return
    call stokes_context_init(ctx, make_settings(eta_f, kappa, tol, max_iter, derivative, mixing, subsamples, &
-                                               fibre_ends, 0_ip, plan_effort, rigidity_code, fibre_radius_scale), &
+                                               fibre_ends, 0_ip, plan_effort, rigidity_code, fibre_radius_scale, &
+                                               fibre_shells), &
                             dim, [n1, n2, n3], &
                             stat, errmsg)
    if (stat /= FOLD_OK) return
+   call stokes_context_lubrication(ctx, .false., shell_gap)
    call stokes_rigid_velocities(ctx, cell, parts, rec, stat, errmsg)
    iterations = ctx%solver%iterations
    history(1:iterations + 1) = ctx%solver%history(0:iterations)

@@ -19,6 +19,7 @@ module fold_settings
    integer(ip), parameter, public :: FOLD_DERIV_SPECTRAL = 0, FOLD_DERIV_FD = 1  !< codes of numerics.stokes.derivative (/setup/resolved/stokes_derivative)
    integer(ip), parameter, public :: FOLD_MIX_ARITHMETIC = 0, FOLD_MIX_HARMONIC = 1, FOLD_MIX_GEOMETRIC = 2  !< codes of numerics.stokes.mixing (/setup/resolved/stokes_mixing)
    integer(ip), parameter, public :: FOLD_ENDS_FLAT = 0, FOLD_ENDS_CAPPED = 1  !< codes of numerics.stokes.fibre_ends (/setup/resolved/stokes_fibre_ends)
+   integer(ip), parameter, public :: FOLD_SHELLS_OVERLAP = 0, FOLD_SHELLS_APART = 1  !< codes of numerics.stokes.fibre_shells (/setup/resolved/stokes_fibre_shells)
    integer(ip), parameter, public :: FOLD_FFT_DOUBLE = 0, FOLD_FFT_SINGLE = 1  !< codes of numerics.stokes.fft_precision (/setup/resolved/stokes_fft_precision)
    integer(ip), parameter, public :: FOLD_RIGIDITY_PENALTY = 0, FOLD_RIGIDITY_EXACT = 1  !< codes of numerics.stokes.rigidity (/setup/resolved/stokes_rigidity)
    integer(ip), parameter, public :: FOLD_GUESS_PREVIOUS = 1, FOLD_GUESS_EXTRAPOLATE = 2  !< codes of numerics.stokes.initial_guess (/setup/resolved/stokes_initial_guess)
@@ -50,6 +51,7 @@ module fold_settings
    integer(i8), parameter, public :: FOLD_LO_STOKES_SUBSAMPLES = 1_i8, FOLD_HI_STOKES_SUBSAMPLES = 8_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_SUBSAMPLES = 3_ip  !< numerics.stokes.subsamples -> /setup/resolved/stokes_subsamples
    integer(i8), parameter, public :: FOLD_LO_STOKES_FIBRE_ENDS = 0_i8, FOLD_HI_STOKES_FIBRE_ENDS = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_FIBRE_ENDS = 0_ip  !< numerics.stokes.fibre_ends -> /setup/resolved/stokes_fibre_ends
    real(dp), parameter, public :: FOLD_LO_STOKES_FIBRE_RADIUS_SCALE = 0.5_dp, FOLD_HI_STOKES_FIBRE_RADIUS_SCALE = 2.0_dp; real(dp), parameter, public :: FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE = 1.0_dp  !< numerics.stokes.fibre_radius_scale -> /setup/resolved/stokes_fibre_radius_scale (optional)
+   integer(i8), parameter, public :: FOLD_LO_STOKES_FIBRE_SHELLS = 0_i8, FOLD_HI_STOKES_FIBRE_SHELLS = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_FIBRE_SHELLS = 0_ip  !< numerics.stokes.fibre_shells -> /setup/resolved/stokes_fibre_shells (optional)
    integer(i8), parameter, public :: FOLD_LO_STOKES_WARM_START = 0_i8, FOLD_HI_STOKES_WARM_START = 1_i8; logical, parameter, public :: FOLD_DEF_STOKES_WARM_START = .true.  !< numerics.stokes.warm_start -> /setup/resolved/stokes_warm_start
    integer(i8), parameter, public :: FOLD_LO_STOKES_FFT_PLAN = 0_i8, FOLD_HI_STOKES_FFT_PLAN = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_FFT_PLAN = 1_ip  !< numerics.stokes.fft_plan -> /setup/resolved/stokes_fft_plan
    integer(i8), parameter, public :: FOLD_LO_STOKES_FFT_PRECISION = 0_i8, FOLD_HI_STOKES_FFT_PRECISION = 1_i8; integer(ip), parameter, public :: FOLD_DEF_STOKES_FFT_PRECISION = 0_ip  !< numerics.stokes.fft_precision -> /setup/resolved/stokes_fft_precision (optional)

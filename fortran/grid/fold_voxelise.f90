@@ -20,11 +20,29 @@
 !> indices are wrapped for storage only), so the cost is proportional to the
 !> voxels the particle touches, and voxels far from the surface (|phi| larger
 !> than the voxel half-diagonal + w) are classified without sub-sampling.
+!> Added shells kept apart (optional shell_gap g >= 0, with fibre_radius_scale s > 1). The shell
+!> of radius (s - 1) R added to a fibre k is its coverage H(1/2 - phi_s/w) minus the geometric
+!> one H(1/2 - phi/w) (phi_s, phi: the signed distances at the scaled and the geometric radius).
+!> Near another particle j it is weighted by H(1/2 + (phi_j - phi - g)/w), phi_j the geometric
+!> signed distance from j: a shell point belongs to k only while it is nearer k's geometric
+!> surface than j's by more than g. Two shells therefore end on either side of the surface
+!> equidistant from the two bodies and leave a fluid layer of at least g between them, and
+!> a shell never comes closer than g to another body; with g the contacts' security zone
+!> alpha the voxelised bodies stay as far apart as the contacts keep the geometric ones.
+!> Without it, two fibres nearer than 2 (s - 1) R overlap in the solve, their summed
+!> coverage bridges the gap with rigid voxels and they move as one body
+!> (docs/fluid_coupled_ci.md#fibre-shells-kept-apart). The geometric body keeps weight 1, and
+!> H(1 - t) = 1 - H(t) keeps chi twice differentiable in the particle positions. Only voxels
+!> within reach of a neighbour (its geometric distance from the voxel centre less than the
+!> fibre's plus g + w/2 + 2 half-diagonals: signed distances are 1-Lipschitz) pay for the
+!> neighbours' distances; the neighbours of each fibre are the periodic images (27 lattice
+!> shifts, none across walls) of the particles whose bounding spheres come that close.
 module fold_voxelise
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_grid, only: grid_t, grid_point
    use fold_particles, only: particle_set_t, FOLD_FIBRE, FOLD_SPHERE, FOLD_SPHEROID, particle_half_segment
+   use fold_segment, only: segment_closest
    implicit none
    private
 
@@ -52,7 +70,7 @@ module fold_voxelise
 contains
 
    !> Voxelise every particle of parts on grid; vox keeps its storage between calls.
-   subroutine voxelise(grid, parts, subsamples, ends, vox, stat, errmsg, walls, fibre_radius_scale)
+   subroutine voxelise(grid, parts, subsamples, ends, vox, stat, errmsg, walls, fibre_radius_scale, shell_gap)
       type(grid_t), intent(in) :: grid
       type(particle_set_t), intent(in) :: parts
       !> Sub-samples per voxel edge (1 .. 8)
@@ -71,7 +89,16 @@ contains
       !> coarse grid turns like a more slender one, so a radius calibrated to the grid can be
       !> given here; spheres and spheroids keep their radius (docs/fluid_coupled_ci.md)
       real(dp), intent(in), optional :: fibre_radius_scale
+      !> With fibre_radius_scale > 1: keep the added shells this far [m] from the other
+      !> particles' geometric surfaces (see the module's notes; default: the shells overlap
+      !> and their coverages add up)
+      real(dp), intent(in), optional :: shell_gap
 
+      integer(ip), allocatable :: nb_ptr(:), nb_j(:), cand(:)
+      real(dp), allocatable :: nb_x(:, :), dcen(:)
+      real(dp) :: gap, r0, hseg0, phig, dmin, own
+      integer(ip) :: e, nc, lo_nb, hi_nb
+      logical :: apart, near
       integer(ip) :: k, dim, ns, s1, s2, s3, is, m(3), lo(3), hi(3), g(3), l(3), i1, i2, i3, nsub
       integer(i8) :: cnt
       real(dp), allocatable :: dr(:, :)
@@ -97,6 +124,12 @@ contains
          write (errmsg, '(a,es10.3)') "voxelise: fibre_radius_scale must be > 0, got ", fscale
          return
       end if
+      gap = -1.0_dp
+      if (present(shell_gap)) gap = shell_gap
+      if (present(shell_gap) .and. .not. (gap >= 0.0_dp)) then
+         write (errmsg, '(a,es10.3)') "voxelise: shell_gap must be >= 0, got ", gap
+         return
+      end if
       if (ends /= FOLD_ENDS_FLAT .and. ends /= FOLD_ENDS_CAPPED) then
          write (errmsg, '(a,i0)') "voxelise: fibre ends must be 0 (flat) or 1 (capped), got ", ends
          return
@@ -115,6 +148,15 @@ contains
          end do
       end do
       w = grid%h/ns
+      apart = gap >= 0.0_dp .and. fscale > 1.0_dp
+      ! a neighbour counts for the voxels within margin (half-diagonal + w) of the scaled fibre, up to
+      ! the gap + w/2 + 2 half-diagonals of the test below
+      if (apart) then
+         call shell_neighbours(grid, parts, fscale, gap + 3.0_dp*grid%half_diag + 2.0_dp*w, bounded_y, &
+                               nb_ptr, nb_j, nb_x)
+         allocate (cand(max(1_ip, maxval(nb_ptr(2:) - nb_ptr(:parts%n)))))
+         allocate (dcen(size(cand)))
+      end if
 
       if (allocated(vox%chi)) then
          if (any(shape(vox%chi) /= [grid%n(1), grid%nl(2), grid%nl(3)])) deallocate (vox%chi)
@@ -135,6 +177,8 @@ contains
          rk = parts%radius(k)
          if (parts%shape(k) == FOLD_FIBRE) rk = fscale*rk
          hseg = particle_half_segment(parts%shape(k), rk, parts%length(k))
+         r0 = parts%radius(k)
+         hseg0 = particle_half_segment(parts%shape(k), r0, parts%length(k))
          ext = aabb_half_extent(parts%shape(k), rk, parts%length(k), pk)
          if (dim == 2) ext(3) = 0.0_dp
          ! extent in voxel units along each lattice direction
@@ -165,14 +209,50 @@ contains
                   r = grid_point(grid, m, 0.5_dp) - xk
                   phi = signed_distance(parts%shape(k), ends, rk, parts%length(k), hseg, pk, r)
                   if (phi > margin) cycle
-                  if (phi < -margin) then
+                  near = .false.
+                  nc = 0
+                  if (apart .and. parts%shape(k) == FOLD_FIBRE) then
+                     lo_nb = int(nb_ptr(k), ip)
+                     hi_nb = int(nb_ptr(k + 1), ip) - 1
+                     if (hi_nb >= lo_nb) then
+                        phig = signed_distance(parts%shape(k), ends, r0, parts%length(k), hseg0, pk, r)
+                        do e = lo_nb, hi_nb
+                           dcen(e - lo_nb + 1) = nearest_other(parts, ends, nb_j(e:e), nb_x(:, e:e), xk + r)
+                        end do
+                        dmin = minval(dcen(1:hi_nb - lo_nb + 1))
+                        near = dmin - phig < gap + 0.5_dp*w + 2.0_dp*grid%half_diag
+                        if (near) then
+                           ! a sub-point lies within half_diag of the centre and the distances are
+                           ! 1-Lipschitz: only a neighbour within 2 half_diag of the nearest at the
+                           ! centre can be the nearest at a sub-point
+                           nc = 0
+                           do e = lo_nb, hi_nb
+                              if (dcen(e - lo_nb + 1) <= dmin + 2.0_dp*grid%half_diag) then
+                                 nc = nc + 1
+                                 cand(nc) = e
+                              end if
+                           end do
+                        end if
+                     end if
+                  end if
+                  if (phi < -margin .and. .not. near) then
                      f = 1.0_dp
                   else
                      f = 0.0_dp
                      do is = 1, nsub
                         phi = signed_distance(parts%shape(k), ends, rk, parts%length(k), hseg, pk, &
                                               r + dr(:, is))
-                        f = f + smooth_step(0.5_dp - phi/w)
+                        if (near) then
+                           ! the geometric body, plus the shell where it is not yielded to a neighbour
+                           phig = signed_distance(parts%shape(k), ends, r0, parts%length(k), hseg0, pk, r + dr(:, is))
+                           dmin = nearest_other(parts, ends, nb_j(cand(1:nc)), nb_x(:, cand(1:nc)), &
+                                                xk + r + dr(:, is))
+                           own = smooth_step(0.5_dp + (dmin - phig - gap)/w)
+                           f = f + smooth_step(0.5_dp - phig/w) + &
+                               own*(smooth_step(0.5_dp - phi/w) - smooth_step(0.5_dp - phig/w))
+                        else
+                           f = f + smooth_step(0.5_dp - phi/w)
+                        end if
                      end do
                      f = f/nsub
                      if (f <= 0.0_dp) cycle
@@ -193,6 +273,89 @@ contains
       vox%chi = min(vox%chi, 1.0_dp)
       stat = FOLD_OK
    end subroutine voxelise
+
+   !> The neighbours whose geometric bodies may claim part of each fibre's added shell: the
+   !> periodic images (27 lattice shifts; none across walls) of every other particle whose
+   !> bounding sphere comes within reach [m] of the fibre's scaled bounding sphere. CSR: those
+   !> of particle k are nb_j(nb_ptr(k) : nb_ptr(k+1) - 1), nb_x the centres of the images [m].
+   !> O(N^2) pair tests, against the solve's O(N_grid log N_grid), once per voxelisation.
+   subroutine shell_neighbours(grid, parts, fscale, reach, bounded_y, nb_ptr, nb_j, nb_x)
+      type(grid_t), intent(in) :: grid
+      type(particle_set_t), intent(in) :: parts
+      real(dp), intent(in) :: fscale, reach
+      logical, intent(in) :: bounded_y
+      integer(ip), allocatable, intent(out) :: nb_ptr(:), nb_j(:)
+      real(dp), allocatable, intent(out) :: nb_x(:, :)
+      integer(ip) :: k, j, a, b, c, cnt, dim
+      real(dp) :: xk(3), xj(3), d(3), bk, bj, pk(3), pj(3), hk, hj, sk, tj_, dvec(3)
+      integer(ip), allocatable :: tj(:)
+      real(dp), allocatable :: tx(:, :)
+      dim = parts%dim
+      allocate (nb_ptr(parts%n + 1), nb_j(max(16_ip, 8_ip*parts%n)), nb_x(3, max(16_ip, 8_ip*parts%n)))
+      cnt = 0
+      do k = 1, parts%n
+         nb_ptr(k) = cnt + 1
+         if (parts%shape(k) /= FOLD_FIBRE) cycle
+         xk = 0.0_dp
+         xk(1:dim) = parts%x(:, k)
+         pk = 0.0_dp
+         pk(1:dim) = parts%p(:, k)/norm2(parts%p(:, k))
+         hk = particle_half_segment(parts%shape(k), fscale*parts%radius(k), parts%length(k))
+         bk = hk + fscale*parts%radius(k)
+         do j = 1, parts%n
+            if (j == k) cycle
+            xj = 0.0_dp
+            xj(1:dim) = parts%x(:, j)
+            pj = 0.0_dp
+            pj(1:dim) = parts%p(:, j)/norm2(parts%p(:, j))
+            hj = particle_half_segment(parts%shape(j), parts%radius(j), parts%length(j))
+            bj = hj + parts%radius(j)
+            do c = merge(-1, 0, dim == 3), merge(1, 0, dim == 3)
+               do b = merge(0, -1, bounded_y), merge(0, 1, bounded_y)
+                  do a = -1, 1
+                     d = xj + matmul(grid%A, real([a, b, c], dp)) - xk
+                     if (norm2(d) > bk + bj + reach) cycle
+                     ! the bounding capsules (fold_particles), which contain the bodies, within reach
+                     call segment_closest(-d, pk, hk, pj, hj, sk, tj_, dvec)
+                     if (norm2(dvec) > fscale*parts%radius(k) + parts%radius(j) + reach) cycle
+                     cnt = cnt + 1
+                     if (cnt > size(nb_j)) then
+                        allocate (tj(2*size(nb_j)), tx(3, 2*size(nb_j)))
+                        tj(1:cnt - 1) = nb_j(1:cnt - 1)
+                        tx(:, 1:cnt - 1) = nb_x(:, 1:cnt - 1)
+                        call move_alloc(tj, nb_j)
+                        call move_alloc(tx, nb_x)
+                     end if
+                     nb_j(cnt) = j
+                     nb_x(:, cnt) = xk + d
+                  end do
+               end do
+            end do
+         end do
+      end do
+      nb_ptr(parts%n + 1) = cnt + 1
+   end subroutine shell_neighbours
+
+   !> The smallest geometric signed distance [m] of the point x from the particles js whose
+   !> (image) centres are xs.
+   pure function nearest_other(parts, ends, js, xs, x) result(dmin)
+      type(particle_set_t), intent(in) :: parts
+      integer(ip), intent(in) :: ends, js(:)
+      real(dp), intent(in) :: xs(:, :), x(3)
+      real(dp) :: dmin
+      integer(ip) :: e, j, dim
+      real(dp) :: pj(3)
+      dim = parts%dim
+      dmin = huge(1.0_dp)
+      do e = 1, size(js)
+         j = js(e)
+         pj = 0.0_dp
+         pj(1:dim) = parts%p(:, j)/norm2(parts%p(:, j))
+         dmin = min(dmin, signed_distance(parts%shape(j), ends, parts%radius(j), parts%length(j), &
+                                          particle_half_segment(parts%shape(j), parts%radius(j), parts%length(j)), &
+                                          pj, x - xs(:, e)))
+      end do
+   end function nearest_other
 
    !> Signed distance [m] from the particle surface of a point at r = x - centre
    !> (negative inside). Spheroid: first-order estimate, exact on the surface.

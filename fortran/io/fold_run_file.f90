@@ -9,7 +9,7 @@
 !> `stokes_max_iterations`, `stokes_kappa`, `stokes_derivative`, `stokes_fft_plan`,
 !> `stokes_mixing`, `stokes_subsamples`, `stokes_fibre_ends`, `stokes_warm_start`,
 !> `time_scheme`; optional `stokes_initial_guess`, `stokes_solve_every`, `stokes_fft_precision`,
-!> `stokes_fibre_radius_scale`, `stokes_reuse`) are read
+!> `stokes_fibre_radius_scale`, `stokes_reuse`, `stokes_fibre_shells`) are read
 !> only when `hydrodynamics` = 1, so Jeffery run files need not carry them; every
 !> setting that changes results is read, none is left at a default of the solver.
 !> Any problem is returned as FOLD_INPUT_ERROR (wrong content) or FOLD_IO_ERROR
@@ -43,6 +43,7 @@ module fold_run_file
                             FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, FOLD_DEF_STOKES_RIGIDITY, &
                             FOLD_LO_STOKES_SOLVE_EVERY, FOLD_HI_STOKES_SOLVE_EVERY, FOLD_DEF_STOKES_SOLVE_EVERY, &
                             FOLD_LO_STOKES_REUSE, FOLD_HI_STOKES_REUSE, FOLD_DEF_STOKES_REUSE, &
+                            FOLD_LO_STOKES_FIBRE_SHELLS, FOLD_HI_STOKES_FIBRE_SHELLS, FOLD_DEF_STOKES_FIBRE_SHELLS, &
                             FOLD_LO_SHAPE, FOLD_HI_SHAPE, FOLD_LO_DIM, FOLD_HI_DIM, &
                             FOLD_LO_VISCOSITY, FOLD_HI_VISCOSITY, FOLD_LO_DT, FOLD_HI_DT, FOLD_LO_T_END, FOLD_HI_T_END
    use fold_h5, only: hid_t, hsize_t, h5_open_file, h5_close_file, h5_exists, h5_shape, &
@@ -299,6 +300,10 @@ contains
       call get_real(file, R//"stokes_fibre_radius_scale", FOLD_LO_STOKES_FIBRE_RADIUS_SCALE, &
                     FOLD_HI_STOKES_FIBRE_RADIUS_SCALE, s%stokes%fibre_radius_scale, stat, errmsg, &
                     if_absent=FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE); if (stat /= FOLD_OK) return
+      ! optional: run files written before the setting existed let the added shells overlap
+      call get_int(file, R//"stokes_fibre_shells", FOLD_LO_STOKES_FIBRE_SHELLS, FOLD_HI_STOKES_FIBRE_SHELLS, iv, &
+                   stat, errmsg, if_absent=FOLD_DEF_STOKES_FIBRE_SHELLS); if (stat /= FOLD_OK) return
+      s%stokes%fibre_shells = int(iv, ip)
    end subroutine read_stokes
 
    subroutine read_initial(file, s, parts, stat, errmsg)

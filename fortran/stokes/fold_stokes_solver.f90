@@ -37,7 +37,8 @@ module fold_stokes_solver
                             FOLD_LO_STOKES_MIXING, FOLD_HI_STOKES_MIXING, &
                             FOLD_LO_STOKES_FIBRE_ENDS, FOLD_HI_STOKES_FIBRE_ENDS, &
                             FOLD_LO_STOKES_FIBRE_RADIUS_SCALE, FOLD_HI_STOKES_FIBRE_RADIUS_SCALE, &
-                            FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE, &
+                            FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE, FOLD_LO_STOKES_FIBRE_SHELLS, FOLD_HI_STOKES_FIBRE_SHELLS, &
+                            FOLD_DEF_STOKES_FIBRE_SHELLS, &
                             FOLD_LO_STOKES_RIGIDITY, FOLD_HI_STOKES_RIGIDITY, &
                             FOLD_LO_STOKES_INITIAL_GUESS, FOLD_HI_STOKES_INITIAL_GUESS, &
                             FOLD_DEF_STOKES_KAPPA, FOLD_DEF_STOKES_TOLERANCE, FOLD_DEF_STOKES_MAX_ITERATIONS, &
@@ -89,6 +90,9 @@ module fold_stokes_solver
       !> Radius of the voxelised fibre over its geometric radius: a hydrodynamic radius
       !> calibrated to the grid (the contacts keep the geometric one) [-]
       real(dp) :: fibre_radius_scale = FOLD_DEF_STOKES_FIBRE_RADIUS_SCALE
+      !> With fibre_radius_scale > 1, the added shells of near fibres (FOLD_SHELLS_*): they
+      !> overlap, or each ends the contacts' security zone short of the other particle
+      integer(ip) :: fibre_shells = FOLD_DEF_STOKES_FIBRE_SHELLS
       !> FFTW planning effort (fold_fft_transport FOLD_PLAN_ESTIMATE / FOLD_PLAN_MEASURE)
       integer :: plan_effort = FOLD_DEF_STOKES_FFT_PLAN
       !> Mixing rule of the viscosity in partially covered voxels (FOLD_MIX_*)
@@ -288,6 +292,8 @@ contains
                       set%fibre_radius_scale <= FOLD_HI_STOKES_FIBRE_RADIUS_SCALE)) then
          write (errmsg, '(a,f4.2,a,f4.2,a,es10.3)') "stokes settings: fibre_radius_scale must be in [", &
             FOLD_LO_STOKES_FIBRE_RADIUS_SCALE, ", ", FOLD_HI_STOKES_FIBRE_RADIUS_SCALE, "], got ", set%fibre_radius_scale
+      else if (set%fibre_shells < FOLD_LO_STOKES_FIBRE_SHELLS .or. set%fibre_shells > FOLD_HI_STOKES_FIBRE_SHELLS) then
+         write (errmsg, '(a,i0)') "stokes settings: fibre_shells must be 0 (overlap) or 1 (apart), got ", set%fibre_shells
       else if (set%rigidity < FOLD_LO_STOKES_RIGIDITY .or. set%rigidity > FOLD_HI_STOKES_RIGIDITY) then
          write (errmsg, '(a,i0,a,i0,a,i0)') "stokes settings: rigidity must be ", FOLD_LO_STOKES_RIGIDITY, " ... ", &
             FOLD_HI_STOKES_RIGIDITY, " ("//code_legend(FOLD_RIGIDITY_NAME, int(FOLD_LO_STOKES_RIGIDITY, ip))// &

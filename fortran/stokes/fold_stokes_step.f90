@@ -22,6 +22,7 @@ module fold_stokes_step
    use fold_grid, only: shear_lattice
    use fold_voxelise, only: voxel_set_t, voxelise
    use fold_stokes_solver, only: stokes_solver_t, stokes_settings_t
+   use fold_settings, only: FOLD_SHELLS_APART
    use fold_stokes_build, only: stokes_serial_create
    use fold_time_scheme, only: FOLD_EULER, FOLD_AB2, time_scheme_state_t
    use fold_rigid_fit, only: rigid_fit
@@ -56,7 +57,8 @@ module fold_stokes_step
       type(voxel_set_t) :: vox
       !> Rigidity residual of each particle after the last step [-]
       real(dp), allocatable :: rigidity(:)
-      !> Sphere lubrication on, and the security zone alpha its gap floor uses [m]
+      !> Sphere lubrication on, and the security zone alpha its gap floor uses [m] (also the
+      !> gap the added fibre shells keep with fibre_shells apart)
       logical :: lubrication = .false.
       real(dp) :: alpha = 0.0_dp
    end type stokes_context_t
@@ -149,8 +151,14 @@ contains
       if (stat /= FOLD_OK) return
       call ctx%solver%set_lattice(shear_lattice(cell%lengths, cell%shear_offset), stat, errmsg)
       if (stat /= FOLD_OK) return
-      call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
-                    stat, errmsg, walls=cell%walls, fibre_radius_scale=ctx%solver%set%fibre_radius_scale)
+      if (ctx%solver%set%fibre_shells == FOLD_SHELLS_APART) then
+         call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
+                       stat, errmsg, walls=cell%walls, fibre_radius_scale=ctx%solver%set%fibre_radius_scale, &
+                       shell_gap=ctx%alpha)
+      else
+         call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
+                       stat, errmsg, walls=cell%walls, fibre_radius_scale=ctx%solver%set%fibre_radius_scale)
+      end if
       if (stat /= FOLD_OK) return
       call ctx%solver%solve(ctx%vox%chi, cell%G, solve_stat, solve_msg)
       if (solve_stat /= FOLD_OK .and. solve_stat /= FOLD_NOT_CONVERGED) then

@@ -33,6 +33,7 @@ BACKENDS = _registry.codes("numerics.stokes.backend")
 DERIVATIVES = _registry.codes("numerics.stokes.derivative")
 MIXINGS = _registry.codes("numerics.stokes.mixing")
 FIBRE_ENDS = _registry.codes("numerics.stokes.fibre_ends")
+FIBRE_SHELLS = _registry.codes("numerics.stokes.fibre_shells")
 GUESSES = _registry.codes("numerics.stokes.initial_guess")
 REUSES = _registry.codes("numerics.stokes.reuse")
 SCHEMES = _registry.codes("numerics.time_scheme")
@@ -113,7 +114,7 @@ def stress_check(eta_eff: float, eta_f: float, voxels: int, kappa: float, tol: f
 #: (a view of the settings registry, which the scene schema reads too).
 DEFAULTS = {key: _registry.default(f"numerics.stokes.{key}")
             for key in ("backend", "tolerance", "max_iterations", "kappa", "derivative", "mixing", "subsamples",
-                        "fibre_ends", "fibre_radius_scale", "warm_start", "initial_guess", "fft_plan", "fft_precision",
+                        "fibre_ends", "fibre_radius_scale", "fibre_shells", "warm_start", "initial_guess", "fft_plan", "fft_precision",
                         "rigidity")}
 
 
@@ -139,6 +140,9 @@ class StokesSettings:
     fibre_ends : ``"flat"`` cylinder (default) or ``"capped"`` (the contact capsule).
     fibre_radius_scale : radius of the voxelised fibres over their geometric radius (a
         hydrodynamic radius calibrated to the grid); spheres and spheroids keep theirs.
+    fibre_shells : with ``fibre_radius_scale`` > 1, the added shells of near fibres:
+        ``"overlap"`` (their coverages add up) or ``"apart"`` (each ends the security zone
+        short of the other particle's geometric surface; ``solve_particles``' ``alpha``).
     warm_start : start CG from the previous step's solution (time marching only).
     guess : initial guess of a warm start: ``"previous"`` (the last solution) or
         ``"extrapolate"`` (2 x_n − x_(n−1) of the last two).
@@ -161,6 +165,7 @@ class StokesSettings:
     subsamples: int = DEFAULTS["subsamples"]
     fibre_ends: str = DEFAULTS["fibre_ends"]
     fibre_radius_scale: float = DEFAULTS["fibre_radius_scale"]
+    fibre_shells: str = DEFAULTS["fibre_shells"]
     warm_start: bool = DEFAULTS["warm_start"]
     guess: str = DEFAULTS["initial_guess"]
     measure_plans: bool = DEFAULTS["fft_plan"] == "measure"
@@ -177,6 +182,7 @@ class StokesSettings:
                 raise InputError(f"{key}: must be in {_registry.range_text(f'numerics.stokes.{path}')}, "
                                  f"got {getattr(self, key)}")
         for key, table in (("derivative", DERIVATIVES), ("mixing", MIXINGS), ("fibre_ends", FIBRE_ENDS),
+                           ("fibre_shells", FIBRE_SHELLS),
                            ("guess", GUESSES), ("backend", BACKEND_CHOICES), ("rigidity", RIGIDITIES)):
             if getattr(self, key) not in table:
                 raise InputError(f"{key}: must be one of {sorted(table)}, got {getattr(self, key)!r}")
@@ -339,9 +345,11 @@ def solve_chi(chi, lattice, G, settings: StokesSettings | None = None) -> FlowSo
 
 
 def solve_particles(particles: Particles, cell_lengths, grid, shear_rate: float = 1.0, shear_offset: float = 0.0,
-                    settings: StokesSettings | None = None) -> FlowSolution:
+                    settings: StokesSettings | None = None, alpha: float = 0.0) -> FlowSolution:
     """Rigid velocities of particles in simple shear ``u = γ̇ (y − Ly/2) e_x`` (frame rule
     of ``fold_cell``) on the Lees–Edwards lattice with offset ``shear_offset``.
+    ``alpha``: the contacts' security zone [m], the gap the added fibre shells keep with
+    ``settings.fibre_shells = "apart"`` (as fold_run takes it from model.alpha).
 
     Returns the flow, χ, the rigid velocities ``v`` (N, dim) and ``omega`` (N, 3),
     the rigidity residual per particle and the bulk stress.
@@ -354,7 +362,7 @@ def solve_particles(particles: Particles, cell_lengths, grid, shear_rate: float 
         n[0], n[1], n[2], L, float(shear_offset), G, particles.shape, particles.radius, particles.length,
         particles.xi, np.asfortranarray(particles.x.T), np.asfortranarray(particles.p.T), c["eta_f"], c["kappa"],
         c["tol"], c["max_iter"], c["derivative"], c["mixing"], int(s.subsamples), FIBRE_ENDS[s.fibre_ends],
-        float(s.fibre_radius_scale), c["plan_effort"], c["rigidity"])
+        float(s.fibre_radius_scale), FIBRE_SHELLS[s.fibre_shells], float(alpha), c["plan_effort"], c["rigidity"])
     checked(stat, msg)
     return FlowSolution(u=u, stress=stress, eta_eff=float(scal[1]), eta_dissipation=float(scal[2]),
                         iterations=int(it), residual=float(scal[0]), history=hist[: int(it) + 1].copy(), chi=chi,

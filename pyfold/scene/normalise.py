@@ -74,7 +74,7 @@ LATTICE_CHECK_SAMPLES = 1_000_000
 _STOKES_DATASETS = ("stokes_backend", "stokes_tolerance", "stokes_max_iterations", "stokes_kappa", "stokes_derivative",
                     "stokes_fft_plan", "stokes_mixing", "stokes_subsamples", "stokes_fibre_ends", "stokes_warm_start",
                     "stokes_initial_guess", "stokes_fft_precision", "stokes_rigidity", "stokes_solve_every",
-                    "stokes_fibre_radius_scale", "stokes_reuse")
+                    "stokes_fibre_radius_scale", "stokes_reuse", "stokes_fibre_shells")
 
 
 def _dataset(name: str, value) -> tuple[object, str, str]:
@@ -1103,6 +1103,10 @@ def _normalise(scene: Scene, source: str, base_dir: str | Path | None) -> Resolv
                 f"(5-9 % at 1-2 voxels per diameter); use cells_per_diameter = 4-8 for quantitative results "
                 f"(docs/physics.md#resolution)")
         scale = scene.numerics.stokes.fibre_radius_scale
+        if scene.numerics.stokes.fibre_shells != registry.default("numerics.stokes.fibre_shells") and scale <= 1.0:
+            warnings.append(
+                f"numerics.stokes.fibre_shells = {scene.numerics.stokes.fibre_shells!r} has no effect: the fibres get "
+                f"no added shell at fibre_radius_scale = {scale:g} (it acts for a scale above 1)")
         uncalibrated = [f.name for f in good
                         if f.shape == "fibre" and scene.particles[f.index].equivalent_aspect_ratio is None]
         if scale != 1.0 and uncalibrated:

@@ -438,6 +438,17 @@ SETTINGS: tuple[Setting, ...] = (
             help="radius of the voxelised fibre (its hydrodynamic radius on the grid) over its geometric radius; "
                  "contacts, volume fraction and the Jeffery shape factor keep the geometric one "
                  "(docs/fluid_coupled_ci.md#a-hydrodynamic-radius-calibrated-to-the-grid)"),
+    Setting("numerics.stokes.fibre_shells", "choice", "overlap", ("overlap", "apart"), _codes(overlap=0, apart=1),
+            physics=_STOKES, resolved="stokes_fibre_shells", optional=True, identity_at_default=False,
+            legend="with fibre_radius_scale > 1, the shells added to near fibres: 0 overlap (coverages add up), "
+                   "1 kept apart by the security zone alpha",
+            fortran="STOKES_FIBRE_SHELLS", fortran_codes="FOLD_SHELLS_",
+            help='with fibre_radius_scale > 1, the shell of radius (s - 1) R added to each fibre near another '
+                 'particle: "overlap", the shells of near fibres overlap and their coverages add up (clipped at '
+                 '1), so fibres closer than 2 (s - 1) R share rigid voxels; "apart", a shell ends where it would '
+                 'come closer than the security zone alpha to another particle\'s geometric surface (the shells '
+                 'of two fibres share the gap between them), so the voxelised bodies stay at least alpha apart, '
+                 'as the contacts keep the geometric ones (docs/fluid_coupled_ci.md#fibre-shells-kept-apart)'),
     Setting("numerics.stokes.warm_start", "bool", True, physics=_STOKES, resolved="stokes_warm_start",
             legend="1: each CG solve starts from the previous solution, 0: from zero", fortran="STOKES_WARM_START",
             help="start each CG solve from the previous solution (see initial_guess) or from zero"),

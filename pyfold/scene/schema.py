@@ -239,6 +239,9 @@ class StokesSettings(_Table):
     #: to the grid, studies/interaction_coefficient/grid_fibre_shape.py); contacts, volume
     #: fraction and the Jeffery shape factor keep the geometric radius [-]
     fibre_radius_scale: _registered("numerics.stokes.fibre_radius_scale") = _default("numerics.stokes.fibre_radius_scale")
+    #: with fibre_radius_scale > 1, the added shells of near fibres: "overlap" (coverages add up) or
+    #: "apart" (each shell ends the security zone alpha short of the other particle's geometric surface)
+    fibre_shells: _registered("numerics.stokes.fibre_shells") = _default("numerics.stokes.fibre_shells")
     #: start each CG solve from the previous solution (see initial_guess) or from zero
     warm_start: _registered("numerics.stokes.warm_start") = _default("numerics.stokes.warm_start")
     #: FFTW planning: "measure" (faster transforms, plans timed at start-up; repeated runs

@@ -128,14 +128,16 @@ DATA = ROOT / "data" / "ci_fluid_coupled"
 def scene_of(n_l3: float, model: str, seed: int, t_end: float, beta: float = BETA,
              max_grid_points: int | None = None, fibre_radius_scale: float = 1.0,
              equivalent_aspect_ratio: str | None = None, dt: float | None = None,
-             solve_every: int | None = None, reuse: str | None = None, cells_per_diameter: int | None = None):
+             solve_every: int | None = None, reuse: str | None = None, cells_per_diameter: int | None = None,
+             fibre_shells: str | None = None):
     """The sweep's builder: ``beta`` fibres at ``n_l3``, ``model`` "stokes" or "jeffery", seed ``seed``
     (``max_grid_points``: the Stokes grid bound, for the finer grids of slender fibres;
     ``fibre_radius_scale``: the Stokes runs' voxelised radius over the geometric one;
     ``equivalent_aspect_ratio``: the rule of the Jeffery β_e both models record, None the default;
     ``dt``: the time step, None for α/(γ̇L); ``solve_every``: the Stokes runs' solve interval in
     steps, None for STOKES'; ``reuse``: numerics.stokes.reuse of the Stokes runs, None its default;
-    ``cells_per_diameter``: the Stokes grid's voxels per diameter, None for STOKES')."""
+    ``cells_per_diameter``: the Stokes grid's voxels per diameter, None for STOKES'; ``fibre_shells``:
+    numerics.stokes.fibre_shells of the Stokes runs, None its default)."""
     if model == "jeffery":
         return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D,
                               equivalent_aspect_ratio=equivalent_aspect_ratio, dt=dt)
@@ -148,6 +150,8 @@ def scene_of(n_l3: float, model: str, seed: int, t_end: float, beta: float = BET
         stokes = {**stokes, "reuse": str(reuse)}
     if cells_per_diameter is not None:
         stokes = {**stokes, "cells_per_diameter": int(cells_per_diameter)}
+    if fibre_shells is not None:
+        stokes = {**stokes, "fibre_shells": str(fibre_shells)}
     return sheared_fibres(beta, n_l3, seed, t_end, alpha_over_d=ALPHA_OVER_D, hydrodynamics="stokes",
                           stokes=stokes, time_scheme="ab2", equivalent_aspect_ratio=equivalent_aspect_ratio, dt=dt)
 
@@ -305,6 +309,9 @@ def grid_xi(out: Path, run: Path, beta: float = BETA) -> tuple[float, float]:
 
 #: The β = 10 resolution check of the calibrated series (ci_resolution_beta10.py: 72³, 96³, 120³)
 RESOLUTION_BETA10 = Path("out/interaction_coefficient/resolution_beta10/ci_resolution_beta10.json")
+#: ... and with the calibrated radius' shells kept apart (ci_resolution_beta10.py --shells apart): the
+#: resolution error of the 96³ grid with that rule
+RESOLUTION_BETA10_APART = Path("out/interaction_coefficient/resolution_beta10_apart/ci_resolution_beta10.json")
 
 
 def resolution_errors(path: Path, keys: tuple[str, str] = ("closure_free_cox", "ibof_trajectory_cox")
@@ -549,7 +556,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     # (resolution_file RESOLUTION_BETA10), the geometric β = 10 series none
     if beta == BETA:
         resolution = resolution_errors(resolution_file)
-    elif resolution_file == RESOLUTION_BETA10:
+    elif resolution_file in (RESOLUTION_BETA10, RESOLUTION_BETA10_APART):
         resolution = resolution_errors(resolution_file, ("closure_free", "ibof_trajectory"))
     else:
         resolution = (math.nan, math.nan)
@@ -658,9 +665,12 @@ def main() -> None:
                     help="the series with the Stokes runs' fibres voxelised at the radius calibrated to the "
                          "converged cylinder, both models recording Zhang's beta_e (SERIES[beta]_calibrated.toml; "
                          "beta = 10)")
+    ap.add_argument("--shells", choices=("overlap", "apart"), default="overlap",
+                    help="with --calibrated: the series whose Stokes runs keep the added shells of near fibres "
+                         "the security zone apart (numerics.stokes.fibre_shells; SERIES[beta]_calibrated_apart.toml)")
     ap.add_argument("--out", type=Path, default=None,
                     help="output folder (default out/interaction_coefficient/fluid_series, "
-                         "fluid_series_beta<beta> for another beta, + _calibrated)")
+                         "fluid_series_beta<beta> for another beta, + _calibrated[_apart])")
     ap.add_argument("--resolution", type=Path,
                     default=Path("out/interaction_coefficient/resolution/ci_resolution.json"),
                     help="the resolution study's summary (ci_resolution.py): the resolution error of the C_I "
@@ -671,13 +681,19 @@ def main() -> None:
         ap.error(f"--write-data: the shipped table takes the series whose resolution error is measured: beta = "
                  f"{BETA:g}, or --beta {args.beta:g} --calibrated; the geometric --beta {args.beta:g} series is "
                  "analysed into --out")
-    name = SERIES[args.beta] + ("_calibrated" if args.calibrated else "")
+    apart = args.shells == "apart"
+    if apart and not args.calibrated:
+        ap.error("--shells apart: the shells are those of the calibrated radius; add --calibrated")
+    if apart and args.write_data:
+        ap.error("--write-data: the shipped table takes the series with the overlapping shells (its three "
+                 "concentrations); the --shells apart series is analysed into --out")
+    suffix = ("_calibrated" if args.calibrated else "") + ("_apart" if apart else "")
+    name = SERIES[args.beta] + suffix
     if not (SWEEPS / f"{name}.toml").is_file():
-        ap.error(f"--calibrated: no calibrated series at beta = {args.beta:g} (studies/sweeps/{name}.toml)")
+        ap.error(f"--calibrated: no such series at beta = {args.beta:g} (studies/sweeps/{name}.toml)")
     if args.out is None:
         args.out = Path("out/interaction_coefficient") / (("fluid_series" if args.beta == BETA
-                                                           else f"fluid_series_beta{args.beta:g}")
-                                                          + ("_calibrated" if args.calibrated else ""))
+                                                           else f"fluid_series_beta{args.beta:g}") + suffix)
     spec = sweep_study.load_form(SWEEPS, name, False, seeds=tuple(args.seeds) if args.seeds else None)
     start = time.perf_counter()
     sweep_dir = args.sweep_dir or args.out / "sweep"
@@ -686,8 +702,10 @@ def main() -> None:
     for values, seed in done:
         point = dict(zip(spec.axes, values))  # point values in the order of spec.axes
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
-    resolution = RESOLUTION_BETA10 if args.beta != BETA and args.calibrated else args.resolution
-    if resolution == RESOLUTION_BETA10 and resolution.is_file():
+    resolution = ((RESOLUTION_BETA10_APART if apart else RESOLUTION_BETA10) if args.beta != BETA and args.calibrated
+                  else args.resolution)
+    beta10_check = resolution in (RESOLUTION_BETA10, RESOLUTION_BETA10_APART)
+    if beta10_check and resolution.is_file():
         import json
 
         measured = json.loads(resolution.read_text(encoding="utf-8"))["closure_free"]["coarse_cells_per_diameter"]
@@ -702,7 +720,8 @@ def main() -> None:
         if point["model"] == "stokes":
             n = float(point["n_l3"])
             reuse[n] = reuse_evidence({**spec.arguments, **point}, n_l3=n, point_evidence=REUSE_EVIDENCE_CONCENTRATED,
-                                      grid_evidence=resolution if resolution == RESOLUTION_BETA10 else None)
+                                      grid_evidence=resolution if resolution in (RESOLUTION_BETA10,
+                                                                                 RESOLUTION_BETA10_APART) else None)
     reuse = {n: v for n, v in reuse.items() if v is not None} or None
     stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse", "cells_per_diameter")
                            if k in spec.arguments}}

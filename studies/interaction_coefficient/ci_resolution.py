@@ -39,10 +39,14 @@ Method
     uses the three finest grids, and the summary the 3-voxel grid's bias.
     ``--calibrate`` finds the scales (:func:`calibrate_scale`: secant on β_e(s) from s = 1, 1.1)
     and prints the sweep file's [[points]].
+    ``--calibrated --shells apart`` (ci_resolution_calibrated_apart.toml): the calibrated runs on the
+    three finest grids with the added shells kept the security zone apart
+    (numerics.stokes.fibre_shells = "apart"): at s = 1.129 (42³) the shells of two fibres at the
+    security gap overlap by 0.16 R otherwise, and the pair moves as one body.
 
 Command
     .venv/bin/python studies/interaction_coefficient/ci_resolution.py [--executor slurm] [--seeds 1 2]
-    .venv/bin/python studies/interaction_coefficient/ci_resolution.py --calibrated
+    .venv/bin/python studies/interaction_coefficient/ci_resolution.py --calibrated [--shells apart]
     .venv/bin/python studies/interaction_coefficient/ci_resolution.py --calibrate   # the scales only
     (two serial runs at a time; finished runs are re-used; --analyse-only analyses what is there)
 
@@ -50,11 +54,11 @@ Cost (2 cores)
     Measured per run (two serial runs at a time on the shared 2-core machine): 84–88 /
     173–190 / 392–443 CPU-s on the three grids, 0.77 CPU-hour for the 12 runs; the
     single-fibre checks 76 CPU-s; the analysis about 2 CPU-min. --calibrated: 90 / 196 / 461
-    CPU-s per run on 42³ / 54³ / 70³ and 32 on the 2-voxel 27³ grid, about 0.95 CPU-hour. The CPU time of every run
-    is in the outputs.
+    CPU-s per run on 42³ / 54³ / 70³ and 32 on the 2-voxel 27³ grid, about 0.95 CPU-hour; --shells apart
+    about 0.85 CPU-hour. The CPU time of every run is in the outputs.
 
 Outputs (under out/interaction_coefficient/resolution/ or, with --calibrated,
-out/interaction_coefficient/resolution_calibrated/ [calibration/: its single-fibre checks]; ``--out``)
+out/interaction_coefficient/resolution_calibrated[_apart]/ [calibration/: its single-fibre checks]; ``--out``)
     sweep/                  the runs (pyfold sweep folder)
     ci_resolution.nc        per grid and seed: C_I by both estimators, with Cox's and the grid's ξ, CPU s
     ci_resolution.md        per grid: ensemble C_I, paired change against the finest grid, order, Richardson
@@ -94,12 +98,16 @@ SERIES_CELLS = int(series.STOKES["cells_per_diameter"])
 CALIBRATION_TOLERANCE = 0.006
 
 
-def scene_of(cells_per_diameter: int, seed: int, t_end: float, fibre_radius_scale: float = 1.0):
+def scene_of(cells_per_diameter: int, seed: int, t_end: float, fibre_radius_scale: float = 1.0,
+             fibre_shells: str | None = None):
     """The sweep's builder: the series' semi-dilute Stokes scene at ``cells_per_diameter``, its
-    fibres voxelised with ``fibre_radius_scale`` times their radius."""
+    fibres voxelised with ``fibre_radius_scale`` times their radius (``fibre_shells``:
+    numerics.stokes.fibre_shells, None its default)."""
     stokes = {**series.STOKES, "cells_per_diameter": int(cells_per_diameter), "max_grid_points": 1_000_000}
     if fibre_radius_scale != 1.0:  # only then: the scenes (and run ids) of the geometric sweep stay as they were
         stokes["fibre_radius_scale"] = float(fibre_radius_scale)
+    if fibre_shells is not None:
+        stokes["fibre_shells"] = str(fibre_shells)
     return sheared_fibres(series.BETA, N_L3, seed, t_end, alpha_over_d=series.ALPHA_OVER_D, hydrodynamics="stokes",
                           stokes=stokes, time_scheme="ab2")
 
@@ -107,6 +115,7 @@ def scene_of(cells_per_diameter: int, seed: int, t_end: float, fibre_radius_scal
 def scaled_beta_e(grid: list[int], side: float, scale: float, cache: Path, beta: float = series.BETA) -> float:
     """β_e of one fibre on ``grid`` voxelised at ``scale`` times its radius (the single-fibre check,
     cached as ``cache``/single_fibre_<n>_s<scale>.nc, the calibration's checks)."""
+    cache.mkdir(parents=True, exist_ok=True)
     return series.beta_e_on(grid, side, cache / f"single_fibre_{grid[0]}_s{scale:.3f}.nc", beta, scale)
 
 
@@ -333,13 +342,20 @@ def main() -> None:
     ap.add_argument("--calibrate", action="store_true",
                     help="measure the calibrated radius scale of each grid of the calibrated sweep, print the "
                          "[[points]] of its sweep file, run nothing else")
+    ap.add_argument("--shells", choices=("overlap", "apart"), default="overlap",
+                    help="with --calibrated: numerics.stokes.fibre_shells of the runs, apart: "
+                         "studies/sweeps/ci_resolution_calibrated_apart.toml")
     ap.add_argument("--out", type=Path, default=None,
-                    help="output folder (default out/interaction_coefficient/resolution[_calibrated])")
+                    help="output folder (default out/interaction_coefficient/resolution[_calibrated[_apart]])")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
     calibrated = args.calibrated or args.calibrate
-    out = args.out or Path("out/interaction_coefficient/" + ("resolution_calibrated" if calibrated else "resolution"))
-    name = "ci_resolution_calibrated" if calibrated else "ci_resolution"
+    if args.shells == "apart" and not args.calibrated:
+        ap.error("--shells apart: the shells are those of the calibrated radius; add --calibrated")
+    suffix = "_apart" if args.shells == "apart" else ""
+    out = args.out or Path("out/interaction_coefficient/" + ("resolution_calibrated" + suffix if calibrated
+                                                             else "resolution"))
+    name = "ci_resolution_calibrated" + suffix if calibrated else "ci_resolution"
     spec = sweep_study.load_form(SWEEPS, name, False, seeds=tuple(args.seeds) if args.seeds else None)
     start = time.perf_counter()
     scales = {}

@@ -28,15 +28,22 @@ Method
     bias of the series' grid (SERIES_CELLS, 96³) against that limit, |mean| ⊕ its s.e., is the
     resolution error the series carries.
 
+    ``--shells apart`` (studies/sweeps/ci_resolution_beta10_apart.toml): the same three grids with the
+    shells the calibrated radius adds kept the security zone α apart (numerics.stokes.fibre_shells =
+    "apart"; on 72³, s = 1.212, two fibres nearer than 2 (s − 1) R = 0.42 R otherwise overlap in the
+    solve and move as one body). Its carried grid is the series' 96³ too (SHELLS_SERIES_CELLS: the grid
+    of ci_fluid_series.py --beta 10 --calibrated --shells apart); the preset's stored rows are the
+    overlapping shells', so this form checks none of them.
+
 Command
-    .venv/bin/python studies/interaction_coefficient/ci_resolution_beta10.py [--analyse-only]
+    .venv/bin/python studies/interaction_coefficient/ci_resolution_beta10.py [--shells apart] [--analyse-only]
 
 Cost (2 cores)
     The table gives the CPU time per run of each grid (72³ about 85 CPU-s, 96³ 185, 120³ 370 at a
     solve every 16th step; 96³ every 4th step about 730); the whole sweep about 1.5 CPU-hours. The
     analysis about a CPU-minute.
 
-Outputs (under out/interaction_coefficient/resolution_beta10/, ``--out``)
+Outputs (under out/interaction_coefficient/resolution_beta10[_apart]/, ``--out``)
     sweep/                      the runs (pyfold sweep folder)
     ci_resolution_beta10.md     per grid and estimator: C_I ± stat., the paired change, CPU time; the
                                 solve-interval control
@@ -63,12 +70,16 @@ import ci_fluid_series as series  # noqa: E402
 from ci_resolution import ASSUMED_ORDER, observed_order  # noqa: E402
 from time_step_beta10 import measure  # noqa: E402
 
-SWEEP = "ci_resolution_beta10_calibrated"
+#: The sweep of each rule for the shells of the calibrated radius (numerics.stokes.fibre_shells)
+SWEEPS = {"overlap": "ci_resolution_beta10_calibrated", "apart": "ci_resolution_beta10_apart"}
 #: The calibrated series' solves (ci_fluid_series_beta10_calibrated.toml); a grid's runs with other solves
 #: are the control of that interval on that grid
 SERIES_SOLVES = series.solve_label(16, "jeffery")
 #: The calibrated series' grid in voxels per diameter (96³): the grid whose bias the summary carries
 SERIES_CELLS = 4
+#: The grid whose bias the summary carries for each rule (the grid of that rule's series: 96³ for both;
+#: 72³ fails the rule for the trajectory fit even with the shells apart)
+SHELLS_SERIES_CELLS = {"overlap": SERIES_CELLS, "apart": SERIES_CELLS}
 ESTIMATORS = ("closure_free", "ibof_trajectory")
 
 
@@ -120,10 +131,16 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--analyse-only", action="store_true", help="analyse the finished runs, simulate nothing")
-    ap.add_argument("--out", type=Path, default=Path("out/interaction_coefficient/resolution_beta10"))
+    ap.add_argument("--shells", choices=sorted(SWEEPS), default="overlap",
+                    help="numerics.stokes.fibre_shells of the runs: its sweep (default: overlap, the series')")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="output folder (out/interaction_coefficient/resolution_beta10[_apart])")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
-    spec = sweep_study.load_form(ROOT / "studies" / "sweeps", SWEEP, False)
+    args.out = args.out or Path("out/interaction_coefficient/resolution_beta10"
+                                + ("" if args.shells == "overlap" else f"_{args.shells}"))
+    series_cells = SHELLS_SERIES_CELLS[args.shells]
+    spec = sweep_study.load_form(ROOT / "studies" / "sweeps", SWEEPS[args.shells], False)
     done = sweep_study.run_sweep(spec, args.sweep_dir or args.out / "sweep", args.executor,
                                  analyse_only=args.analyse_only)
     runs: dict[tuple[int, int], dict] = {}  # the series' solves on each grid: (cells per diameter, seed)
@@ -135,7 +152,8 @@ def main() -> None:
         m = measure(path)
         m["cpu_s"] = sweep_store.cpu_seconds(path.parent)
         m["scale"] = float(point["fibre_radius_scale"])
-        setting = series.solve_label(point["solve_every"], point["reuse"])
+        solves = {**spec.arguments, **point}  # a sweep may give the solves to every point at once
+        setting = series.solve_label(solves["solve_every"], solves["reuse"])
         if setting == SERIES_SOLVES:
             runs[c, seed] = m
         else:
@@ -153,7 +171,8 @@ def main() -> None:
         for c in cpds[1:]:
             if not np.array_equal(runs[coarse, s]["p0"], runs[c, s]["p0"]):
                 raise SystemExit(f"seed {s}: the initial axes differ between the grids; the runs are not paired")
-    lines = [f"# Resolution of the calibrated β = 10 C_I (φβ = 0.5, strain 0–20, seeds {seeds})", "",
+    lines = [f"# Resolution of the calibrated β = 10 C_I (φβ = 0.5, strain 0–20, seeds {seeds}, "
+             f"shells: {args.shells})", "",
              "| voxels per diameter | grid | radius scale | CPU-s per run | CG it./solve | closure-free C_I | "
              "IBOF trajectory C_I |", "|---|---|---|---|---|---|---|"]
     ens = {}
@@ -173,9 +192,10 @@ def main() -> None:
             d = paired_difference([runs[c, s][est][0] for s in seeds], [runs[fine, s][est][0] for s in seeds])
             lines.append(f"| {est} | {grids[c]} | {d.mean:+.2e} ± {d.stderr:.1e} (p {d.p:.2g}) | "
                          f"{abs(d.mean) / ens[c][est].error:.2f} |")
-    lines += _evidence_lines(runs, ens, seeds, cpds, fine)
+    if args.shells == "overlap":  # the preset's rows (pyfold.scene.study_preset.RESOLUTION) are these runs'
+        lines += _evidence_lines(runs, ens, seeds, cpds, fine)
     lines += ["", "## Order and Richardson extrapolation", ""]
-    summary = {"grids": {str(c): grids[c] for c in cpds}, "seeds": seeds, "strain": 20.0}
+    summary = {"grids": {str(c): grids[c] for c in cpds}, "seeds": seeds, "strain": 20.0, "shells": args.shells}
     for est in ESTIMATORS:
         means = [ens[c][est].mean for c in cpds]
         p = observed_order(means[-3:], [h[c] for c in cpds[-3:]]) if len(cpds) >= 3 else math.nan
@@ -185,7 +205,7 @@ def main() -> None:
         v = {c: np.array([runs[c, s][est][0] for s in seeds]) for c in cpds}
         c_inf = v[fine] + (v[fine] - v[mid]) / (r - 1.0)  # per seed: the grids of a seed share its initial state
         e_inf = ensemble_mean(c_inf)
-        carried = SERIES_CELLS if SERIES_CELLS in cpds[:-1] else coarse
+        carried = series_cells if series_cells in cpds[:-1] else coarse
         bias = paired_difference(v[carried], c_inf)
         summary[est] = {"coarse_cells_per_diameter": carried, "coarse": float(v[carried].mean()),
                         "richardson": e_inf.mean, "richardson_err": e_inf.error, "coarse_bias": bias.mean,
@@ -209,13 +229,13 @@ def main() -> None:
         have = [s for s in spec.seeds if (c, setting, s) in controls and (c, s) in runs]
         if len(have) < 2:
             continue
-        if c == SERIES_CELLS:  # the series' solve interval against this setting on its own grid
+        if c == series_cells:  # the series' solve interval against this setting on its own grid
             summary["solve_interval"] = {"cells_per_diameter": c, "series": SERIES_SOLVES, "against": setting,
                                          "seeds": have}
         for est in ESTIMATORS:
             d = paired_difference([runs[c, s][est][0] for s in have], [controls[c, setting, s][est][0] for s in have])
             e = ensemble_mean([controls[c, setting, s][est][0] for s in have])
-            if c == SERIES_CELLS:
+            if c == series_cells:
                 summary["solve_interval"][est] = {"change": d.mean, "stderr": d.stderr, "error": e.error}
             control_lines.append(f"| {grids[c]} | {est} | {setting} | {e.mean:+.3e} ± {e.error:.1e} | "
                                  f"{d.mean:+.2e} ± {d.stderr:.1e} | {abs(d.mean) / e.error:.2f} | {len(have)} | "

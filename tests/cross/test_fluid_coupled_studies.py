@@ -248,6 +248,31 @@ def test_the_beta10_resolution_runs_are_the_calibrated_series_on_three_calibrate
     assert scales == {3: 1.212, 4: 1.1, 5: 1.091}
 
 
+def test_the_beta10_resolution_runs_with_shells_apart_differ_from_the_calibrated_ones_by_that_rule_only():
+    """ci_resolution_beta10.py --shells apart: each of its scenes is the calibrated sweep's scene of the
+    same grid with the series' solves, plus numerics.stokes.fibre_shells = "apart"; the grid whose bias
+    it carries is the grid of the series with that rule, whose scenes are the calibrated series' plus
+    the rule."""
+    import tomllib
+
+    study = import_study("interaction_coefficient", "ci_resolution_beta10")
+    apart, cal = (load_form(STUDIES / "sweeps", study.SWEEPS[rule], False) for rule in ("apart", "overlap"))
+    assert apart.seeds == cal.seeds
+    series_apart = load_form(STUDIES / "sweeps", "ci_fluid_series_beta10_calibrated_apart", False)
+    assert study.SHELLS_SERIES_CELLS["apart"] == series_apart.arguments["cells_per_diameter"]
+    cal_series = load_form(STUDIES / "sweeps", "ci_fluid_series_beta10_calibrated", False)
+    assert {k: v for k, v in series_apart.arguments.items() if k != "fibre_shells"} == cal_series.arguments
+    assert series_apart.points == cal_series.points and series_apart.seeds == cal_series.seeds
+    solves = (apart.arguments["solve_every"], apart.arguments["reuse"])
+    same = {int(p["cells_per_diameter"]): p for p in cal.points if (p["solve_every"], p["reuse"]) == solves}
+    assert sorted(same) == sorted(int(p["cells_per_diameter"]) for p in apart.points)
+    for pt in apart.points:
+        a = tomllib.loads(series.scene_of(**pt, seed=2, **apart.arguments).toml)
+        b = tomllib.loads(series.scene_of(**same[int(pt["cells_per_diameter"])], seed=2, **cal.arguments).toml)
+        assert a["numerics"]["stokes"].pop("fibre_shells") == "apart"
+        assert a == b
+
+
 def test_the_series_reads_the_measured_change_of_its_solves_and_resolution(tmp_path):
     """ci_fluid_series.reuse_errors: the error of a sweep's solve interval is the solve-reuse study's
     paired change of that setting ⊕ its s.e. (closure-free, IBOF trajectory); none for the series'
