@@ -35,8 +35,9 @@
 !> H(1 - t) = 1 - H(t) keeps chi twice differentiable in the particle positions. Only voxels
 !> within reach of a neighbour (its geometric distance from the voxel centre less than the
 !> fibre's plus g + w/2 + 2 half-diagonals: signed distances are 1-Lipschitz) pay for the
-!> neighbours' distances; the neighbours of each fibre are the periodic images (27 lattice
-!> shifts, none across walls) of the particles whose bounding spheres come that close.
+!> neighbours' distances, and each of its sub-points only those that can be the nearest there;
+!> the neighbours of each fibre are the periodic images (27 lattice shifts, none across walls)
+!> of the particles whose bounding capsules (fold_particles) come that close.
 module fold_voxelise
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
@@ -276,7 +277,8 @@ contains
 
    !> The neighbours whose geometric bodies may claim part of each fibre's added shell: the
    !> periodic images (27 lattice shifts; none across walls) of every other particle whose
-   !> bounding sphere comes within reach [m] of the fibre's scaled bounding sphere. CSR: those
+   !> bounding capsule comes within reach [m] of the fibre's scaled one (bounding spheres
+   !> first, then the capsules' closest axis points, fold_segment). CSR: those
    !> of particle k are nb_j(nb_ptr(k) : nb_ptr(k+1) - 1), nb_x the centres of the images [m].
    !> O(N^2) pair tests, against the solve's O(N_grid log N_grid), once per voxelisation.
    subroutine shell_neighbours(grid, parts, fscale, reach, bounded_y, nb_ptr, nb_j, nb_x)
