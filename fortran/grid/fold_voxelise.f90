@@ -20,7 +20,8 @@
 !> indices are wrapped for storage only), so the cost is proportional to the
 !> voxels the particle touches, and voxels far from the surface (|phi| larger
 !> than the voxel half-diagonal + w) are classified without sub-sampling.
-!> Added shells kept apart (optional shell_gap g >= 0, with fibre_radius_scale s > 1). The shell
+!> Added shells kept apart (optional shell_gap g >= 0, with fibre_radius_scale s > 1; a negative
+!> g, the default, lets them overlap). The shell
 !> of radius (s - 1) R added to a fibre k is its coverage H(1/2 - phi_s/w) minus the geometric
 !> one H(1/2 - phi/w) (phi_s, phi: the signed distances at the scaled and the geometric radius).
 !> Near another particle j it is weighted by H(1/2 + (phi_j - phi - g)/w), phi_j the geometric
@@ -39,6 +40,7 @@
 !> the neighbours of each fibre are the periodic images (27 lattice shifts, none across walls)
 !> of the particles whose bounding capsules (fold_particles) come that close.
 module fold_voxelise
+   use, intrinsic :: ieee_arithmetic, only: ieee_is_nan
    use fold_kinds, only: dp, ip, i8, msg_len
    use fold_status, only: FOLD_OK, FOLD_INPUT_ERROR
    use fold_grid, only: grid_t, grid_point
@@ -91,8 +93,8 @@ contains
       !> given here; spheres and spheroids keep their radius (docs/fluid_coupled_ci.md)
       real(dp), intent(in), optional :: fibre_radius_scale
       !> With fibre_radius_scale > 1: keep the added shells this far [m] from the other
-      !> particles' geometric surfaces (see the module's notes; default: the shells overlap
-      !> and their coverages add up)
+      !> particles' geometric surfaces (see the module's notes); absent or negative (the
+      !> default): the shells overlap and their coverages add up
       real(dp), intent(in), optional :: shell_gap
 
       integer(ip), allocatable :: nb_ptr(:), nb_j(:), cand(:)
@@ -127,8 +129,8 @@ contains
       end if
       gap = -1.0_dp
       if (present(shell_gap)) gap = shell_gap
-      if (present(shell_gap) .and. .not. (gap >= 0.0_dp)) then
-         write (errmsg, '(a,es10.3)') "voxelise: shell_gap must be >= 0, got ", gap
+      if (ieee_is_nan(gap)) then
+         errmsg = "voxelise: shell_gap is NaN"
          return
       end if
       if (ends /= FOLD_ENDS_FLAT .and. ends /= FOLD_ENDS_CAPPED) then

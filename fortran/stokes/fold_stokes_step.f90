@@ -151,14 +151,10 @@ contains
       if (stat /= FOLD_OK) return
       call ctx%solver%set_lattice(shear_lattice(cell%lengths, cell%shear_offset), stat, errmsg)
       if (stat /= FOLD_OK) return
-      if (ctx%solver%set%fibre_shells == FOLD_SHELLS_APART) then
-         call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
-                       stat, errmsg, walls=cell%walls, fibre_radius_scale=ctx%solver%set%fibre_radius_scale, &
-                       shell_gap=ctx%alpha)
-      else
-         call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
-                       stat, errmsg, walls=cell%walls, fibre_radius_scale=ctx%solver%set%fibre_radius_scale)
-      end if
+      ! the shells of a calibrated radius kept alpha apart, or overlapping (a negative gap)
+      call voxelise(ctx%solver%grid, parts, ctx%solver%set%subsamples, ctx%solver%set%fibre_ends, ctx%vox, &
+                    stat, errmsg, walls=cell%walls, fibre_radius_scale=ctx%solver%set%fibre_radius_scale, &
+                    shell_gap=merge(ctx%alpha, -1.0_dp, ctx%solver%set%fibre_shells == FOLD_SHELLS_APART))
       if (stat /= FOLD_OK) return
       call ctx%solver%solve(ctx%vox%chi, cell%G, solve_stat, solve_msg)
       if (solve_stat /= FOLD_OK .and. solve_stat /= FOLD_NOT_CONVERGED) then
