@@ -55,7 +55,7 @@ Cost (2 cores)
     173–190 / 392–443 CPU-s on the three grids, 0.77 CPU-hour for the 12 runs; the
     single-fibre checks 76 CPU-s; the analysis about 2 CPU-min. --calibrated: 90 / 196 / 461
     CPU-s per run on 42³ / 54³ / 70³ and 32 on the 2-voxel 27³ grid, about 0.95 CPU-hour; --shells apart
-    94 / 168 / 407, about 0.75 CPU-hour. The CPU time of every run is in the outputs.
+    90 / 164 / 404 with 8 seeds, about 1.5 CPU-hours. The CPU time of every run is in the outputs.
 
 Outputs (under out/interaction_coefficient/resolution/ or, with --calibrated,
 out/interaction_coefficient/resolution_calibrated[_apart]/ [calibration/: its single-fibre checks]; ``--out``)
