@@ -108,6 +108,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pyfold.scene import registry
 from pyfold.scene.sheared_fibres import sheared_fibres
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -312,6 +313,10 @@ RESOLUTION_BETA10 = Path("out/interaction_coefficient/resolution_beta10/ci_resol
 #: ... and with the calibrated radius' shells kept apart (ci_resolution_beta10.py --shells apart): the
 #: resolution error of the 96³ grid with that rule
 RESOLUTION_BETA10_APART = Path("out/interaction_coefficient/resolution_beta10_apart/ci_resolution_beta10.json")
+#: The β = 10 checks whose summaries carry a resolution error of the calibrated series' grid
+RESOLUTION_BETA10_FILES = (RESOLUTION_BETA10, RESOLUTION_BETA10_APART)
+#: The rules for the shells of a calibrated radius (numerics.stokes.fibre_shells), the registry's words
+SHELL_RULES = registry.setting("numerics.stokes.fibre_shells").choices
 
 
 def resolution_errors(path: Path, keys: tuple[str, str] = ("closure_free_cox", "ibof_trajectory_cox")
@@ -556,7 +561,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     # (resolution_file RESOLUTION_BETA10), the geometric β = 10 series none
     if beta == BETA:
         resolution = resolution_errors(resolution_file)
-    elif resolution_file in (RESOLUTION_BETA10, RESOLUTION_BETA10_APART):
+    elif resolution_file in RESOLUTION_BETA10_FILES:
         resolution = resolution_errors(resolution_file, ("closure_free", "ibof_trajectory"))
     else:
         resolution = (math.nan, math.nan)
@@ -665,7 +670,7 @@ def main() -> None:
                     help="the series with the Stokes runs' fibres voxelised at the radius calibrated to the "
                          "converged cylinder, both models recording Zhang's beta_e (SERIES[beta]_calibrated.toml; "
                          "beta = 10)")
-    ap.add_argument("--shells", choices=("overlap", "apart"), default="overlap",
+    ap.add_argument("--shells", choices=SHELL_RULES, default=registry.default("numerics.stokes.fibre_shells"),
                     help="with --calibrated: the series whose Stokes runs keep the added shells of near fibres "
                          "the security zone apart (numerics.stokes.fibre_shells; SERIES[beta]_calibrated_apart.toml)")
     ap.add_argument("--out", type=Path, default=None,
@@ -704,8 +709,7 @@ def main() -> None:
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
     resolution = ((RESOLUTION_BETA10_APART if apart else RESOLUTION_BETA10) if args.beta != BETA and args.calibrated
                   else args.resolution)
-    beta10_check = resolution in (RESOLUTION_BETA10, RESOLUTION_BETA10_APART)
-    if beta10_check and resolution.is_file():
+    if resolution in RESOLUTION_BETA10_FILES and resolution.is_file():
         import json
 
         measured = json.loads(resolution.read_text(encoding="utf-8"))["closure_free"]["coarse_cells_per_diameter"]
@@ -720,8 +724,7 @@ def main() -> None:
         if point["model"] == "stokes":
             n = float(point["n_l3"])
             reuse[n] = reuse_evidence({**spec.arguments, **point}, n_l3=n, point_evidence=REUSE_EVIDENCE_CONCENTRATED,
-                                      grid_evidence=resolution if resolution in (RESOLUTION_BETA10,
-                                                                                 RESOLUTION_BETA10_APART) else None)
+                                      grid_evidence=resolution if resolution in RESOLUTION_BETA10_FILES else None)
     reuse = {n: v for n, v in reuse.items() if v is not None} or None
     stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse", "cells_per_diameter")
                            if k in spec.arguments}}

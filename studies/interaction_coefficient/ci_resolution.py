@@ -76,6 +76,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pyfold.scene import registry
 from pyfold.scene.sheared_fibres import sheared_fibres
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -127,8 +128,6 @@ def calibrate_scale(grid: list[int], side: float, target: float, cache: Path, be
     1.1, until |β_e(s) − target| ≤ ``tolerance`` · target. Returns (s, β_e(s), [(s, β_e), ...]);
     s is rounded to 3 decimals and measured there, so the returned β_e is that of the scale a
     scene would use. Raises SystemExit naming the grid when ``max_checks`` checks do not reach it."""
-    from pyfold.scene import registry
-
     bounds = registry.setting("numerics.stokes.fibre_radius_scale")
     cache.mkdir(parents=True, exist_ok=True)
 
@@ -342,7 +341,7 @@ def main() -> None:
     ap.add_argument("--calibrate", action="store_true",
                     help="measure the calibrated radius scale of each grid of the calibrated sweep, print the "
                          "[[points]] of its sweep file, run nothing else")
-    ap.add_argument("--shells", choices=("overlap", "apart"), default="overlap",
+    ap.add_argument("--shells", choices=series.SHELL_RULES, default=registry.default("numerics.stokes.fibre_shells"),
                     help="with --calibrated: numerics.stokes.fibre_shells of the runs, apart: "
                          "studies/sweeps/ci_resolution_calibrated_apart.toml")
     ap.add_argument("--out", type=Path, default=None,
