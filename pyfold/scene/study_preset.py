@@ -24,8 +24,9 @@ Resolution: where the scene leaves ``numerics.stokes.cells_per_diameter`` unset,
 takes the coarsest grid of :data:`RESOLUTION` (resolution studies of the semi-dilute scene, per
 aspect ratio: the same seeds on three grids, the paired change of C_I against the finest) whose
 change stays below the same fraction for both estimators, with the fibre radius calibrated to
-that grid where the study calibrated it (``fibre_radius_scale``). A grid the scene states that
-its study found too coarse is kept, and the run says so (a warning and the reason).
+that grid where the study calibrated it (``fibre_radius_scale``, with the study's ``fibre_shells``). A
+grid the scene states that its study found too coarse is kept, and the run says so (a warning and
+the reason).
 
 Aspect ratio: :data:`BETA_EVIDENCE` holds the measurements of another aspect ratio's scene
 (β = 10, where solve intervals and a longer step were measured); a scene of that β takes them,
@@ -278,6 +279,8 @@ class GridMeasured:
     trajectory: float
     trajectory_stderr: float
     cpu_ratio: float  # CPU time per run / the coarsest grid's
+    #: numerics.stokes.fibre_shells of the runs ("overlap", the registry's default, or "apart")
+    fibre_shells: str = "overlap"
 
     def change(self) -> float:
         """The larger of the two estimators' changes [statistical errors]."""
@@ -306,25 +309,30 @@ class ResolutionEvidence:
         return next((g for g in self.grids if g.cells_per_diameter == cells_per_diameter), None)
 
 
-def _grids(*rows: tuple) -> tuple[GridMeasured, ...]:
+def _grids(*rows: tuple, fibre_shells: str = "overlap") -> tuple[GridMeasured, ...]:
     """GridMeasured of rows (cells per diameter, grid, radius scale, closure-free change ± s.e.,
-    trajectory change ± s.e., CPU ratio); the last row, the finest, is the reference."""
+    trajectory change ± s.e., CPU ratio), all run with ``fibre_shells``; the last row, the finest,
+    is the reference."""
     return tuple(GridMeasured(*row[:3], closure_free=row[3], closure_free_stderr=row[4], trajectory=row[5],
-                              trajectory_stderr=row[6], cpu_ratio=row[7]) for row in rows)
+                              trajectory_stderr=row[6], cpu_ratio=row[7], fibre_shells=fibre_shells) for row in rows)
 
 
-#: The resolution studies, by β. Changes against the finest grid, paired over seeds 1–4 (strain 20
+#: The resolution studies, by β. Changes against the finest grid, paired over the seeds (strain 20
 #: from the isotropic start, the numerics of the fluid-coupled series), in statistical errors of
-#: the coarser grid's C_I; docs/fluid_coupled_ci.md, "Resolution" and "β = 10: the calibrated C_I
-#: against the grid". In the comments: the changes and the coarser grid's error, absolute.
+#: the coarser grid's C_I over the same seeds; docs/fluid_coupled_ci.md, "Fibre shells kept apart"
+#: and "β = 10: the calibrated C_I against the grid". In the comments: the changes and the coarser
+#: grid's error, absolute.
 RESOLUTION: Mapping[float, ResolutionEvidence] = MappingProxyType({
     5.0: ResolutionEvidence(
-        beta=5.0, scene="98 beta = 5 fibres, n L^3 = 4.98", study="studies/interaction_coefficient/ci_resolution.py",
-        # 42^3: -3.6e-4 +- 1.7e-4 (4.4e-4), +6.9e-4 +- 1.9e-4 (4.2e-4); 54^3: -1.7e-5 +- 1.2e-4 (3.9e-4),
-        # +1.3e-4 +- 1.6e-4 (4.2e-4)
-        grids=_grids((3, "42^3", 1.0, 0.82, 0.39, 1.64, 0.45, 1.0),
-                     (4, "54^3", 1.0, 0.04, 0.31, 0.31, 0.38, 2.10),
-                     (5, "70^3", 1.0, 0.0, 0.0, 0.0, 0.0, 4.92))),
+        beta=5.0, scene="98 beta = 5 fibres, n L^3 = 4.98, fibres voxelised at the radius calibrated per grid with "
+                        "the shells apart, Zhang's beta_e (the calibrated grid fibre's) in the fits, 8 seeds",
+        study="studies/interaction_coefficient/ci_resolution.py --calibrated --shells apart",
+        # 8 seeds, so in units of the 8-seed error, sqrt(2) smaller than the 4-seed error the rule names:
+        # 42^3: -2.4e-5 +- 1.9e-4 (3.2e-4), -6.5e-5 +- 3.9e-4 (4.6e-4); 54^3: -2.0e-4 +- 2.2e-4 (3.0e-4),
+        # -1.5e-4 +- 2.3e-4 (4.7e-4). With the geometric radius (4 seeds) 42^3 moved C_I by 0.82 and 1.64.
+        grids=_grids((3, "42^3", 1.129, 0.08, 0.62, 0.14, 0.83, 1.0),
+                     (4, "54^3", 1.094, 0.66, 0.74, 0.31, 0.48, 1.82),
+                     (5, "70^3", 1.071, 0.0, 0.0, 0.0, 0.0, 4.48), fibre_shells="apart")),
     10.0: ResolutionEvidence(
         beta=10.0, scene="88 beta = 10 fibres, n L^3 = 6.37, fibres voxelised at the radius calibrated per grid",
         study="studies/interaction_coefficient/ci_resolution_beta10.py",
@@ -378,6 +386,9 @@ def resolution_check(beta: float, recomputed: list[GridMeasured]) -> tuple[list[
         if abs(old.fibre_radius_scale - g.fibre_radius_scale) > 1e-9:
             bad.append(f"{g.cells_per_diameter} voxels per diameter: radius scale stored {old.fibre_radius_scale:g}, "
                        f"run at {g.fibre_radius_scale:g}")
+        if old.fibre_shells != g.fibre_shells:
+            bad.append(f"{g.cells_per_diameter} voxels per diameter: fibre shells stored {old.fibre_shells!r}, "
+                       f"run with {g.fibre_shells!r}")
         if old.cpu_ratio != g.cpu_ratio:
             notes.append(f"{g.cells_per_diameter} voxels per diameter: CPU ratio stored {old.cpu_ratio:.2f}, "
                          f"this machine {g.cpu_ratio:.2f}")
@@ -482,6 +493,7 @@ def fill(scene: Scene, probe) -> tuple[Scene, str, tuple[str, ...]]:
     row = res.at(cells) if res is not None else None
     if row is not None and row.fibre_radius_scale != 1.0:
         wanted["fibre_radius_scale"] = row.fibre_radius_scale
+        wanted["fibre_shells"] = row.fibre_shells
     points = _grid_points(probe, cells)
     # the budget follows the grid the preset chose for a Stokes scene; under hydrodynamics = "auto" the
     # budget decides whether the solver runs at all, which is the scene's choice, not a numerical setting
@@ -603,6 +615,10 @@ def _resolution_text(res: ResolutionEvidence, cells: int, stated: bool, scene: S
         if abs(scale - row.fibre_radius_scale) > 1e-9:
             text += (f"; that grid's measurement voxelised the fibres at {row.fibre_radius_scale:g} R "
                      f"(fibre_radius_scale), this scene at {scale:g} R")
+        shells = scene.numerics.stokes.fibre_shells
+        if shells != row.fibre_shells:
+            text += (f"; that grid's measurement ran with fibre_shells = {row.fibre_shells!r}, this scene with "
+                     f"{shells!r}")
     return text, tuple(warnings)
 
 

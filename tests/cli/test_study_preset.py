@@ -47,9 +47,9 @@ def _evidence(settings):
         period_error=-0.16)})
 
 
-def _grid(cells, change, cpu, scale=1.0):
+def _grid(cells, change, cpu, scale=1.0, shells="overlap"):
     return sp.GridMeasured(cells, f"{cells}", scale, closure_free=change, closure_free_stderr=0.1, trajectory=change,
-                           trajectory_stderr=0.2, cpu_ratio=cpu)
+                           trajectory_stderr=0.2, cpu_ratio=cpu, fibre_shells=shells)
 
 
 @pytest.fixture
@@ -163,6 +163,41 @@ def test_the_coarsest_grid_within_the_rule_is_filled_with_its_calibrated_radius(
     assert "cells_per_diameter = 3, the coarsest grid" in r.preset_reason
     assert "2 voxels per diameter 0.90" in r.preset_reason
     assert not any("too coarse" in w for w in r.warnings)
+
+
+def test_a_calibrated_grid_brings_the_shell_rule_its_study_ran(evidence):
+    """The radius and the shell rule are one calibration: the preset fills both from the grid's
+    row; a scene that states another rule keeps it, and the reason says the measurement's."""
+    evidence([_m("tol1e-3", {"tolerance": 1e-3}, 0.1, 0.6)],
+             grids=[_grid(3, 0.1, 1.0, 1.129, "apart"), _grid(4, 0.0, 2.0, 1.094, "apart")])
+    r = parse_scene(_scene(), "s.toml")
+    st = r.scene.numerics.stokes
+    assert (st.cells_per_diameter, st.fibre_radius_scale, st.fibre_shells) == (3, 1.129, "apart")
+    assert "fibre_shells = 'apart'" in r.preset_reason and "ran with fibre_shells" not in r.preset_reason
+    r = parse_scene(_scene(stokes={"fibre_shells": "overlap"}), "s.toml")
+    assert r.scene.numerics.stokes.fibre_shells == "overlap"
+    assert "ran with fibre_shells = 'apart', this scene with 'overlap'" in r.preset_reason
+    # a geometric row (scale 1) leaves the rule to the scene: the default stands
+    evidence([_m("tol1e-3", {"tolerance": 1e-3}, 0.1, 0.6)], grids=[_grid(3, 0.1, 1.0), _grid(4, 0.0, 2.0)])
+    assert parse_scene(_scene(), "s.toml").scene.numerics.stokes.fibre_shells == "overlap"
+
+
+def test_the_main_jobs_scene_gets_its_resolution_studys_grid_without_a_too_coarse_warning():
+    """data/scenes/fluid_coupled.toml leaves the grid to the preset: 3 voxels per diameter with the
+    calibrated radius and the shells apart, the row the shipped β = 5 resolution study admits, and
+    records the grid fibre's β_e (Zhang's rule) that row's changes were measured with."""
+    from pyfold.commands.main_job import FLUID_SCENE
+    from pyfold.scene import load_scene
+
+    r = load_scene(FLUID_SCENE)
+    row = sp.resolution_for(5.0).choice()
+    st = r.scene.numerics.stokes
+    assert (st.cells_per_diameter, st.fibre_radius_scale, st.fibre_shells) == (
+        row.cells_per_diameter, row.fibre_radius_scale, row.fibre_shells)
+    assert row.fibre_shells == "apart" and sp.admissible(row)
+    assert r.stokes_grid == (42, 42, 42)
+    assert r.scene.particles[0].equivalent_aspect_ratio == "zhang"
+    assert not any("too coarse" in w for w in r.warnings) and "too coarse" not in r.preset_reason
 
 
 def test_a_stated_grid_known_to_be_too_coarse_is_kept_and_the_run_says_so(evidence):
