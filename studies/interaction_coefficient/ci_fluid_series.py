@@ -315,6 +315,11 @@ RESOLUTION_BETA10 = Path("out/interaction_coefficient/resolution_beta10/ci_resol
 RESOLUTION_BETA10_APART = Path("out/interaction_coefficient/resolution_beta10_apart/ci_resolution_beta10.json")
 #: The β = 10 checks whose summaries carry a resolution error of the calibrated series' grid
 RESOLUTION_BETA10_FILES = (RESOLUTION_BETA10, RESOLUTION_BETA10_APART)
+#: The β = 5 grids with the calibrated radius and its shells apart (ci_resolution.py --calibrated --shells
+#: apart, seeds 1-8): the resolution error of the calibrated β = 5 series' 42³ C_I, with the grid fibre's ξ
+#: (its keys; Zhang's β_e, which that series records)
+RESOLUTION_CALIBRATED_APART = Path("out/interaction_coefficient/resolution_calibrated_apart/ci_resolution.json")
+RESOLUTION_GRID_XI_KEYS = ("closure_free_grid", "ibof_trajectory_grid")
 #: The rules for the shells of a calibrated radius (numerics.stokes.fibre_shells), the registry's words
 SHELL_RULES = registry.setting("numerics.stokes.fibre_shells").choices
 
@@ -560,12 +565,15 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     # the β = 5 resolution study measured the β = 5 semi-dilute scene; the calibrated β = 10 series has its own
     # (resolution_file RESOLUTION_BETA10), the geometric β = 10 series none
     if beta == BETA:
-        resolution = resolution_errors(resolution_file)
+        resolution = resolution_errors(resolution_file, RESOLUTION_GRID_XI_KEYS
+                                       if resolution_file == RESOLUTION_CALIBRATED_APART else
+                                       ("closure_free_cox", "ibof_trajectory_cox"))
     elif resolution_file in RESOLUTION_BETA10_FILES:
         resolution = resolution_errors(resolution_file, ("closure_free", "ibof_trajectory"))
     else:
         resolution = (math.nan, math.nan)
     measured_beta10 = beta != BETA and all(math.isfinite(v) for v in resolution)
+    calibrated5 = beta == BETA and resolution_file == RESOLUTION_CALIBRATED_APART
     if beta == BETA and not all(math.isfinite(v) for v in resolution):
         print(f"--resolution: {resolution_file} is missing: the total errors are NaN (run ci_resolution.py)",
               file=sys.stderr)
@@ -619,7 +627,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     first = scene_of(5.0, "jeffery", 1, 1.0, beta, dt=dt)
     attrs = {"title": f"Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = {beta:g} fibres",
              "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py "
-                        + ("--write-data" if beta == BETA else f"--beta {beta:g}"
+                        + (("--calibrated --shells apart --write-data" if calibrated5 else "--write-data")
+                           if beta == BETA else f"--beta {beta:g}"
                            + (" --calibrated --write-data" if measured_beta10 else "")),
              "scene": f"pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = "
                       f"{first.dt:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
@@ -634,7 +643,9 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
                           + "; ".join(f"n L^3 {n:g}: {src}" for n, (_v, src) in sorted(reuse.items())) + ")"
                           if reuse else "") + "; shape: change "
                        f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
-                       + ("3-voxel C_I against the Richardson limit (ci_resolution.py)" if beta == BETA else
+                       + ("3-voxel C_I against the Richardson limit of 54^3 and 70^3, all calibrated with the "
+                          "shells apart, grid fibre's xi (ci_resolution.py --calibrated --shells apart)" if calibrated5 else
+                          "3-voxel C_I against the Richardson limit (ci_resolution.py)" if beta == BETA else
                           "96^3 C_I against the Richardson limit of 96^3 and 120^3, all calibrated "
                           "(ci_resolution_beta10.py)" if measured_beta10 else
                           "not measured at this beta")
@@ -689,9 +700,12 @@ def main() -> None:
     apart = args.shells == "apart"
     if apart and not args.calibrated:
         ap.error("--shells apart: the shells are those of the calibrated radius; add --calibrated")
-    if apart and args.write_data:
-        ap.error("--write-data: the shipped table takes the series with the overlapping shells (its three "
+    if apart and args.write_data and args.beta != BETA:
+        ap.error("--write-data: the shipped beta = 10 rows are the series with the overlapping shells (its three "
                  "concentrations); the --shells apart series is analysed into --out")
+    if args.calibrated and not apart and args.beta == BETA:
+        ap.error(f"--calibrated at beta = {BETA:g}: the calibrated series runs with the shells apart (the grid "
+                 "numerics.preset = \"study\" takes); add --shells apart")
     suffix = ("_calibrated" if args.calibrated else "") + ("_apart" if apart else "")
     name = SERIES[args.beta] + suffix
     if not (SWEEPS / f"{name}.toml").is_file():
@@ -708,7 +722,7 @@ def main() -> None:
         point = dict(zip(spec.axes, values))  # point values in the order of spec.axes
         keyed[(float(point["n_l3"]), point["model"]), seed] = done[values, seed]
     resolution = ((RESOLUTION_BETA10_APART if apart else RESOLUTION_BETA10) if args.beta != BETA and args.calibrated
-                  else args.resolution)
+                  else RESOLUTION_CALIBRATED_APART if args.calibrated else args.resolution)
     if resolution in RESOLUTION_BETA10_FILES and resolution.is_file():
         import json
 

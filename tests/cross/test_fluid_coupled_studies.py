@@ -273,6 +273,38 @@ def test_the_beta10_resolution_runs_with_shells_apart_differ_from_the_calibrated
         assert a == b
 
 
+def test_the_calibrated_beta5_series_is_the_series_at_the_grid_the_preset_takes():
+    """ci_fluid_series_calibrated_apart.toml: the β = 5 series' points and seeds (so the same initial
+    states), its Stokes runs voxelised at the radius scale and shell rule of the 42³ row of
+    ci_resolution_calibrated_apart.toml, which is the row numerics.preset = "study" takes at β = 5
+    (pyfold.scene.study_preset.RESOLUTION); both models record Zhang's β_e, the ξ of the grid fibre
+    whose changes that row holds. A scene differs from the series' only by those keys."""
+    import tomllib
+
+    from pyfold.scene import study_preset as sp
+
+    plain, cal = (load_form(STUDIES / "sweeps", n, False)
+                  for n in ("ci_fluid_series", "ci_fluid_series_calibrated_apart"))
+    res = load_form(STUDIES / "sweeps", "ci_resolution_calibrated_apart", False)
+    assert cal.points == plain.points and cal.seeds == plain.seeds
+    row = sp.resolution_for(5.0).choice()
+    grid = next(p for p in res.points if p["cells_per_diameter"] == series.STOKES["cells_per_diameter"])
+    assert (grid["fibre_radius_scale"], res.arguments["fibre_shells"]) == (
+        cal.arguments["fibre_radius_scale"], cal.arguments["fibre_shells"])
+    assert (row.cells_per_diameter, row.fibre_radius_scale, row.fibre_shells) == (
+        series.STOKES["cells_per_diameter"], cal.arguments["fibre_radius_scale"], cal.arguments["fibre_shells"])
+    assert cal.arguments["equivalent_aspect_ratio"] == "zhang"
+    extra = {"fibre_radius_scale", "fibre_shells"}
+    for pt in cal.points:
+        a = tomllib.loads(series.scene_of(**pt, seed=3, **cal.arguments).toml)
+        b = tomllib.loads(series.scene_of(**pt, seed=3, **plain.arguments).toml)
+        assert a["particles"][0].pop("equivalent_aspect_ratio") == "zhang"
+        if pt["model"] == "stokes":
+            got = {k: a["numerics"]["stokes"].pop(k) for k in extra}
+            assert got == {k: cal.arguments[k] for k in extra}
+        assert a == b
+
+
 def test_the_series_reads_the_measured_change_of_its_solves_and_resolution(tmp_path):
     """ci_fluid_series.reuse_errors: the error of a sweep's solve interval is the solve-reuse study's
     paired change of that setting ⊕ its s.e. (closure-free, IBOF trajectory); none for the series'
