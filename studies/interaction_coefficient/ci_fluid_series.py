@@ -60,6 +60,13 @@ Method
     --concentrated (REUSE_EVIDENCE_CONCENTRATED), at φβ = 0.5 on 96³ by ci_resolution_beta10.py's
     control (φβ = 0.25 takes that one), else on 72³ by studies/speed_accuracy/solve_reuse.py
     --beta 10 (REUSE_EVIDENCE).
+    ``--calibrated --shells apart`` at β = 5 (ci_fluid_series_calibrated_apart.toml): the β = 5 series'
+    scenes and seeds on the same 42³ grid with the fibres of the Stokes runs voxelised at 1.129 R
+    (one fibre there turns with Zhang's β_e, 4.11) and the shells that adds kept the security zone
+    apart, both models recording Zhang's β_e: the grid numerics.preset = "study" takes at β = 5.
+    Its resolution error is the bias of the 42³ C_I against the Richardson limit of 54³ and 70³
+    (all calibrated, shells apart, with the grid fibre's ξ; seeds 1-8) measured by
+    ci_resolution.py --calibrated --shells apart (RESOLUTION_CALIBRATED_APART).
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
     run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
     its drift reported).
@@ -71,6 +78,8 @@ Command
         (analysed once a concentration has two finished pairs of runs; no --write-data)
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10 --calibrated [--write-data]
         (--write-data: its rows replace the table's β = 10 rows, the β = 5 rows stay)
+    .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --calibrated --shells apart [--write-data]
+        (the β = 5 series at the preset's grid; --write-data: its rows replace the table's β = 5 rows)
     (the sweep runs two serial simulations at a time; finished runs are re-used, a killed one
     is resumed from its checkpoint; --analyse-only analyses what is there)
 
@@ -85,7 +94,7 @@ Cost (2 cores)
     96³ (ci_resolution_beta10.py); measured: 1822 / 1940 / 2787 CPU-s per Stokes run, 2.0 / 2.2 / 3.1
     CPU-hours per point of 4 seeds at φβ = 0.25 / 0.5 / 1.0; the analysis of the three points 4 min.
 
-Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/ [_calibrated/];
+Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/, + _calibrated[_apart]/;
 ``--out``)
     sweep/                        the runs (pyfold sweep folder)
     nl3_<n>/stokes/, .../jeffery/ the report of each ensemble (pyfold report's files)
@@ -679,8 +688,8 @@ def main() -> None:
                     help="fibre aspect ratio: the sweep of that beta (SERIES)")
     ap.add_argument("--calibrated", action="store_true",
                     help="the series with the Stokes runs' fibres voxelised at the radius calibrated to the "
-                         "converged cylinder, both models recording Zhang's beta_e (SERIES[beta]_calibrated.toml; "
-                         "beta = 10)")
+                         "converged cylinder, both models recording Zhang's beta_e (SERIES[beta]_calibrated.toml, "
+                         "beta = 10; at beta = 5 with --shells apart only)")
     ap.add_argument("--shells", choices=SHELL_RULES, default=registry.default("numerics.stokes.fibre_shells"),
                     help="with --calibrated: the series whose Stokes runs keep the added shells of near fibres "
                          "the security zone apart (numerics.stokes.fibre_shells; SERIES[beta]_calibrated_apart.toml)")
