@@ -1095,14 +1095,20 @@ def _normalise(scene: Scene, source: str, base_dir: str | Path | None) -> Resolv
     if hydrodynamics == "stokes":
         thinnest_d = 2.0 * min(f.radius for f in good)
         per_diameter = min(n * thinnest_d / L for n, L in zip(grid[:dim], lengths[:dim]))
+        scale = scene.numerics.stokes.fibre_radius_scale
         if per_diameter < STOKES_QUANTITATIVE_CELLS_PER_DIAMETER:
+            # a radius scaled to the grid sets the fibres' rotation (its calibration measures it); the
+            # effective viscosity keeps the coarse grid's bias
+            biased = ("the effective viscosity is biased (5-9 % at 1-2 voxels per diameter); the fibres turn as the "
+                      f"voxelised radius (fibre_radius_scale = {scale:g}) makes them, which a calibration to this grid "
+                      "chooses (docs/fluid_coupled_ci.md#a-hydrodynamic-radius-calibrated-to-the-grid); use "
+                      "cells_per_diameter = 4-8 for a quantitative viscosity" if scale != 1.0 else
+                      "the effective viscosity and rotation rates are biased (5-9 % at 1-2 voxels per diameter); use "
+                      "cells_per_diameter = 4-8 for quantitative results")
             warnings.append(
                 f"numerics.stokes.cells_per_diameter: the Stokes grid {' x '.join(map(str, grid[:dim]))} resolves the "
                 f"thinnest diameter {thinnest_d:g} by {per_diameter:.3g} voxels, below "
-                f"{STOKES_QUANTITATIVE_CELLS_PER_DIAMETER}: the effective viscosity and rotation rates are biased "
-                f"(5-9 % at 1-2 voxels per diameter); use cells_per_diameter = 4-8 for quantitative results "
-                f"(docs/physics.md#resolution)")
-        scale = scene.numerics.stokes.fibre_radius_scale
+                f"{STOKES_QUANTITATIVE_CELLS_PER_DIAMETER}: {biased} (docs/physics.md#resolution)")
         if scene.numerics.stokes.fibre_shells != registry.default("numerics.stokes.fibre_shells") and scale <= 1.0:
             warnings.append(
                 f"numerics.stokes.fibre_shells = {scene.numerics.stokes.fibre_shells!r} has no effect: the fibres get "

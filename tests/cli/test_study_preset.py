@@ -198,6 +198,13 @@ def test_the_main_jobs_scene_gets_its_resolution_studys_grid_without_a_too_coars
     assert r.stokes_grid == (42, 42, 42)
     assert r.scene.particles[0].equivalent_aspect_ratio == "zhang"
     assert not any("too coarse" in w for w in r.warnings) and "too coarse" not in r.preset_reason
+    # the coarse grid's warning: the viscosity stays biased, the rotation is the calibrated radius'
+    coarse = [w for w in r.warnings if w.startswith("numerics.stokes.cells_per_diameter: the Stokes grid")]
+    assert len(coarse) == 1 and "fibre_radius_scale = 1.129" in coarse[0]
+    assert "rotation rates are biased" not in coarse[0]
+    assert "rotation rates are biased" in next(
+        w for w in parse_scene(_scene(stokes={"cells_per_diameter": 3, "fibre_radius_scale": 1.0}), "s.toml").warnings
+        if w.startswith("numerics.stokes.cells_per_diameter: the Stokes grid"))
 
 
 def test_a_stated_grid_known_to_be_too_coarse_is_kept_and_the_run_says_so(evidence):
