@@ -389,7 +389,7 @@ SETTINGS: tuple[Setting, ...] = (
             default_text="none: each key keeps its own default",
             help='"study": every numerical setting the scene leaves '
                  'unset (dt and the Stokes kappa, tolerance, precision, solve reuse and resolution, with the '
-                 'fibre radius calibrated to the grid where that was measured) chosen, for the scene\'s regime '
+                 'fibre radius calibrated to the grid, and its shell rule, where that was measured) chosen, for the scene\'s regime '
                  'and aspect ratio, as the cheapest measured to move C_I by less than half its statistical '
                  'error over 4 seeds; a stated grid known to be too coarse is kept with a warning '
                  '(pyfold/scene/study_preset.py, docs/speed_accuracy.md)'),
