@@ -40,6 +40,10 @@ RANK_LEVEL = 0.05
 #: Scene keys that may differ between the runs of one ensemble: the seed, and the
 #: free texts (``title``/``description`` often name the seed).
 SEED_KEYS = ("numerics.seed", "title", "description", "resolved/seed")
+#: Resolved keys that explain the scene in prose (its warnings, why a model or a preset's
+#: numerics were chosen): what they explain is recorded as resolved values, compared
+#: key by key, and their wording may change between versions without changing the scene.
+PROSE_KEYS = ("resolved/scene_warnings", "resolved/numerics_preset_reason", "resolved/hydrodynamics_reason")
 
 
 # --------------------------------------------------------------------------- one scene
@@ -48,14 +52,14 @@ SEED_KEYS = ("numerics.seed", "title", "description", "resolved/seed")
 def scene_fingerprint(run_path: Path) -> dict[str, object]:
     """What makes the scene of a run: the normalised scene stored in ``/setup/scene_json``
     and every resolved value in ``/setup/resolved`` (``resolved/<name>``), without the
-    seed and the free texts (:data:`SEED_KEYS`). The verbatim TOML is not compared
-    (comments and layout may differ)."""
+    seed and the free texts (:data:`SEED_KEYS`) and the prose that explains them
+    (:data:`PROSE_KEYS`). The verbatim TOML is not compared (comments and layout may differ)."""
     from pyfold.fingerprint import setup_keys
     from pyfold.run_input import read_setup
 
     setup = read_setup(run_path)
     keys = setup_keys(setup.scene, setup.resolved)
-    return {k: v for k, v in keys.items() if k not in SEED_KEYS}
+    return {k: v for k, v in keys.items() if k not in SEED_KEYS and k not in PROSE_KEYS}
 
 
 def _same(a, b) -> bool:
