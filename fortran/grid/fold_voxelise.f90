@@ -19,7 +19,12 @@
 !> indices around its centre: the periodic minimum image is implicit (voxel
 !> indices are wrapped for storage only), so the cost is proportional to the
 !> voxels the particle touches, and voxels far from the surface (|phi| larger
-!> than the voxel half-diagonal + w) are classified without sub-sampling.
+!> than the voxel half-diagonal + w) are classified without sub-sampling. A fibre
+!> skips the rows of its box (lattice direction 1) that pass farther from its axis
+!> segment than its radius + that margin, so an oblique fibre visits the voxels near it,
+!> not its whole box. Every skip only avoids work whose result is known (chi is the same
+!> bit for bit): a fibre's signed distance is the exact Euclidean one, 1-Lipschitz, so a
+!> bound at a row or a voxel centre widened by the sub-points' reach holds where it skips.
 !> Added shells kept apart (optional shell_gap g >= 0, with fibre_radius_scale s > 1; a negative
 !> g, the default, lets them overlap). The shell
 !> of radius (s - 1) R added to a fibre k is its coverage H(1/2 - phi_s/w) minus the geometric
@@ -35,8 +40,11 @@
 !> (docs/fluid_coupled_ci.md#fibre-shells-kept-apart). The geometric body keeps weight 1, and
 !> H(1 - t) = 1 - H(t) keeps chi twice differentiable in the particle positions. Only voxels
 !> within reach of a neighbour (its geometric distance from the voxel centre less than the
-!> fibre's plus g + w/2 + 2 half-diagonals: signed distances are 1-Lipschitz) pay for the
-!> neighbours' distances, and each of its sub-points only those that can be the nearest there;
+!> fibre's plus g + w/2 + 2 half-diagonals: signed distances are 1-Lipschitz) and whose
+!> sub-points can fall in the shell (phi < w/2 and phi_geometric > -w/2 within their reach)
+!> pay for the neighbours' distances, each of its sub-points only where the scaled and the
+!> geometric coverages differ (elsewhere the shell term is exactly 0 whoever owns it), and
+!> only for the neighbours that can be the nearest there;
 !> the neighbours of each fibre are the periodic images (27 lattice shifts, none across walls)
 !> of the particles whose bounding capsules (fold_particles) come that close.
 module fold_voxelise
@@ -101,11 +109,12 @@ contains
       real(dp), allocatable :: nb_x(:, :), dcen(:)
       real(dp) :: gap, r0, hseg0, phig, dmin, own
       integer(ip) :: e, nc, lo_nb, hi_nb
-      logical :: apart, near
+      logical :: apart, near, band
       integer(ip) :: k, dim, ns, s1, s2, s3, is, m(3), lo(3), hi(3), g(3), l(3), i1, i2, i3, nsub
       integer(i8) :: cnt
       real(dp), allocatable :: dr(:, :)
       real(dp) :: xk(3), pk(3), c(3), ext(3), span(3), r(3), w, margin, phi, f, hseg, rk, fscale
+      real(dp) :: dsub, slack, sg, ss, row_c(3), row_p(3), row_h, st, tt, dv(3)
       logical :: inside_slab, bounded_y
 
       bounded_y = .false.
@@ -151,6 +160,14 @@ contains
          end do
       end do
       w = grid%h/ns
+      ! the sub-points lie within dsub of their voxel centre; the signed distances of fibres are exact
+      ! Euclidean ones, 1-Lipschitz, so a bound at the centre widened by dsub holds at every sub-point.
+      ! slack absorbs the round-off of such a bound (the tests it guards only skip work whose result
+      ! is known: chi does not change)
+      dsub = maxval(norm2(dr, dim=1))
+      slack = 1.0e-9_dp*grid%h
+      ! the rows of lattice direction 1: unit direction and the step between voxel centres
+      row_p = grid%A(:, 1)/norm2(grid%A(:, 1))
       apart = gap >= 0.0_dp .and. fscale > 1.0_dp
       ! a neighbour counts for the voxels within margin (half-diagonal + w) of the scaled fibre, up to
       ! the gap + w/2 + 2 half-diagonals of the test below
@@ -203,9 +220,21 @@ contains
          hi(1:dim) = ceiling(c(1:dim) + span(1:dim))
          do i3 = lo(3), hi(3)
             do i2 = lo(2), hi(2)
+               if (bounded_y .and. (i2 < 0 .or. i2 >= grid%n(2))) cycle
+               g(2:3) = modulo([i2, i3], grid%n(2:3))
+               if (any(g(2:3) < grid%off(2:3) .or. g(2:3) >= grid%off(2:3) + grid%nl(2:3))) cycle
+               if (parts%shape(k) == FOLD_FIBRE) then
+                  ! a fibre (flat or capped) lies inside the capsule of its axis segment (half-length L/2)
+                  ! and radius rk, so no centre of a row farther than rk + margin from that segment
+                  ! has phi <= margin
+                  row_c = 0.5_dp*(grid_point(grid, [lo(1), i2, i3], 0.5_dp) + grid_point(grid, [hi(1), i2, i3], 0.5_dp)) &
+                          - xk
+                  row_h = 0.5_dp*real(hi(1) - lo(1), dp)*norm2(grid%A(:, 1))/real(grid%n(1), dp)
+                  call segment_closest(row_c, row_p, row_h, pk, 0.5_dp*parts%length(k), st, tt, dv)
+                  if (norm2(dv) - rk > margin + slack) cycle
+               end if
                do i1 = lo(1), hi(1)
                   m = [i1, i2, i3]
-                  if (bounded_y .and. (i2 < 0 .or. i2 >= grid%n(2))) cycle
                   g = modulo(m, grid%n)
                   inside_slab = all(g >= grid%off .and. g < grid%off + grid%nl)
                   if (.not. inside_slab) cycle
@@ -217,8 +246,15 @@ contains
                   if (apart .and. parts%shape(k) == FOLD_FIBRE) then
                      lo_nb = int(nb_ptr(k), ip)
                      hi_nb = int(nb_ptr(k + 1), ip) - 1
+                     band = .false.
                      if (hi_nb >= lo_nb) then
                         phig = signed_distance(parts%shape(k), ends, r0, parts%length(k), hseg0, pk, r)
+                        ! a neighbour can only claim a sub-point where the shell covers part of it (the
+                        ! scaled and geometric coverages differ there: phi < w/2 and phig > -w/2); a voxel
+                        ! with no such sub-point has the same chi with or without the neighbours
+                        band = phi - dsub < 0.5_dp*w + slack .and. phig + dsub > -0.5_dp*w - slack
+                     end if
+                     if (band) then
                         do e = lo_nb, hi_nb
                            dcen(e - lo_nb + 1) = nearest_other(parts, ends, nb_j(e:e), nb_x(:, e:e), xk + r)
                         end do
@@ -246,13 +282,18 @@ contains
                         phi = signed_distance(parts%shape(k), ends, rk, parts%length(k), hseg, pk, &
                                               r + dr(:, is))
                         if (near) then
-                           ! the geometric body, plus the shell where it is not yielded to a neighbour
+                           ! the geometric body, plus the shell where it is not yielded to a neighbour;
+                           ! where the two coverages agree the shell adds exactly 0 whoever owns it
                            phig = signed_distance(parts%shape(k), ends, r0, parts%length(k), hseg0, pk, r + dr(:, is))
-                           dmin = nearest_other(parts, ends, nb_j(cand(1:nc)), nb_x(:, cand(1:nc)), &
-                                                xk + r + dr(:, is))
-                           own = smooth_step(0.5_dp + (dmin - phig - gap)/w)
-                           f = f + smooth_step(0.5_dp - phig/w) + &
-                               own*(smooth_step(0.5_dp - phi/w) - smooth_step(0.5_dp - phig/w))
+                           sg = smooth_step(0.5_dp - phig/w)
+                           ss = smooth_step(0.5_dp - phi/w)
+                           own = 1.0_dp
+                           if (ss /= sg) then
+                              dmin = nearest_other(parts, ends, nb_j(cand(1:nc)), nb_x(:, cand(1:nc)), &
+                                                   xk + r + dr(:, is))
+                              own = smooth_step(0.5_dp + (dmin - phig - gap)/w)
+                           end if
+                           f = f + sg + own*(ss - sg)
                         else
                            f = f + smooth_step(0.5_dp - phi/w)
                         end if
