@@ -119,7 +119,7 @@ def test_a_scaled_scene_that_records_the_default_beta_e_is_warned():
         stokes = {"cells_per_diameter": 3} | ({"fibre_radius_scale": scale} if scale != 1.0 else {})
         scene = sheared_fibres(5.0, 5.0, 1, 1.0, hydrodynamics="stokes", stokes=stokes,
                                equivalent_aspect_ratio=rule)
-        return [w for w in parse_scene(scene.toml).warnings if "fibre_radius_scale" in w]
+        return [w for w in parse_scene(scene.toml).warnings if w.startswith("numerics.stokes.fibre_radius_scale")]
 
     (text,) = warned(1.129, None)
     assert "particles.equivalent_aspect_ratio" in text and "'cox'" in text
