@@ -64,6 +64,8 @@ Method
     scenes and seeds on the same 42³ grid with the fibres of the Stokes runs voxelised at 1.129 R
     (one fibre there turns with Zhang's β_e, 4.11) and the shells that adds kept the security zone
     apart, both models recording Zhang's β_e: the grid numerics.preset = "study" takes at β = 5.
+    It adds three concentrations to the three, n L³ = 1.52 / 3.51 / 6.50 (30 / 69 / 128 fibres,
+    φβ = 0.24 / 0.55 / 1.02), and its rows are the shipped table's β = 5 rows (--write-data).
     Its resolution error is the bias of the 42³ C_I against the Richardson limit of 54³ and 70³
     (all calibrated, shells apart, with the grid fibre's ξ; seeds 1-8) measured by
     ci_resolution.py --calibrated --shells apart (RESOLUTION_CALIBRATED_APART).
@@ -73,13 +75,13 @@ Method
 
 Command
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py [--executor slurm] [--seeds 1 2]
-        [--write-data]     # also write data/ci_fluid_coupled.{nc,csv} (the shipped table)
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10   # the β = 10 sweep
         (analysed once a concentration has two finished pairs of runs; no --write-data)
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --beta 10 --calibrated [--write-data]
         (--write-data: its rows replace the table's β = 10 rows, the β = 5 rows stay)
     .venv/bin/python studies/interaction_coefficient/ci_fluid_series.py --calibrated --shells apart [--write-data]
-        (the β = 5 series at the preset's grid; --write-data: its rows replace the table's β = 5 rows)
+        (the β = 5 series at the preset's grid, six concentrations; --write-data: its rows replace the
+        table's β = 5 rows; the geometric β = 5 series is analysed into --out only)
     (the sweep runs two serial simulations at a time; finished runs are re-used, a killed one
     is resumed from its checkpoint; --analyse-only analyses what is there)
 
@@ -636,7 +638,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     first = scene_of(5.0, "jeffery", 1, 1.0, beta, dt=dt)
     attrs = {"title": f"Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = {beta:g} fibres",
              "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py "
-                        + (("--calibrated --shells apart --write-data" if calibrated5 else "--write-data")
+                        + (("--calibrated --shells apart --write-data" if calibrated5 else "").rstrip()
                            if beta == BETA else f"--beta {beta:g}"
                            + (" --calibrated --write-data" if measured_beta10 else "")),
              "scene": f"pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = "
@@ -702,11 +704,13 @@ def main() -> None:
                          "(beta = 5 only: at another beta it is not measured and not read)")
     sweep_study.add_arguments(ap)
     args = ap.parse_args()
-    if args.write_data and args.beta != BETA and not args.calibrated:
-        ap.error(f"--write-data: the shipped table takes the series whose resolution error is measured: beta = "
-                 f"{BETA:g}, or --beta {args.beta:g} --calibrated; the geometric --beta {args.beta:g} series is "
-                 "analysed into --out")
     apart = args.shells == "apart"
+    if args.write_data and args.beta != BETA and not args.calibrated:
+        ap.error(f"--write-data: the shipped table takes the series whose resolution error is measured: "
+                 f"--beta {args.beta:g} --calibrated; the geometric --beta {args.beta:g} series is analysed into --out")
+    if args.write_data and args.beta == BETA and not (args.calibrated and apart):
+        ap.error(f"--write-data: the shipped beta = {BETA:g} rows are the series on the grid numerics.preset = "
+                 "\"study\" takes; add --calibrated --shells apart (the geometric series is analysed into --out)")
     if apart and not args.calibrated:
         ap.error("--shells apart: the shells are those of the calibrated radius; add --calibrated")
     if apart and args.write_data and args.beta != BETA:

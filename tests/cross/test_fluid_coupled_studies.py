@@ -109,7 +109,9 @@ def test_the_calibrated_beta10_series_is_the_beta10_series_with_a_calibrated_rad
 
     plain, cal = (load_form(STUDIES / "sweeps", n, False)
                   for n in ("ci_fluid_series_beta10", "ci_fluid_series_beta10_calibrated"))
-    assert cal.points == plain.points and cal.seeds == plain.seeds
+    assert all(p in cal.points for p in plain.points) and cal.seeds == plain.seeds
+    for n_l3 in {p["n_l3"] for p in cal.points}:  # every concentration has its contacts-only twins
+        assert sorted(p["model"] for p in cal.points if p["n_l3"] == n_l3) == ["jeffery", "stokes"]
     assert cal.arguments == {**plain.arguments, "fibre_radius_scale": 1.1, "equivalent_aspect_ratio": "zhang",
                              "dt": 0.02, "solve_every": 16, "reuse": "jeffery", "cells_per_diameter": 4,
                              "max_grid_points": 900000}
@@ -275,10 +277,11 @@ def test_the_beta10_resolution_runs_with_shells_apart_differ_from_the_calibrated
 
 def test_the_calibrated_beta5_series_is_the_series_at_the_grid_the_preset_takes():
     """ci_fluid_series_calibrated_apart.toml: the β = 5 series' points and seeds (so the same initial
-    states), its Stokes runs voxelised at the radius scale and shell rule of the 42³ row of
+    states) and more concentrations, each with its twins; its Stokes runs voxelised at the radius scale and shell rule of the 42³ row of
     ci_resolution_calibrated_apart.toml, which is the row numerics.preset = "study" takes at β = 5
     (pyfold.scene.study_preset.RESOLUTION); both models record Zhang's β_e, the ξ of the grid fibre
-    whose changes that row holds. A scene differs from the series' only by those keys."""
+    whose changes that row holds. A scene differs from the series' scene at its concentration only by
+    those keys."""
     import tomllib
 
     from pyfold.scene import study_preset as sp
@@ -286,7 +289,9 @@ def test_the_calibrated_beta5_series_is_the_series_at_the_grid_the_preset_takes(
     plain, cal = (load_form(STUDIES / "sweeps", n, False)
                   for n in ("ci_fluid_series", "ci_fluid_series_calibrated_apart"))
     res = load_form(STUDIES / "sweeps", "ci_resolution_calibrated_apart", False)
-    assert cal.points == plain.points and cal.seeds == plain.seeds
+    assert all(p in cal.points for p in plain.points) and cal.seeds == plain.seeds
+    for n_l3 in {p["n_l3"] for p in cal.points}:  # every concentration has its contacts-only twins
+        assert sorted(p["model"] for p in cal.points if p["n_l3"] == n_l3) == ["jeffery", "stokes"]
     row = sp.resolution_for(5.0).choice()
     grid = next(p for p in res.points if p["cells_per_diameter"] == series.STOKES["cells_per_diameter"])
     assert (grid["fibre_radius_scale"], res.arguments["fibre_shells"]) == (
@@ -303,6 +308,22 @@ def test_the_calibrated_beta5_series_is_the_series_at_the_grid_the_preset_takes(
             got = {k: a["numerics"]["stokes"].pop(k) for k in extra}
             assert got == {k: cal.arguments[k] for k in extra}
         assert a == b
+
+
+@pytest.mark.parametrize("flags", [[], ["--calibrated", "--beta", "10", "--shells", "apart"]])
+def test_the_shipped_table_is_not_written_from_a_series_it_does_not_ship(flags, tmp_path):
+    """--write-data of the geometric β = 5 series (the shipped β = 5 rows are the series on the grid the
+    preset takes) or of the β = 10 series with the shells apart (the shipped β = 10 rows overlap them)
+    exits 2 naming the option, before any run, with the table untouched."""
+    import subprocess
+    import sys
+
+    before = series.DATA.with_suffix(".csv").read_bytes()
+    proc = subprocess.run([sys.executable, str(STUDIES / "interaction_coefficient" / "ci_fluid_series.py"),
+                           "--write-data", "--out", str(tmp_path / "out"), *flags],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "--write-data: the shipped" in proc.stderr, proc.stderr
+    assert not (tmp_path / "out").exists() and series.DATA.with_suffix(".csv").read_bytes() == before
 
 
 def test_the_series_reads_the_measured_change_of_its_solves_and_resolution(tmp_path):
