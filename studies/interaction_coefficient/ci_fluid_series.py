@@ -70,7 +70,7 @@ Method
     (all calibrated, shells apart, with the grid fibre's ξ; seeds 1-8) measured by
     ci_resolution.py --calibrated --shells apart (RESOLUTION_CALIBRATED_APART).
     Steady state: every run goes to strain 200; the MSER-5 onset and the end drift of each
-    run are in the table (the issue's rule: a detected steady state, or strain ≥ 200 with
+    run are in the table (the study's rule: a detected steady state, or strain ≥ 200 with
     its drift reported).
 
 Command
