@@ -95,6 +95,10 @@ Cost (2 cores)
     calibrated, at twice the step and a solve every 16th step: about 9 CPU-s per unit strain on
     96³ (ci_resolution_beta10.py); measured: 1822 / 1940 / 2787 CPU-s per Stokes run, 2.0 / 2.2 / 3.1
     CPU-hours per point of 4 seeds at φβ = 0.25 / 0.5 / 1.0; the analysis of the three points 4 min.
+    β = 5 on the preset's grid (--calibrated --shells apart): 463 / 579 / 630 / 857 / 787 / 866–878
+    CPU-s per Stokes run at n L³ 1.52 / 2.49 / 3.51 / 4.98 / 6.50 / 7.98, twins 3–30 CPU-s: 0.52 /
+    0.65 / 0.71 / 0.97 / 0.90 / 1.00 CPU-hours per point (docs/fluid_coupled_ci.md#cost); the
+    analysis of the six points 5 min.
 
 Outputs (under out/interaction_coefficient/fluid_series/, β = 10: fluid_series_beta10/, + _calibrated[_apart]/;
 ``--out``)
@@ -564,11 +568,13 @@ def cpu_of(path: Path) -> float:
 
 
 def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, resolution_file: Path,
-            beta: float = BETA, reuse: dict | None = None, stokes: dict | None = None, dt: float | None = None) -> None:
+            beta: float = BETA, reuse: dict | None = None, stokes: dict | None = None, dt: float | None = None,
+            beta_e_rule: str = "cox") -> None:
     """The tables, report and figure of the finished runs ``done``; ``reuse``: per n L³, the
     (closure-free, trajectory) error of the sweep's solve interval against STOKES' and where it was
     measured (reuse_evidence), added to the settings error in quadrature; ``stokes``: the Stokes
-    numerics the sweep runs (STOKES by default); ``dt``: its time step (None: α/(γ̇L))."""
+    numerics the sweep runs (STOKES by default); ``dt``: its time step (None: α/(γ̇L)); ``beta_e_rule``:
+    the rule of the β_e both models record (equivalent_aspect_ratio), against which the shape error is taken."""
     from pyfold.correlations import fluid_coupled_table
     from pyfold.ensemble import paired_difference
     from pyfold.report import build_report, write_report
@@ -643,7 +649,7 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
                            + (" --calibrated --write-data" if measured_beta10 else "")),
              "scene": f"pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = "
                       f"{first.dt:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
-                      f"Stokes grid {grid}",
+                      f"Stokes grid {grid}, both models recording {beta_e_rule.capitalize()}'s beta_e",
              "stokes_numerics": f"{stokes or STOKES}, ab2 (setting {SETTING} of studies/speed_accuracy/ci_stokes_settings.py"
                                 + (", with the solve interval of studies/speed_accuracy/solve_reuse.py --beta 10)"
                                    if reuse else ")"),
@@ -653,7 +659,8 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
                        + (" and of its solve interval, in quadrature (measured at "
                           + "; ".join(f"n L^3 {n:g}: {src}" for n, (_v, src) in sorted(reuse.items())) + ")"
                           if reuse else "") + "; shape: change "
-                       f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of Cox's; resolution: bias of the "
+                       f"with the grid fibre's beta_e = {beta_e_grid:.3f} instead of the recorded "
+                       f"({beta_e_rule.capitalize()}'s); resolution: bias of the "
                        + ("3-voxel C_I against the Richardson limit of 54^3 and 70^3, all calibrated with the "
                           "shells apart, grid fibre's xi (ci_resolution.py --calibrated --shells apart)" if calibrated5 else
                           "3-voxel C_I against the Richardson limit (ci_resolution.py)" if beta == BETA else
@@ -753,10 +760,12 @@ def main() -> None:
             reuse[n] = reuse_evidence({**spec.arguments, **point}, n_l3=n, point_evidence=REUSE_EVIDENCE_CONCENTRATED,
                                       grid_evidence=resolution if resolution in RESOLUTION_BETA10_FILES else None)
     reuse = {n: v for n, v in reuse.items() if v is not None} or None
-    stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse", "cells_per_diameter")
+    stokes = {**STOKES, **{k: spec.arguments[k] for k in ("solve_every", "reuse", "cells_per_diameter",
+                                                          "fibre_radius_scale", "fibre_shells")
                            if k in spec.arguments}}
     analyse(keyed, tuple(spec.seeds), args.out, args.write_data, resolution, args.beta, reuse, stokes,
-            spec.arguments.get("dt"))
+            spec.arguments.get("dt"), spec.arguments.get("equivalent_aspect_ratio")
+            or registry.EQUIVALENT_ASPECT_RATIO_DEFAULT)
     print(f"written: {args.out} ({time.perf_counter() - start:.0f} s)")
 
 

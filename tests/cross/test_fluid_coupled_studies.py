@@ -597,6 +597,24 @@ def test_a_beta10_table_joins_the_shipped_beta5_one_without_touching_its_rows(tm
     assert five_values == fluid_coupled_ci(5.0, 0.78, rows=five)[0]
 
 
+@pytest.mark.parametrize("beta, sweep", [(5.0, "ci_fluid_series_calibrated_apart"),
+                                         (10.0, "ci_fluid_series_beta10_calibrated")])
+def test_the_shipped_table_names_the_radius_shells_and_beta_e_of_its_runs(beta, sweep):
+    """The header of each aspect ratio's rows in data/ci_fluid_coupled.csv states the voxelised
+    radius scale, the shell rule and the β_e rule of the sweep that made them, and takes the shape
+    error against the recorded β_e (not Cox's, which these runs do not record)."""
+    spec = load_form(STUDIES / "sweeps", sweep, False)
+    head = {k: v for k, v in series.read_attrs(series.DATA.with_suffix(".csv")).items()
+            if k.startswith(f"beta{beta:g}_")}
+    args = spec.arguments
+    assert f"'fibre_radius_scale': {args['fibre_radius_scale']!r}" in head[f"beta{beta:g}_stokes_numerics"]
+    if "fibre_shells" in args:
+        assert f"'fibre_shells': {args['fibre_shells']!r}" in head[f"beta{beta:g}_stokes_numerics"]
+    rule = args["equivalent_aspect_ratio"].capitalize()
+    assert head[f"beta{beta:g}_scene"].endswith(f"both models recording {rule}'s beta_e")
+    assert f"instead of the recorded ({rule}'s)" in head[f"beta{beta:g}_errors"]
+
+
 def test_the_documented_fits_are_those_of_the_shipped_table():
     """docs/fluid_coupled_ci.md lists the fit of each aspect ratio of data/ci_fluid_coupled.csv as
     ci_fluid_series.fit_lines gives it: a new table without the new fits in the docs fails here."""
