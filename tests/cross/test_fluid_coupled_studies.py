@@ -278,8 +278,8 @@ def test_the_calibrated_beta5_series_is_the_series_at_the_grid_the_preset_takes(
     states) and more concentrations, each with its twins; its Stokes runs voxelised at the radius
     scale and shell rule of the 42³ row of ci_resolution_calibrated_apart.toml, which is the row
     numerics.preset = "study" takes at β = 5 (pyfold.scene.study_preset.RESOLUTION); both models
-    record Zhang's β_e, the ξ of the grid fibre whose changes that row holds. A scene differs from the series' scene at its concentration only by
-    those keys."""
+    record Zhang's β_e, the ξ of the grid fibre whose changes that row holds. A scene differs from
+    the series' scene at its concentration only by those keys."""
     import tomllib
 
     from pyfold.scene import study_preset as sp
