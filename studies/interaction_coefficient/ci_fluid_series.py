@@ -643,10 +643,10 @@ def analyse(done: dict, seeds: tuple[int, ...], out: Path, write_data: bool, res
     grid = "x".join(map(str, grid_of(first_stokes)))
     first = scene_of(5.0, "jeffery", 1, 1.0, beta, dt=dt)
     attrs = {"title": f"Fluid-coupled (Stokes + contacts) and contacts-only Folgar-Tucker C_I of beta = {beta:g} fibres",
-             "command": ".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py "
-                        + (("--calibrated --shells apart --write-data" if calibrated5 else "").rstrip()
-                           if beta == BETA else f"--beta {beta:g}"
-                           + (" --calibrated --write-data" if measured_beta10 else "")),
+             "command": (".venv/bin/python studies/interaction_coefficient/ci_fluid_series.py "
+                         + (("--calibrated --shells apart --write-data" if calibrated5 else "")
+                            if beta == BETA else f"--beta {beta:g}"
+                            + (" --calibrated --write-data" if measured_beta10 else ""))).rstrip(),
              "scene": f"pyfold.scene.sheared_fibres, simple shear, isotropic start, alpha = 0.1 d, dt = "
                       f"{first.dt:g}, strain {max(r['strain'] for r in rows):g}, cell {first.side:g} L, "
                       f"Stokes grid {grid}, both models recording {beta_e_rule.capitalize()}'s beta_e",
